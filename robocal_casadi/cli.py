@@ -1,0 +1,47 @@
+"""The ``robocal`` command line: one module per verb in ``robocal_casadi.commands``.
+
+Each verb module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and a
+module docstring whose first line is the verb's help. Any ``InputError`` (or other
+``RobocalError``) ends the program with status 2 and one line on standard error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import RobocalError
+
+VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "demo")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="robocal",
+        description="Calibrate, diagnose and track industrial robots (robocal_casadi).",
+    )
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    for verb in VERBS:
+        module = importlib.import_module(f"robocal_casadi.commands.{verb}")
+        doc = (module.__doc__ or "").strip()
+        sub = verbs.add_parser(verb, help=doc.splitlines()[0] if doc else None, description=doc,
+                               formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(sub)
+        sub.set_defaults(_module=module)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._module.run(args) or 0)
+    except RobocalError as error:
+        message = " ".join(str(error).split())
+        print(f"robocal {args.verb}: error: {message}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,87 @@
+"""The contract every measurement model fulfils.
+
+A measurement model turns one dataset into a residual vector ``r`` whose least-squares
+minimum is the calibration. Its unknowns besides the robot are of two sorts:
+
+* ``mounted``: what is fixed to the robot (probe tip, tracker reflector, laser origin
+  and beam). Shared by name between datasets, carried from calibration into validation.
+* ``placement``: where the instrument sits in the room (socket positions, the tracker's
+  frame, the sphere centre). Per dataset (names carry the dataset label) and fitted
+  again on validation data.
+
+The engine hands the model ``points(offsets)``: world positions [m] (3 x N, one column
+per data row) of flange-frame points ``offsets`` (3 x 1 or 3 x N) [m], with the robot
+and effect parameters already inside. ``residual`` returns an MX column; ``errors``
+turns a numeric residual into the per-measurement error lengths the contract's RMS is
+taken over.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Callable, ClassVar
+
+import casadi as ca
+import numpy as np
+
+from ..parameters import ParameterRegistry
+
+PointsFunction = Callable[[ca.MX], ca.MX]
+
+
+class MeasurementModel(ABC):
+    """Residuals of one dataset; see the module docstring for the unknowns."""
+
+    kind: ClassVar[str]
+
+    def __init__(self, dataset, label: str):
+        self.dataset = dataset
+        self.label = label  # prefix of placement names, unique among the datasets solved
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}({self.label!r}, rows={self.dataset.rows}, "
+                f"mounted={len(self.mounted)}, placement={len(self.placement)})")
+
+    @property
+    @abstractmethod
+    def mounted(self) -> ParameterRegistry:
+        """Instrument-on-robot unknowns (shared by name)."""
+
+    @property
+    @abstractmethod
+    def placement(self) -> ParameterRegistry:
+        """Instrument-in-room unknowns (per dataset)."""
+
+    @abstractmethod
+    def initial_mounted(self) -> np.ndarray:
+        """Nominal values of ``mounted`` from the dataset file [SI]."""
+
+    @abstractmethod
+    def initial_placement(self, points: Callable[[np.ndarray], np.ndarray],
+                          mounted: np.ndarray) -> np.ndarray:
+        """A starting value of ``placement`` without user help.
+
+        ``points(offsets)`` evaluates world positions (3 x N) numerically for the
+        current robot; ``mounted`` are the current mounted values.
+        """
+
+    @abstractmethod
+    def residual(self, points: PointsFunction, mounted: ca.MX, placement: ca.MX) -> ca.MX:
+        """Residual column [m] (the contract's residuals, before any weighting)."""
+
+    @abstractmethod
+    def errors(self, residual: np.ndarray) -> np.ndarray:
+        """Per-measurement error lengths [m] (the contract's RMS is taken over these)."""
+
+    def error_rows(self) -> np.ndarray:
+        """For each entry of ``errors``, the data row it belongs to (-1 if none)."""
+        return np.full(len(self.errors(np.zeros(self.residual_size()))), -1)
+
+    @abstractmethod
+    def residual_size(self) -> int:
+        """Length of the residual column."""
+
+    @property
+    def uses_robot(self) -> bool:
+        """False when the data carries its own flange poses (pendant readings)."""
+        return True

@@ -1,0 +1,195 @@
+"""Typed, immutable results of a calibration, and the contract's ``result.json``.
+
+Values are SI inside; ``to_json`` converts to the robot file's units (lengths in its
+length unit, angles in its angle unit, residual RMS in its length unit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .robot import Robot
+from .units import Units
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """One geometric parameter: ``nominal``, ``estimate``, ``std`` in SI of ``quantity``.
+
+    ``identifiable`` is False for parameters held at nominal, with ``reason`` saying why.
+    """
+
+    name: str
+    quantity: str  # "length" [m] | "angle" [rad] | "none"
+    nominal: float
+    estimate: float
+    std: float | None
+    identifiable: bool
+    reason: str | None = None
+
+    def to_json(self, units: Units) -> dict:
+        scale = units.scale(self.quantity)
+        entry = {"name": self.name, "nominal": self.nominal / scale,
+                 "estimate": self.estimate / scale,
+                 "std": None if self.std is None else self.std / scale,
+                 "unit": units.unit_name(self.quantity), "identifiable": self.identifiable}
+        if self.reason:
+            entry["reason"] = self.reason
+        return entry
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What the data can tell: from the column-scaled Jacobian at the start point.
+
+    ``singular_values`` of the scaled Jacobian restricted to the robot parameters after
+    the placement unknowns are projected out, largest first; ``identifiable`` the chosen
+    parameters; ``unidentifiable`` maps each other parameter to the reason;
+    ``combinations`` lists base-parameter relations (text) among dependent ones.
+    """
+
+    candidates: tuple[str, ...]
+    identifiable: tuple[str, ...]
+    unidentifiable: dict[str, str]
+    singular_values: np.ndarray
+    condition_number: float
+    combinations: tuple[str, ...] = ()
+
+    def __repr__(self) -> str:
+        return (f"Identifiability({len(self.identifiable)} of {len(self.candidates)} identifiable, "
+                f"condition_number={self.condition_number:.4g})")
+
+
+@dataclass(frozen=True)
+class EffectFinding:
+    """An effect added by diagnosis: parameters in ``unit``, evidence as numbers."""
+
+    name: str
+    joints: tuple[int, ...]
+    parameters: dict[str, float]
+    unit: str
+    evidence: dict[str, float]
+    std: dict[str, float] = field(default_factory=dict)
+    summary: str = ""
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "joints": list(self.joints),
+                "parameters": {k: float(v) for k, v in self.parameters.items()},
+                "unit": self.unit, "evidence": {k: float(v) for k, v in self.evidence.items()}}
+
+
+@dataclass(frozen=True)
+class RmsSummary:
+    """RMS of the per-measurement errors [m]: nominal, geometric, final."""
+
+    rms_nominal: float
+    rms_geometric: float
+    rms_final: float
+
+    def to_json(self, units: Units) -> dict:
+        s = units.length_scale
+        return {"unit": units.length, "rms_nominal": self.rms_nominal / s,
+                "rms_geometric": self.rms_geometric / s, "rms_final": self.rms_final / s}
+
+
+@dataclass(frozen=True)
+class DatasetResiduals:
+    """Per-measurement errors [m] of one dataset under each model, for reports.
+
+    ``rows`` gives each error's data row (-1 for errors that belong to no single row,
+    such as a bar-length error); ``joints`` (N x dof) and ``extras`` are the dataset's.
+    """
+
+    label: str
+    kind: str
+    errors_nominal: np.ndarray
+    errors_geometric: np.ndarray
+    errors_final: np.ndarray
+    rows: np.ndarray
+    joints: np.ndarray | None
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")  # noqa: E731
+        return (f"DatasetResiduals({self.label!r}, {len(self.errors_final)} errors, rms nominal "
+                f"{rms(self.errors_nominal):.3g} m, final {rms(self.errors_final):.3g} m)")
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Everything a calibration produced. See ``to_json`` for the contract's file."""
+
+    datasets: tuple[str, ...]
+    robot_nominal: Robot
+    robot_calibrated: Robot
+    parameters: tuple[ParameterEstimate, ...]
+    identifiability: Identifiability
+    condition_number: float
+    effects: tuple[EffectFinding, ...]
+    fit: RmsSummary
+    validation: RmsSummary | None
+    residuals: tuple[DatasetResiduals, ...]
+    validation_residuals: tuple[DatasetResiduals, ...] = ()
+    mounted: dict[str, tuple[float, float | None]] = field(default_factory=dict)
+    placement: dict[str, float] = field(default_factory=dict)
+    solver: dict[str, Any] = field(default_factory=dict)
+    effect_models: tuple = ()  # the Effect objects, with ``effect_values`` (SI)
+    effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
+
+    @property
+    def units(self) -> Units:
+        return self.robot_nominal.units
+
+    def parameter(self, name: str) -> ParameterEstimate:
+        for entry in self.parameters:
+            if entry.name == name:
+                return entry
+        raise KeyError(f"no parameter {name!r}; names: {[p.name for p in self.parameters]}")
+
+    def to_json(self) -> dict:
+        """The contract's ``result.json`` content, in the robot file's units."""
+        units = self.units
+        out: dict[str, Any] = {
+            "datasets": list(self.datasets),
+            "convention": self.robot_nominal.convention,
+            "parameters": [p.to_json(units) for p in self.parameters],
+            "condition_number": float(self.condition_number),
+            "effects": [e.to_json() for e in self.effects],
+            "fit": self.fit.to_json(units),
+        }
+        if self.validation is not None:
+            out["validation"] = self.validation.to_json(units)
+        s = units.length_scale
+        out["mounted"] = {k: {"estimate": v / s, "std": None if sd is None else sd / s,
+                              "unit": units.length} for k, (v, sd) in self.mounted.items()}
+        out["identifiability"] = {
+            "identifiable": list(self.identifiability.identifiable),
+            "not_identifiable": dict(self.identifiability.unidentifiable),
+            "combinations": list(self.identifiability.combinations),
+            "singular_values": [float(v) for v in self.identifiability.singular_values],
+        }
+        out["solver"] = {k: v for k, v in self.solver.items()
+                         if isinstance(v, (int, float, str, bool))}
+        return out
+
+    def __repr__(self) -> str:
+        u = self.units
+        s = u.length_scale
+        lines = [
+            f"CalibrationResult({', '.join(self.datasets)})",
+            f"  identifiable parameters: {len(self.identifiability.identifiable)} of "
+            f"{len(self.identifiability.candidates)}, condition number {self.condition_number:.4g}",
+            f"  fit RMS [{u.length}]: nominal {self.fit.rms_nominal / s:.6g}, geometric "
+            f"{self.fit.rms_geometric / s:.6g}, final {self.fit.rms_final / s:.6g}",
+        ]
+        if self.validation is not None:
+            v = self.validation
+            lines.append(f"  validation RMS [{u.length}]: nominal {v.rms_nominal / s:.6g}, "
+                         f"geometric {v.rms_geometric / s:.6g}, final {v.rms_final / s:.6g}")
+        for effect in self.effects:
+            lines.append(f"  effect {effect.name} joints {list(effect.joints)}: {effect.summary}")
+        return "\n".join(lines)

@@ -1,0 +1,305 @@
+"""The robot model: a DH chain with base, tool, limits and inertial data.
+
+A ``Robot`` holds everything in SI (metres, radians, kilograms) and remembers the units
+of the file it came from, so ``save_robot`` writes it back in those units.
+
+Conventions (CONTRACT.md):
+
+* standard DH, joint i: ``T(i-1,i) = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)``
+* modified DH (Craig): ``T(i-1,i) = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i) Ry(beta_i)``;
+  joint i's entry stores ``a_{i-1}``, ``alpha_{i-1}`` as its ``a``, ``alpha``.
+* a revolute reading adds to ``theta_i``, a prismatic one to ``d_i``.
+* ``world_T_tool = base * T(0,1) ... T(n-1,n) * tool``; the end of the chain is the flange.
+* a link's ``com`` is in the frame after its joint's transform.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .errors import InputError
+from .fields import load_yaml, number, require, vector
+from .units import SI, Units, parse_units
+
+JOINT_TYPES = ("revolute", "prismatic")
+CONVENTIONS = ("dh", "mdh")
+JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com"}
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One row of the DH table, SI units: lengths [m], angles [rad], mass [kg]."""
+
+    type: str
+    theta: float
+    d: float
+    a: float
+    alpha: float
+    beta: float = 0.0
+    limits: tuple[float, float] | None = None  # [rad] or [m] for prismatic joints
+    mass: float | None = None
+    com: tuple[float, float, float] | None = None  # [m], in the link's own frame
+    has_beta: bool = False  # the file gave a beta; written back even when zero
+
+    @property
+    def revolute(self) -> bool:
+        return self.type == "revolute"
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A fixed pose: ``xyz`` [m] and ``rpy`` [rad] with ``R = Rz(y) Ry(p) Rx(r)``."""
+
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def matrix(self) -> np.ndarray:
+        from .transforms import pose_from_xyz_rpy
+
+        return pose_from_xyz_rpy(self.xyz, self.rpy)
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A serial robot in DH form, everything SI. ``units`` are the source file's units."""
+
+    name: str
+    convention: str
+    joints: tuple[Joint, ...]
+    base: Frame = field(default_factory=Frame)
+    tool: Frame = field(default_factory=Frame)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    units: Units = SI
+    has_base: bool = False
+    has_tool: bool = False
+    has_gravity: bool = False
+
+    @property
+    def dof(self) -> int:
+        return len(self.joints)
+
+    @property
+    def lower_limits(self) -> np.ndarray:
+        """Lower joint limits [rad or m]; -inf where none is given."""
+        return np.array([j.limits[0] if j.limits else -np.inf for j in self.joints])
+
+    @property
+    def upper_limits(self) -> np.ndarray:
+        """Upper joint limits [rad or m]; +inf where none is given."""
+        return np.array([j.limits[1] if j.limits else np.inf for j in self.joints])
+
+    @property
+    def has_inertia(self) -> bool:
+        """True when every joint carries ``mass`` and ``com``."""
+        return all(j.mass is not None and j.com is not None for j in self.joints)
+
+    def reading_scales(self) -> np.ndarray:
+        """SI per file unit of each joint reading (angle unit for revolute, length for prismatic)."""
+        return np.array(
+            [self.units.angle_scale if j.revolute else self.units.length_scale for j in self.joints]
+        )
+
+    def parameters(self):
+        """The parameter registry of this robot (see ``parameters.ParameterRegistry``)."""
+        from .parameters import ParameterRegistry
+
+        return ParameterRegistry.for_robot(self)
+
+    def parameter_vector(self) -> np.ndarray:
+        """The nominal geometric parameter vector in registry order, SI."""
+        return self.parameters().vector_of(self)
+
+    def with_parameters(self, values: np.ndarray) -> "Robot":
+        """A copy whose geometry is ``values`` (registry order, SI)."""
+        return self.parameters().robot_from(self, np.asarray(values, dtype=float))
+
+    def with_units(self, units: Units) -> "Robot":
+        return replace(self, units=units)
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Read a robot file (CONTRACT.md "Robot file"); errors name the file and the key."""
+    path = Path(path)
+    content = load_yaml(path, what="robot file")
+    return robot_from_dict(content, file=path)
+
+
+def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
+    """Build a ``Robot`` from the parsed YAML mapping of a robot file."""
+    convention = require(content, "convention", file=file)
+    if convention not in CONVENTIONS:
+        raise InputError(
+            f"unknown convention {convention!r}; expected one of {list(CONVENTIONS)}",
+            file=file,
+            where="convention",
+        )
+    units = parse_units(require(content, "units", file=file), file=file)
+    raw_joints = require(content, "joints", file=file)
+    if not isinstance(raw_joints, list) or not raw_joints:
+        raise InputError("expected a non-empty list of joints", file=file, where="joints")
+    joints = tuple(
+        _joint_from_dict(raw, units, file=file, where=f"joints[{i}] (joint {i + 1})")
+        for i, raw in enumerate(raw_joints)
+    )
+    base = _frame_from_dict(content.get("base"), units, file=file, where="base")
+    tool = _frame_from_dict(content.get("tool"), units, file=file, where="tool")
+    gravity = (0.0, 0.0, -9.81)
+    if "gravity" in content:
+        gravity = tuple(vector(content["gravity"], 3, file=file, where="gravity"))
+    name = content.get("name", Path(file).stem if file else "robot")
+    return Robot(
+        name=str(name),
+        convention=convention,
+        joints=joints,
+        base=base,
+        tool=tool,
+        gravity=gravity,  # type: ignore[arg-type]
+        units=units,
+        has_base="base" in content,
+        has_tool="tool" in content,
+        has_gravity="gravity" in content,
+    )
+
+
+def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
+    if not isinstance(raw, dict):
+        raise InputError(f"expected a mapping, got {raw!r}", file=file, where=where)
+    unknown = set(raw) - JOINT_KEYS
+    if unknown:
+        raise InputError(
+            f"unknown key(s) {sorted(unknown)}; allowed: {sorted(JOINT_KEYS)}", file=file,
+            where=where,
+        )
+    joint_type = raw.get("type", "revolute")
+    if joint_type not in JOINT_TYPES:
+        raise InputError(
+            f"unknown joint type {joint_type!r}; expected one of {list(JOINT_TYPES)}",
+            file=file,
+            where=f"{where}.type",
+        )
+    L, A = units.length_scale, units.angle_scale
+    values = {}
+    for key, scale in (("theta", A), ("d", L), ("a", L), ("alpha", A)):
+        values[key] = number(require(raw, key, file=file, where=where), file=file,
+                             where=f"{where}.{key}") * scale
+    beta = number(raw.get("beta", 0.0), file=file, where=f"{where}.beta") * A
+    limits = None
+    if "limits" in raw:
+        lo, hi = vector(raw["limits"], 2, file=file, where=f"{where}.limits")
+        scale = A if joint_type == "revolute" else L
+        if lo >= hi:
+            raise InputError(f"lower limit {lo} is not below upper limit {hi}", file=file,
+                             where=f"{where}.limits")
+        limits = (lo * scale, hi * scale)
+    mass = None
+    if "mass" in raw:
+        mass = number(raw["mass"], file=file, where=f"{where}.mass")
+        if mass < 0:
+            raise InputError(f"mass must not be negative, got {mass}", file=file,
+                             where=f"{where}.mass")
+    com = None
+    if "com" in raw:
+        com = tuple(c * L for c in vector(raw["com"], 3, file=file, where=f"{where}.com"))
+    return Joint(
+        type=joint_type, beta=beta, limits=limits, mass=mass, com=com,  # type: ignore[arg-type]
+        has_beta="beta" in raw, **values,
+    )
+
+
+def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
+    if raw is None:
+        return Frame()
+    if not isinstance(raw, dict):
+        raise InputError("expected a mapping {xyz: [...], rpy: [...]}", file=file, where=where)
+    unknown = set(raw) - {"xyz", "rpy"}
+    if unknown:
+        raise InputError(f"unknown key(s) {sorted(unknown)}; allowed: ['rpy', 'xyz']",
+                         file=file, where=where)
+    xyz = vector(raw.get("xyz", [0, 0, 0]), 3, file=file, where=f"{where}.xyz")
+    rpy = vector(raw.get("rpy", [0, 0, 0]), 3, file=file, where=f"{where}.rpy")
+    return Frame(
+        tuple(v * units.length_scale for v in xyz),  # type: ignore[arg-type]
+        tuple(v * units.angle_scale for v in rpy),  # type: ignore[arg-type]
+    )
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
+    """The robot file mapping in ``units`` (default: the robot's own file units)."""
+    units = units or robot.units
+    L, A = units.length_scale, units.angle_scale
+    joints = []
+    for joint in robot.joints:
+        entry: dict[str, Any] = {"type": joint.type}
+        entry["theta"] = joint.theta / A
+        entry["d"] = joint.d / L
+        entry["a"] = joint.a / L
+        entry["alpha"] = joint.alpha / A
+        if joint.has_beta or joint.beta != 0.0:
+            entry["beta"] = joint.beta / A
+        if joint.limits is not None:
+            scale = A if joint.revolute else L
+            entry["limits"] = [joint.limits[0] / scale, joint.limits[1] / scale]
+        if joint.mass is not None:
+            entry["mass"] = joint.mass
+        if joint.com is not None:
+            entry["com"] = [c / L for c in joint.com]
+        joints.append(entry)
+    content: dict[str, Any] = {
+        "name": robot.name,
+        "convention": robot.convention,
+        "units": units.as_dict(),
+        "joints": joints,
+    }
+    for key, frame, present in (("base", robot.base, robot.has_base),
+                                ("tool", robot.tool, robot.has_tool)):
+        if present or any(frame.xyz) or any(frame.rpy):
+            content[key] = {"xyz": [v / L for v in frame.xyz], "rpy": [v / A for v in frame.rpy]}
+    if robot.has_gravity or tuple(robot.gravity) != (0.0, 0.0, -9.81):
+        content["gravity"] = list(robot.gravity)
+    return content
+
+
+class _FlowListDumper(yaml.SafeDumper):
+    """Writes short lists inline (``[0, 0, 1]``) the way people write robot files."""
+
+
+def _represent_list(dumper, data):
+    flow = all(not isinstance(v, (list, dict)) for v in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+def _represent_float(dumper, value: float):
+    # repr() is the shortest string that reads back to the same float.
+    if math.isfinite(value):
+        text = repr(float(value))
+        if "e" in text and "." not in text.split("e")[0]:
+            mantissa, exponent = text.split("e")
+            text = f"{mantissa}.0e{exponent}"
+        return dumper.represent_scalar("tag:yaml.org,2002:float", text)
+    return yaml.SafeDumper.represent_float(dumper, value)
+
+
+_FlowListDumper.add_representer(list, _represent_list)
+_FlowListDumper.add_representer(float, _represent_float)
+
+
+def dump_yaml(content: dict) -> str:
+    """YAML text with inline short lists and full-precision floats."""
+    return yaml.dump(content, Dumper=_FlowListDumper, sort_keys=False, width=120)
+
+
+def save_robot(robot: Robot, path: str | Path, units: Units | None = None) -> None:
+    """Write ``robot`` as a robot file in ``units`` (default: its own file units)."""
+    Path(path).write_text(dump_yaml(robot_to_dict(robot, units)))
