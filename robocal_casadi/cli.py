@@ -23,7 +23,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for verb in VERBS:
-        module = importlib.import_module(f"robocal_casadi.commands.{verb}")
+        try:
+            module = importlib.import_module(f"robocal_casadi.commands.{verb}")
+        except ModuleNotFoundError as error:
+            if error.name != f"robocal_casadi.commands.{verb}":
+                raise
+            continue  # a verb whose module is not installed is not offered
         doc = (module.__doc__ or "").strip()
         sub = verbs.add_parser(verb, help=doc.splitlines()[0] if doc else None, description=doc,
                                formatter_class=argparse.RawDescriptionHelpFormatter)
