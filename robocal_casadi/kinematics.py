@@ -147,6 +147,24 @@ class Kinematics:
         angular = ca.horzcat(*columns)
         return ca.Function("tool_jacobian", [q, p], [ca.vertcat(linear, angular)], ["q", "p"], ["J"])
 
+    def compiled(self, name: str) -> ca.Function:
+        """The function ``name`` (e.g. ``"tool_pose"``) as compiled C, built once and cached.
+
+        Same inputs and outputs as the interpreted one, named ``<name>_compiled`` so that
+        ``mapped`` keeps both apart. Falls back to the interpreted function with a warning
+        where no C compiler works (see ``codegen.compiled``).
+        """
+        cache = self.__dict__.setdefault("_compiled", {})
+        if name not in cache:
+            from .codegen import compiled
+
+            function = getattr(self, name)
+            symbols = function.sx_in()
+            renamed = ca.Function(f"{name}_compiled", symbols, function.call(symbols),
+                                  function.name_in(), function.name_out())
+            cache[name] = compiled(renamed)
+        return cache[name]
+
     # ------------------------------------------------------------------ numeric helpers
 
     def mapped(self, function: ca.Function, count: int) -> ca.Function:
