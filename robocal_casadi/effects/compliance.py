@@ -1,0 +1,171 @@
+"""Joint compliance: each joint gives way in proportion to the gravity torque it holds.
+
+With link masses in the robot file (``mass``, ``com`` on every joint):
+
+    dq_j = -c_j * tau_j(q)           c_j [rad/Nm] (revolute) or [m/N] (prismatic)
+
+``tau(q)`` is the generalized gravity torque the motors apply to hold the arm
+(``gravity.gravity_torque``: links plus a point payload of the row's ``payload`` [kg],
+0 without that column, at ``payload_com`` [m] in the flange frame). Parameters ``c{j}``.
+
+Without masses (lumped unknowns). The gravity torque is linear in the unknown first
+moments ``h_k = m_k com_k`` [kg m] and masses ``m_k`` [kg] of the links,
+``tau_j = sum_k B_jk(q) pi_k`` (``gravity.first_moment_basis``), so
+
+    dq_j = -c_j * payload * tau1_j(q) - sum_(k, i) w_jki * B_j,(k, i)(q)
+
+with ``tau1`` the torque of 1 kg at ``payload_com`` and ``w_jki = c_j pi_ki`` the products
+of the compliance with link k's first moment (``c{j}_h{k}x|y|z`` [rad/Nm x kg m]) or mass
+(``c{j}_m{k}`` [rad/Nm x kg]). Taking each product as its own unknown makes the model
+linear. Many basis columns are linearly dependent as functions of ``q`` (a link's mass
+and the previous link's moment along a parallel axis; terms constant in ``q``, which the
+joint's ``theta`` offset already holds), so for each joint only a maximal independent set
+is kept: the columns are sampled at random readings within the joint limits (nominal
+geometry, fixed seed), a constant column is put first, and pivoted Gram-Schmidt keeps
+each column whose part outside the span of the ones before it exceeds 1e-6 of its
+norm. ``c{j}`` itself appears only with a ``payload`` column (``payload=True``), where the
+known payload mass makes it separable.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from ..robot import Robot
+from .base import Effect, RowContext
+from .checks import check_joints, column
+from .gravity import (FIRST_MOMENT_COMPONENTS, first_moment_basis, gravity_torque,
+                      payload_torque_per_kg)
+
+SAMPLES = 96
+INDEPENDENCE = 1e-6
+
+
+@lru_cache(maxsize=16)
+def _torque_function(robot: Robot) -> ca.Function:
+    """``(q, p, payload, payload_com) -> tau`` [Nm or N], built once per robot."""
+    registry = robot.parameters()
+    q = ca.SX.sym("q", robot.dof)
+    p = ca.SX.sym("p", len(registry))
+    payload = ca.SX.sym("payload")
+    com = ca.SX.sym("payload_com", 3)
+    return ca.Function("gravity_torque", [q, p, payload, com],
+                       [gravity_torque(robot, registry, q, p, payload, com)])
+
+
+@lru_cache(maxsize=16)
+def _lumped_functions(robot: Robot) -> tuple[ca.Function, ca.Function]:
+    """``(q, p) -> basis`` (dof x 4 dof) and ``(q, p, payload_com) -> tau per kg``."""
+    registry = robot.parameters()
+    q = ca.SX.sym("q", robot.dof)
+    p = ca.SX.sym("p", len(registry))
+    com = ca.SX.sym("payload_com", 3)
+    basis = ca.Function("first_moment_basis", [q, p], [first_moment_basis(robot, registry, q, p)])
+    per_kg = ca.Function("payload_torque_per_kg", [q, p, com],
+                         [payload_torque_per_kg(robot, registry, q, p, com)])
+    return basis, per_kg
+
+
+def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
+                      seed: int = 0) -> tuple[int, ...]:
+    """Columns of ``first_moment_basis`` row ``joint`` (1-based) kept as lumped unknowns.
+
+    A maximal set independent of each other and of a constant (see the module
+    docstring), in the order found.
+    """
+    basis, _ = _lumped_functions(robot)
+    rng = np.random.default_rng(seed)
+    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
+    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    Q = rng.uniform(lower, upper, size=(samples, robot.dof))
+    p = robot.parameter_vector()
+    rows = np.array([np.asarray(basis(q, p))[joint - 1] for q in Q])  # samples x 4 dof
+    kept: list[int] = []
+    span = [np.ones(samples) / np.sqrt(samples)]
+    remaining = rows.copy()
+    norms = np.linalg.norm(rows, axis=0)
+    # a unit first moment (1 kg m) gives torques of order |g|: below that, roundoff
+    scale = max(float(norms.max()), float(np.linalg.norm(robot.gravity)) * np.sqrt(samples))
+    remaining -= np.outer(span[0], span[0] @ remaining)
+    candidates = [k for k in range(rows.shape[1]) if norms[k] > INDEPENDENCE * scale]
+    while candidates:
+        left = np.linalg.norm(remaining[:, candidates], axis=0)
+        relative = left / norms[candidates]
+        best = int(np.argmax(relative))
+        if relative[best] <= INDEPENDENCE:
+            break
+        k = candidates.pop(best)
+        u = remaining[:, k] / left[best]
+        remaining -= np.outer(u, u @ remaining)
+        kept.append(k)
+    return tuple(kept)
+
+
+def _term_name(joint: int, term: int) -> str:
+    link, component = divmod(term, len(FIRST_MOMENT_COMPONENTS))
+    c = FIRST_MOMENT_COMPONENTS[component]
+    return f"c{joint}_m{link + 1}" if c == "m" else f"c{joint}_h{link + 1}{c}"
+
+
+class JointCompliance(Effect):
+    """``dq_j = -c_j tau_j(q)`` for each joint j in ``joints``; see the module docstring.
+
+    ``robot``: give it to choose the form; a robot without masses selects the lumped
+    form (its independent terms are fixed here). Without ``robot`` the link masses are
+    required at ``delta``. ``payload``: in the lumped form, whether the data carries a
+    ``payload`` column (adds ``c{j}``).
+    """
+
+    name = "joint_compliance"
+    unit = "rad/Nm"
+
+    def __init__(self, joints: tuple[int, ...], robot: Robot | None = None,
+                 payload: bool = False):
+        super().__init__(joints)
+        self.lumped = robot is not None and not robot.has_inertia
+        self.payload = bool(payload)
+        self.terms: dict[int, tuple[int, ...]] = {}
+        if self.lumped:
+            check_joints(self, robot)
+            self.terms = {j: independent_terms(robot, j) for j in self.joints}  # type: ignore[arg-type]
+
+    def __repr__(self) -> str:
+        form = ", lumped" if self.lumped else ""
+        return f"JointCompliance(joints={list(self.joints)}{form})"
+
+    def parameter_names(self) -> tuple[str, ...]:
+        if not self.lumped:
+            return tuple(f"c{j}" for j in self.joints)
+        names: list[str] = []
+        for j in self.joints:
+            if self.payload:
+                names.append(f"c{j}")
+            names.extend(_term_name(j, t) for t in self.terms[j])
+        return tuple(names)
+
+    def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
+        check_joints(self, row.robot)
+        payload = row.extras.get("payload", 0.0)
+        entries = {}
+        if not self.lumped:
+            tau = _torque_function(row.robot)(row.q, row.p, payload, row.payload_com)
+            for k, j in enumerate(self.joints):
+                entries[j - 1] = -theta[k] * tau[j - 1]
+            return column(entries, row.robot.dof), None
+        basis_function, per_kg_function = _lumped_functions(row.robot)
+        basis = basis_function(row.q, row.p)
+        per_kg = per_kg_function(row.q, row.p, row.payload_com)
+        k = 0
+        for j in self.joints:
+            deflection = 0
+            if self.payload:
+                deflection = deflection - theta[k] * payload * per_kg[j - 1]
+                k += 1
+            for t in self.terms[j]:
+                deflection = deflection - theta[k] * basis[j - 1, t]
+                k += 1
+            entries[j - 1] = deflection
+        return column(entries, row.robot.dof), None
