@@ -1,0 +1,146 @@
+"""Which parameters the data can determine, and why the others cannot.
+
+Method: take the Jacobian of the residual at a start point, project out the columns of
+the placement unknowns (they are always estimated), scale every remaining column to
+unit length (so metres and radians compare), then run a column-pivoted QR in which,
+among equally good columns, the earlier one in a preference order wins. A column is
+
+* "invisible" when its unscaled norm is zero: it changes no residual (the patent's
+  all-zero column);
+* "absorbed by the placement" when its projection is zero: the placement unknowns make
+  the same change (e.g. base parameters against an unknown tracker frame);
+* "dependent" when it is a combination of columns already chosen (the patent's "keep
+  one of linearly dependent columns"); the combination is reported as a base-parameter
+  relation.
+
+The identifiable set is the pivoted columns up to the numerical rank.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .results import Identifiability
+
+RANK_TOLERANCE = 1e-7  # relative residual norm of a unit column below which it is dependent
+
+
+def preference(name: str) -> tuple[int, str]:
+    """Order in which equally informative parameters are kept.
+
+    Standard DH parameters first (joint by joint), then the mounted instrument, then the
+    tool, then the base, then the Hayati ``beta`` (only where DH alone is degenerate).
+    """
+    if name.startswith("beta"):
+        return (4, name)
+    if name.startswith("base_"):
+        return (3, name)
+    if name.startswith("tool_"):
+        return (2, name)
+    if name[:1] in "tda" and any(ch.isdigit() for ch in name):
+        return (0, name)
+    return (1, name)
+
+
+def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
+                     tolerance: float = RANK_TOLERANCE) -> tuple[list[int], np.ndarray]:
+    """Greedy column-pivoted Gram-Schmidt on unit columns.
+
+    Picks, at each step, the column with the largest remaining norm; ties (within 1e-9)
+    go to the smallest ``priority``. Returns the chosen column indices and the remaining
+    norms of all columns after the last pick.
+    """
+    A = columns.copy()
+    chosen: list[int] = []
+    remaining = np.linalg.norm(A, axis=0)
+    available = list(range(A.shape[1]))
+    while available:
+        norms = remaining[available]
+        best = norms.max()
+        if best < tolerance:
+            break
+        ties = [available[k] for k in np.flatnonzero(norms >= best * (1 - 1e-9) - 1e-15)]
+        pick = min(ties, key=lambda j: priority[j])
+        chosen.append(pick)
+        available.remove(pick)
+        v = A[:, pick] / np.linalg.norm(A[:, pick])
+        A -= np.outer(v, v @ A)
+        A[:, pick] = 0.0
+        remaining = np.linalg.norm(A, axis=0)
+    return chosen, remaining
+
+
+def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int],
+            placement: Sequence[int], *, invisible_reason: str, absorbed_reason: str,
+            tolerance: float = RANK_TOLERANCE) -> Identifiability:
+    """Identifiability of the ``candidates`` columns of ``jacobian`` (indices into ``names``).
+
+    ``placement`` columns are projected out first. Reasons are worded for the data kind.
+    """
+    J = np.asarray(jacobian, float)
+    candidates = list(candidates)
+    raw = J[:, candidates]
+    raw_norms = np.linalg.norm(raw, axis=0)
+    scale_reference = raw_norms.max() if raw_norms.size else 1.0
+    if len(placement):
+        P = J[:, list(placement)]
+        U, s, _ = np.linalg.svd(P, full_matrices=False)
+        U = U[:, s > s.max() * 1e-10] if s.size and s.max() > 0 else U[:, :0]
+        projected = raw - U @ (U.T @ raw)
+    else:
+        projected = raw.copy()
+    projected_norms = np.linalg.norm(projected, axis=0)
+
+    unidentifiable: dict[str, str] = {}
+    usable = []
+    for k, index in enumerate(candidates):
+        name = names[index]
+        if raw_norms[k] <= 1e-12 * max(scale_reference, 1e-300):
+            unidentifiable[name] = f"changes no residual ({invisible_reason})"
+        elif projected_norms[k] <= tolerance * raw_norms[k] * 10:
+            unidentifiable[name] = absorbed_reason
+        else:
+            usable.append(k)
+    unit = projected[:, usable] / projected_norms[usable]
+    priority = [preference(names[candidates[k]]) for k in usable]
+    order = sorted(range(len(usable)), key=lambda j: priority[j])
+    rank_of = {j: r for r, j in enumerate(order)}
+    chosen, _ = pivoted_qr_order(unit, [rank_of[j] for j in range(len(usable))], tolerance)
+    chosen_set = set(chosen)
+    identifiable_local = [usable[j] for j in sorted(chosen, key=lambda j: usable[j])]
+
+    combinations = []
+    if chosen:
+        basis = unit[:, chosen]
+        for j in range(len(usable)):
+            if j in chosen_set:
+                continue
+            name = names[candidates[usable[j]]]
+            coefficients, *_ = np.linalg.lstsq(basis, unit[:, j], rcond=None)
+            # Back to unscaled columns: col_j = sum c_k (norm_j / norm_k) col_k.
+            terms = []
+            for c, k in sorted(zip(coefficients, chosen), key=lambda t: -abs(t[0])):
+                factor = c * projected_norms[usable[j]] / projected_norms[usable[k]]
+                if abs(c) > 1e-3:
+                    terms.append(f"{factor:+.4g}*{names[candidates[usable[k]]]}")
+            relation = " ".join(terms[:4]) + (" ..." if len(terms) > 4 else "")
+            unidentifiable[name] = (f"a combination of parameters already identified "
+                                    f"({name} acts like {relation})")
+            combinations.append(f"{name} ~ {relation}")
+
+    if identifiable_local:
+        s = np.linalg.svd(projected[:, identifiable_local] /
+                          projected_norms[identifiable_local], compute_uv=False)
+        condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    else:
+        s, condition = np.zeros(0), float("nan")
+    return Identifiability(
+        candidates=tuple(names[i] for i in candidates),
+        identifiable=tuple(names[candidates[k]] for k in identifiable_local),
+        unidentifiable=unidentifiable,
+        singular_values=s,
+        condition_number=condition,
+        combinations=tuple(combinations),
+    )

@@ -1,0 +1,237 @@
+"""Geometric calibration: from datasets to a ``CalibrationResult``.
+
+``calibrate`` runs the whole job:
+
+1. the nominal fit: the nominal robot with only the placement unknowns fitted
+   (``rms_nominal``);
+2. identifiability at that point (``identifiability.analyse``);
+3. the geometric fit of every identifiable robot and mounted parameter, jointly with the
+   placements (``rms_geometric``);
+4. diagnosis of what the residual still holds (``diagnosis``), when asked;
+5. validation on held-out datasets: robot, effects and mounted instrument from the
+   calibration, placements fitted again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .effects.base import Effect
+from .errors import InputError, SolverError
+from .identifiability import analyse
+from .measurement import model_for
+from .problem import Problem
+from .results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
+                      RmsSummary)
+from .solver import Solution, solve
+
+__all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
+
+
+def models_for(datasets: Sequence, prefix: str = "") -> list:
+    """One measurement model per dataset, labelled by file stem (made unique)."""
+    models, seen = [], {}
+    for dataset in datasets:
+        label = prefix + Path(dataset.path).stem
+        seen[label] = seen.get(label, 0) + 1
+        if seen[label] > 1:
+            label = f"{label}#{seen[label]}"
+        models.append(model_for(dataset, label))
+    return models
+
+
+def analyse_identifiability(problem: Problem, x: np.ndarray,
+                            candidates: Sequence[str] | None = None) -> Identifiability:
+    """Identifiability of ``candidates`` (default: robot, effect and mounted unknowns) at ``x``."""
+    names = problem.unknowns.names
+    if candidates is None:
+        mask = problem.mask("robot", "effects", "mounted")
+        candidate_index = list(np.flatnonzero(mask))
+    else:
+        candidate_index = [problem.unknowns.index(n) for n in candidates]
+    placement = list(np.flatnonzero(problem.mask("placement")))
+    model = problem.models[0]
+    invisible = "; ".join(sorted({getattr(m, "invisible_reason", "no effect on these data")
+                                  for m in problem.models}))
+    absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
+                                 for m in problem.models}))
+    del model
+    return analyse(problem.jacobian(x), names, candidate_index, placement,
+                   invisible_reason=invisible, absorbed_reason=absorbed)
+
+
+def _check_same_robot(datasets: Sequence) -> None:
+    first = datasets[0]
+    for dataset in datasets[1:]:
+        if dataset.robot_path != first.robot_path and dataset.robot != first.robot:
+            raise InputError(f"names robot file {dataset.robot_path}, but {first.path.name} names "
+                             f"{first.robot_path}: datasets calibrated together must share one "
+                             f"robot", file=dataset.path, where="robot")
+
+
+def _free_mask(problem: Problem, identifiability: Identifiability) -> np.ndarray:
+    free = problem.mask("placement")
+    free[problem.unknowns.indices(identifiability.identifiable)] = True
+    return free
+
+
+def _residuals(problem: Problem, x_nominal, x_geometric, x_final) -> list[DatasetResiduals]:
+    out = []
+    errors = [problem.errors(x) for x in (x_nominal, x_geometric, x_final)]
+    for k, model in enumerate(problem.models):
+        dataset = model.dataset
+        out.append(DatasetResiduals(
+            label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
+            errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
+            joints=dataset.joints, extras=dict(dataset.extras)))
+    return out
+
+
+def _rms(errors: Sequence[np.ndarray]) -> float:
+    flat = np.concatenate([np.asarray(e) for e in errors]) if errors else np.zeros(0)
+    return float(np.sqrt(np.mean(flat**2))) if flat.size else float("nan")
+
+
+def refit_placement(problem: Problem, x: np.ndarray, *, method: str = "lm") -> np.ndarray:
+    """``x`` with only the placement unknowns re-solved (robot, effects, mounted held)."""
+    return solve(problem, x, problem.mask("placement"), method=method).x
+
+
+def evaluate(robot, datasets: Sequence, effects: Sequence[Effect], values: dict[str, float],
+             label_prefix: str = "") -> tuple[Problem, np.ndarray]:
+    """Problem over ``datasets`` started at ``values`` (by name), placements re-fitted."""
+    problem = Problem(robot, models_for(datasets, label_prefix), effects, start=values)
+    return problem, refit_placement(problem, problem.initial())
+
+
+def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
+    keep = problem.mask("robot", "effects", "mounted")
+    return {problem.unknowns.names[i]: float(x[i]) for i in np.flatnonzero(keep)}
+
+
+def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
+              diagnose: bool = True, method: str = "lm", loss: str = "linear",
+              progress: bool = False) -> CalibrationResult:
+    """Calibrate the robot shared by ``datasets``; see the module docstring.
+
+    ``effects`` are declared effects identified from the start; ``diagnose`` lets the
+    diagnosis add more. ``method`` and ``loss`` go to ``solver.solve``.
+    """
+    datasets = list(datasets)
+    if not datasets:
+        raise InputError("no dataset given")
+    _check_same_robot(datasets + list(validation))
+    robot = datasets[0].robot
+    models = models_for(datasets)
+    problem = Problem(robot, models, effects)
+    x0 = problem.initial()
+
+    nominal = solve(problem, x0, problem.mask("placement"), method=method, loss=loss)
+    identifiability = analyse_identifiability(problem, nominal.x)
+    if not identifiability.identifiable:
+        raise InputError("the data identify no robot parameter (too few or degenerate rows)",
+                         file=datasets[0].path)
+    free = _free_mask(problem, identifiability)
+    rows_needed = int(free.sum())
+    if problem.size <= rows_needed:
+        raise InputError(f"{problem.size} residuals cannot identify {rows_needed} unknowns; "
+                         f"add data", file=datasets[0].path)
+    geometric = solve(problem, nominal.x, free, method=method, loss=loss)
+    if geometric.status not in ("converged", "max_iterations"):
+        raise SolverError(f"the geometric calibration did not converge ({geometric.status})",
+                          stats={"iterations": geometric.iterations})
+
+    final_problem, final, findings, tested = problem, geometric, (), ()
+    if diagnose:
+        from . import diagnosis  # the diagnosis builds on this module
+
+        outcome = diagnosis.run(problem, geometric, identifiability, method=method, loss=loss)
+        final_problem, final = outcome.problem, outcome.solution
+        findings, tested = outcome.added, outcome.tested
+
+    x_nominal_final = _embed(problem, nominal.x, final_problem)
+    x_geometric_final = _embed(problem, geometric.x, final_problem)
+    residuals = _residuals(final_problem, x_nominal_final, x_geometric_final, final.x)
+    fit = RmsSummary(problem.rms(nominal.x), problem.rms(geometric.x),
+                     final_problem.rms(final.x))
+
+    validation_summary, validation_residuals = None, ()
+    if validation:
+        validation_summary, validation_residuals = _validate(
+            robot, list(validation), problem, geometric.x, final_problem, final.x)
+
+    std = final.std
+    names = final_problem.unknowns.names
+    nominal_vector = problem.kinematics.nominal
+    parameters = []
+    for i, name in enumerate(problem.kinematics.registry.names):
+        identified = name in identifiability.identifiable
+        parameters.append(ParameterEstimate(
+            name=name, quantity=problem.kinematics.registry.quantities[i],
+            nominal=float(nominal_vector[i]), estimate=float(final.x[i]),
+            std=float(std[i]) if identified else None, identifiable=identified,
+            reason=identifiability.unidentifiable.get(name)))
+    mounted_slice = final_problem.slices["mounted"]
+    mounted = {names[i]: (float(final.x[i]), float(std[i]) if np.isfinite(std[i]) else None)
+               for i in range(mounted_slice.start, mounted_slice.stop)}
+    placement_slice = final_problem.slices["placement"]
+    placement = {names[i]: float(final.x[i])
+                 for i in range(placement_slice.start, placement_slice.stop)}
+    calibrated = robot.with_parameters(final.x[problem.slices["robot"]])
+    return CalibrationResult(
+        datasets=tuple(d.path.name for d in datasets),
+        robot_nominal=robot,
+        robot_calibrated=calibrated,
+        parameters=tuple(parameters),
+        identifiability=identifiability,
+        condition_number=identifiability.condition_number,
+        effects=tuple(findings),
+        fit=fit,
+        validation=validation_summary,
+        residuals=tuple(residuals),
+        validation_residuals=tuple(validation_residuals),
+        mounted=mounted,
+        placement=placement,
+        solver={"method": method, "loss": loss, "iterations": final.iterations,
+                "status": final.status, "seconds": geometric.seconds + nominal.seconds,
+                "residuals": problem.size, "free_unknowns": int(free.sum())},
+        effect_models=tuple(final_problem.effects),
+        effect_values=final.x[final_problem.slices["effects"]].copy(),
+        diagnosis=tuple(tested),
+    )
+
+
+def _embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
+    """``x`` of ``source`` placed into ``target``'s layout by name (missing effects zero)."""
+    if target is source:
+        return x
+    out = np.zeros(len(target.unknowns))
+    for i, name in enumerate(source.unknowns.names):
+        if name in target.unknowns:
+            out[target.unknowns.index(name)] = x[i]
+    return out
+
+
+def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x_final):
+    stages = []
+    for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
+        values = {} if x is None else _values(stage_problem, x)
+        val_problem, x_val = evaluate(robot, validation, stage_problem.effects, values,
+                                      label_prefix="validation:")
+        stages.append((val_problem, x_val))
+    errors = [p.errors(x) for p, x in stages]
+    summary = RmsSummary(*(_rms(e) for e in errors))
+    residuals = []
+    for k, model in enumerate(stages[-1][0].models):
+        dataset = model.dataset
+        residuals.append(DatasetResiduals(
+            label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
+            errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
+            joints=dataset.joints, extras=dict(dataset.extras)))
+    return summary, residuals
+
+
+Solution = Solution

@@ -1,0 +1,34 @@
+"""Measurement models, one per dataset kind, behind ``MeasurementModel``."""
+
+from __future__ import annotations
+
+from .artifact import ArtifactModel, CrossBarModel
+from .base import MeasurementModel
+from .tracker import TrackerModel
+
+MODELS: dict[str, type[MeasurementModel]] = {
+    "cross_bar": CrossBarModel,
+    "artifact_touches": ArtifactModel,
+    "tracker_points": TrackerModel,
+}
+
+try:  # the sphere-and-laser model lives in its own module
+    from .sphere_laser import SphereLaserModel
+
+    MODELS["sphere_laser"] = SphereLaserModel
+except ImportError:  # pragma: no cover - only while that module is absent
+    pass
+
+
+def model_for(dataset, label: str) -> MeasurementModel:
+    """The measurement model of ``dataset``'s kind, with placement names under ``label``."""
+    from ..errors import InputError
+
+    if dataset.kind not in MODELS:
+        raise InputError(f"no measurement model for kind {dataset.kind!r}", file=dataset.path,
+                         where="kind")
+    return MODELS[dataset.kind](dataset, label)
+
+
+__all__ = ["ArtifactModel", "CrossBarModel", "MODELS", "MeasurementModel",
+           "TrackerModel", "model_for"]

@@ -1,0 +1,169 @@
+"""Probe touches of sockets on a rigid artifact (``artifact_touches``, ``cross_bar``).
+
+Unknowns: the probe-ball centre in the flange frame (mounted: ``probe_x, probe_y,
+probe_z`` [m]) and, per placement, the position of every socket touched more than once
+(placement: ``<label>/pose<k>/<socket>_x`` ... [m], world frame). A socket touched once
+is simply where the probe was.
+
+Residuals [m], per placement:
+
+* each touch's deviation from its socket (3 components; sockets touched more than once),
+* each known distance: ``|S_a - S_b| - L``,
+* each perpendicularity ``[A, C, B, D]``: ``(C - A) . (D - B) / L_AC`` with ``L_AC`` the
+  known distance A-C when given, else ``sqrt(|AC| |BD|)``.
+
+``cross_bar`` is the artifact with one touch per socket, distances ``A-C`` and ``B-D`` and
+one perpendicularity: exactly the bar residuals ``|AC| - L``, ``|BD| - L``, ``AC.BD / L``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..parameters import ParameterRegistry
+from .base import MeasurementModel, PointsFunction
+
+
+@dataclass(frozen=True)
+class _Socket:
+    pose: int
+    name: str
+    rows: tuple[int, ...]
+    unknown_index: int | None  # index of its x in the placement vector, None when touched once
+
+
+class ArtifactModel(MeasurementModel):
+    """Residuals of touch data; see the module docstring."""
+
+    kind = "artifact_touches"
+    invisible_reason = ("touch data carry no absolute position: a rigid motion of all touched "
+                        "points changes no residual")
+    absorbed_reason = "absorbed by the unknown socket positions (touch data carry no absolute position)"
+
+    def __init__(self, dataset, label: str):
+        super().__init__(dataset, label)
+        sockets: list[_Socket] = []
+        names: list[str] = []
+        for pose in sorted(set(int(p) for p in dataset.pose)):
+            rows_of_pose = np.flatnonzero(dataset.pose == pose)
+            for socket in sorted({dataset.point[i] for i in rows_of_pose}):
+                rows = tuple(int(i) for i in rows_of_pose if dataset.point[i] == socket)
+                index = None
+                if len(rows) > 1:
+                    index = len(names)
+                    names += [f"{label}/pose{pose}/{socket}_{axis}" for axis in "xyz"]
+                sockets.append(_Socket(pose, socket, rows, index))
+        self.sockets = tuple(sockets)
+        self._placement = ParameterRegistry(tuple(names), ("length",) * len(names))
+        self._by_key = {(s.pose, s.name): s for s in sockets}
+        known = {}
+        for a, b, length in dataset.distances:
+            known[(a, b)] = known[(b, a)] = length
+        self._known = known
+        self._size = self._count_residuals()
+
+    # ------------------------------------------------------------------ unknowns
+
+    @property
+    def mounted(self) -> ParameterRegistry:
+        return ParameterRegistry(("probe_x", "probe_y", "probe_z"), ("length",) * 3)
+
+    @property
+    def placement(self) -> ParameterRegistry:
+        return self._placement
+
+    def initial_mounted(self) -> np.ndarray:
+        return np.asarray(self.dataset.probe, dtype=float).copy()
+
+    def initial_placement(self, points, mounted) -> np.ndarray:
+        world = points(np.asarray(mounted, float).reshape(3, 1))  # 3 x N
+        values = np.zeros(len(self._placement))
+        for socket in self.sockets:
+            if socket.unknown_index is not None:
+                values[socket.unknown_index:socket.unknown_index + 3] = \
+                    world[:, list(socket.rows)].mean(axis=1)
+        return values
+
+    # ------------------------------------------------------------------ residuals
+
+    def _poses(self):
+        return sorted({s.pose for s in self.sockets})
+
+    def _count_residuals(self) -> int:
+        count = sum(3 * len(s.rows) for s in self.sockets if s.unknown_index is not None)
+        for pose in self._poses():
+            count += len(self._distances(pose)) + len(self._perpendiculars(pose))
+        return count
+
+    def _distances(self, pose: int):
+        return [(a, b, L) for a, b, L in self.dataset.distances
+                if (pose, a) in self._by_key and (pose, b) in self._by_key]
+
+    def _perpendiculars(self, pose: int):
+        return [entry for entry in self.dataset.perpendicular
+                if all((pose, s) in self._by_key for s in entry)]
+
+    def residual_size(self) -> int:
+        return self._size
+
+    def residual(self, points: PointsFunction, mounted, placement) -> ca.MX:
+        world = points(mounted)  # 3 x N
+        position = {}
+        parts = []
+        for socket in self.sockets:
+            if socket.unknown_index is None:
+                position[(socket.pose, socket.name)] = world[:, socket.rows[0]]
+            else:
+                k = socket.unknown_index
+                centre = placement[k:k + 3]
+                position[(socket.pose, socket.name)] = centre
+                for row in socket.rows:
+                    parts.append(world[:, row] - centre)
+        for pose in self._poses():
+            for a, b, length in self._distances(pose):
+                parts.append(ca.norm_2(position[(pose, a)] - position[(pose, b)]) - length)
+            for a, c, b, d in self._perpendiculars(pose):
+                ac = position[(pose, c)] - position[(pose, a)]
+                bd = position[(pose, d)] - position[(pose, b)]
+                scale = self._known.get((a, c))
+                if scale is None:
+                    scale = ca.sqrt(ca.norm_2(ac) * ca.norm_2(bd))
+                parts.append(ca.dot(ac, bd) / scale)
+        return ca.vertcat(*parts) if parts else ca.MX(0, 1)
+
+    def _layout(self):
+        """(rows, sizes) of each error: touches first (3 residuals each), then scalars."""
+        rows, sizes = [], []
+        for socket in self.sockets:
+            if socket.unknown_index is not None:
+                rows += list(socket.rows)
+                sizes += [3] * len(socket.rows)
+        for pose in self._poses():
+            n = len(self._distances(pose)) + len(self._perpendiculars(pose))
+            rows += [-1] * n
+            sizes += [1] * n
+        return np.array(rows, dtype=int), np.array(sizes, dtype=int)
+
+    def errors(self, residual: np.ndarray) -> np.ndarray:
+        _, sizes = self._layout()
+        residual = np.asarray(residual, float).ravel()
+        out = np.empty(len(sizes))
+        start = 0
+        for i, size in enumerate(sizes):
+            out[i] = np.linalg.norm(residual[start:start + size])
+            start += size
+        return out
+
+    def error_rows(self) -> np.ndarray:
+        return self._layout()[0]
+
+
+class CrossBarModel(ArtifactModel):
+    """The cross-shaped bar: an artifact whose four sockets are touched once per pose."""
+
+    kind = "cross_bar"
+    invisible_reason = ("bar data carry no absolute position: a rigid motion of all touched "
+                        "points changes no bar length and no angle")

@@ -1,0 +1,85 @@
+"""Absolute positions from a laser tracker (``tracker_points``).
+
+Unknowns: the reflector centre in the flange frame (mounted: ``target_x, target_y,
+target_z`` [m]) and the tracker's frame (placement: ``<label>/instrument_x, _y, _z`` [m]
+and ``<label>/instrument_rx, _ry, _rz`` [rad]). The instrument rotation is
+``R = R0 Rz(rz) Ry(ry) Rx(rx)`` with ``R0`` from a closed-form rigid registration of the
+nominal positions to the measured ones (Kabsch), so the angles stay small and far from
+gimbal lock.
+
+Residual per point [m]: ``measured_i - (R p_world_i + t)``, measured in the instrument
+frame; the error of a point is the length of that 3-vector.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..parameters import ParameterRegistry
+from ..transforms import pose_from_xyz_rpy
+from .base import MeasurementModel, PointsFunction
+
+
+def rigid_registration(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``R, t`` with ``target ~ R source + t`` (points as rows, Kabsch)."""
+    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
+    H = (source - source_mean).T @ (target - target_mean)
+    U, _, Vt = np.linalg.svd(H)
+    sign = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, sign]) @ U.T
+    return R, target_mean - R @ source_mean
+
+
+class TrackerModel(MeasurementModel):
+    """Residuals of absolute position data; see the module docstring."""
+
+    kind = "tracker_points"
+    invisible_reason = "has no effect on the measured positions"
+    absorbed_reason = "absorbed by the unknown instrument frame (tracker data fix no robot base)"
+
+    def __init__(self, dataset, label: str):
+        super().__init__(dataset, label)
+        names = tuple(f"{label}/instrument_{k}" for k in ("x", "y", "z", "rx", "ry", "rz"))
+        self._placement = ParameterRegistry(names, ("length",) * 3 + ("angle",) * 3)
+        self.R0 = np.eye(3)
+
+    @property
+    def mounted(self) -> ParameterRegistry:
+        return ParameterRegistry(("target_x", "target_y", "target_z"), ("length",) * 3)
+
+    @property
+    def placement(self) -> ParameterRegistry:
+        return self._placement
+
+    def initial_mounted(self) -> np.ndarray:
+        return np.asarray(self.dataset.target, dtype=float).copy()
+
+    def initial_placement(self, points, mounted) -> np.ndarray:
+        world = points(np.asarray(mounted, float).reshape(3, 1)).T  # N x 3
+        R, t = rigid_registration(world, self.dataset.measured)
+        self.R0 = R
+        return np.concatenate([t, np.zeros(3)])
+
+    def instrument_transform(self, placement: np.ndarray) -> np.ndarray:
+        """``T_instrument_world`` (4x4) of a placement vector."""
+        T = pose_from_xyz_rpy(placement[:3], placement[3:])
+        T[:3, :3] = self.R0 @ T[:3, :3]
+        return T
+
+    def residual_size(self) -> int:
+        return 3 * self.dataset.rows
+
+    def residual(self, points: PointsFunction, mounted, placement) -> ca.MX:
+        world = points(mounted)  # 3 x N
+        T = pose_from_xyz_rpy([placement[0], placement[1], placement[2]],
+                              [placement[3], placement[4], placement[5]])
+        R = ca.DM(self.R0) @ T[:3, :3]
+        predicted = R @ world + ca.repmat(T[:3, 3], 1, self.dataset.rows)
+        return ca.vec(ca.DM(self.dataset.measured.T) - predicted)
+
+    def errors(self, residual: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(np.asarray(residual, float).reshape(-1, 3), axis=1)
+
+    def error_rows(self) -> np.ndarray:
+        return np.arange(self.dataset.rows)

@@ -1,0 +1,309 @@
+"""The identification problem: one residual over all datasets, with exact Jacobian.
+
+Unknown vector ``x`` (``Problem.unknowns``), in this order:
+
+1. every geometric parameter of the robot (``ParameterRegistry`` names, SI),
+2. the parameters of each effect (``Effect.parameter_names``),
+3. the mounted instrument unknowns, shared by name across datasets (probe, target, laser),
+4. the placement unknowns of each dataset (sockets, instrument frame, sphere centre).
+
+Which of them are free is decided by the caller (identifiability, nominal fit,
+validation); the residual and Jacobian are built once per problem as CasADi functions.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from .effects.base import Effect, RowContext
+from .errors import InputError
+from .kinematics import Kinematics
+from .measurement.base import MeasurementModel
+from .parameters import ParameterRegistry
+from .robot import Robot
+
+
+def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Sequence[str]):
+    """Per-row CasADi function of one flange-frame point after the effects act.
+
+    ``(q, extras, p, theta, offset, payload_com) -> (p_world, dp/dp, dp/dtheta, dp/doffset)``
+    with ``q`` the joint readings, ``extras`` the data columns the effects read, ``p`` the
+    robot geometry, ``theta`` all effect parameters, ``offset`` [m] in the flange frame;
+    ``p_world`` [m] and its exact derivatives (SX, so a batch of rows is one cheap map).
+    """
+    robot, registry = kinematics.robot, kinematics.registry
+    q = ca.SX.sym("q", robot.dof)
+    extras = ca.SX.sym("extras", len(columns))
+    p = ca.SX.sym("p", len(registry))
+    sizes = [len(e.parameter_names()) for e in effects]
+    theta = ca.SX.sym("theta", sum(sizes))
+    offset = ca.SX.sym("offset", 3)
+    payload_com = ca.SX.sym("payload_com", 3)
+    row = RowContext(robot, registry, q, p, {c: extras[i] for i, c in enumerate(columns)},
+                     payload_com)
+    dq = ca.SX.zeros(robot.dof)
+    dp = ca.SX.zeros(len(registry))
+    start = 0
+    for effect, size in zip(effects, sizes):
+        delta_q, delta_p = effect.delta(row, theta[start:start + size])
+        dq += delta_q
+        if delta_p is not None:
+            dp += delta_p
+        start += size
+    position = kinematics.point(q + dq, p + dp, offset)
+    inputs = [q, extras, p, theta, offset, payload_com]
+    point = ca.Function("row_point", inputs, [position])
+    derivatives = ca.Function("row_point_jacobians", inputs,
+                              [position, ca.jacobian(position, p), ca.jacobian(position, theta),
+                               ca.jacobian(position, offset)])
+    return point, derivatives
+
+
+class Problem:
+    """Residuals of ``models`` for ``robot`` with ``effects``; see the module docstring.
+
+    ``start`` optionally gives starting values by name (robot, effect or mounted
+    parameters, SI); placement unknowns are always initialised from the data.
+    """
+
+    def __init__(self, robot: Robot, models: Sequence[MeasurementModel],
+                 effects: Sequence[Effect] = (), start: dict[str, float] | None = None,
+                 kinematics: Kinematics | None = None):
+        self.robot = robot
+        self.models = tuple(models)
+        self.effects = tuple(effects)
+        self.kinematics = kinematics or Kinematics(robot)
+        robot_registry = self.kinematics.registry
+        effect_registry = ParameterRegistry((), ())
+        for effect in self.effects:
+            effect_registry = effect_registry.concat(effect.registry())
+        mounted_names: list[str] = []
+        mounted_quantities: list[str] = []
+        for model in self.models:
+            for name in model.mounted.names:
+                if name not in mounted_names:
+                    mounted_names.append(name)
+                    mounted_quantities.append(model.mounted.quantity(name))
+        mounted_registry = ParameterRegistry(tuple(mounted_names), tuple(mounted_quantities))
+        placement_registry = ParameterRegistry((), ())
+        for model in self.models:
+            placement_registry = placement_registry.concat(model.placement)
+        self.unknowns = (robot_registry.concat(effect_registry).concat(mounted_registry)
+                         .concat(placement_registry))
+        sizes = [len(robot_registry), len(effect_registry), len(mounted_registry),
+                 len(placement_registry)]
+        bounds = np.cumsum([0] + sizes)
+        self.slices = {key: slice(int(bounds[i]), int(bounds[i + 1]))
+                       for i, key in enumerate(("robot", "effects", "mounted", "placement"))}
+        self.columns = tuple(sorted({c for e in self.effects for c in e.required_columns()}
+                                    | ({"payload"} if self.effects else set())))
+        self._row = _row_function(self.kinematics, self.effects, self.columns)
+        self._maps: dict[tuple[int, int], ca.Function] = {}
+        self._x0 = self._initial(start or {})
+
+    def __repr__(self) -> str:
+        counts = {k: s.stop - s.start for k, s in self.slices.items()}
+        return (f"Problem({self.robot.name!r}, datasets={[m.label for m in self.models]}, "
+                f"effects={[e.label for e in self.effects]}, unknowns={counts})")
+
+    # ------------------------------------------------------------------ layout helpers
+
+    def mounted_indices(self, model: MeasurementModel) -> np.ndarray:
+        return self.unknowns.indices(model.mounted.names)
+
+    def placement_indices(self, model: MeasurementModel) -> np.ndarray:
+        return self.unknowns.indices(model.placement.names)
+
+    def mask(self, *keys: str) -> np.ndarray:
+        """Boolean mask over ``x`` selecting whole blocks ('robot', 'placement', ...)."""
+        mask = np.zeros(len(self.unknowns), dtype=bool)
+        for key in keys:
+            mask[self.slices[key]] = True
+        return mask
+
+    # ------------------------------------------------------------------ data per model
+
+    def _data(self, model: MeasurementModel):
+        dataset = model.dataset
+        n = dataset.rows
+        extras = np.zeros((len(self.columns), n))
+        for i, column in enumerate(self.columns):
+            if column in dataset.extras:
+                extras[i] = np.asarray(dataset.extras[column], dtype=float)
+            elif column != "payload":
+                raise InputError(f"effect needs a {column!r} column", file=dataset.data_path)
+        payload_com = dataset.payload_com if dataset.payload_com is not None else np.zeros(3)
+        return dataset.joints.T, extras, payload_com
+
+    def _mapped(self, which: int, rows: int) -> ca.Function:
+        key = (which, rows)
+        if key not in self._maps:
+            function = self._row[which]
+            self._maps[key] = function.map(rows, "thread", 2) if rows > 1 else function
+        return self._maps[key]
+
+    def points_numeric(self, model: MeasurementModel, x: np.ndarray):
+        """``offsets -> world positions (3 x N)`` [m] for the robot/effects in ``x``."""
+        p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
+        Q, extras, payload_com = self._data(model)
+        mapped = self._mapped(0, model.dataset.rows)
+
+        def points(offsets):
+            return np.asarray(mapped(Q, extras, p, theta, np.asarray(offsets, float),
+                                     payload_com))
+
+        return points
+
+    def _initial(self, start: dict[str, float]) -> np.ndarray:
+        x = np.zeros(len(self.unknowns))
+        x[self.slices["robot"]] = self.kinematics.registry.vector_of(self.robot)
+        for model in self.models:
+            x[self.mounted_indices(model)] = model.initial_mounted()
+        for name, value in start.items():
+            if name in self.unknowns:
+                x[self.unknowns.index(name)] = value
+        for model in self.models:
+            mounted = x[self.mounted_indices(model)]
+            x[self.placement_indices(model)] = model.initial_placement(
+                self.points_numeric(model, x), mounted)
+        return x
+
+    def initial(self) -> np.ndarray:
+        """Starting point: given/nominal robot, zero effects, nominal mounted, placement fitted."""
+        return self._x0.copy()
+
+    # ------------------------------------------------------------------ residual functions
+    #
+    # The residual of a model is r = g(P, x) with P (3 x N) the world points of its rows.
+    # P comes from the per-row SX function (cheap, mapped); g is the model's MX expression
+    # with P as an input. The Jacobian is assembled by the chain rule
+    #     dr/dx = dg/dx + dg/dP M,   M = dP/dp E_p + dP/dtheta E_theta + dP/doffset doffset/dx
+    # where dg/dP M is one forward derivative of g with the columns of M as directions.
+
+    @cached_property
+    def _compiled(self) -> list[dict]:
+        nx = len(self.unknowns)
+        x = ca.MX.sym("x", nx)
+        out = []
+        for model in self.models:
+            rows = model.dataset.rows
+            P = ca.MX.sym("P", 3 * rows)
+            recorded: dict = {}
+
+            def points(offsets, P=P, rows=rows, recorded=recorded):
+                if "offsets" in recorded:
+                    raise RuntimeError("a measurement model may ask for its points once")
+                recorded["offsets"] = offsets
+                return ca.reshape(P, 3, rows)
+
+            mounted = ca.vertcat(*[x[int(i)] for i in self.mounted_indices(model)])
+            placement = ca.vertcat(*[x[int(i)] for i in self.placement_indices(model)]) \
+                if len(model.placement) else ca.MX(0, 1)
+            r = model.residual(points, mounted, placement)
+            M = ca.MX.sym("M", 3 * rows, nx)
+            entry = {"model": model, "uses_points": "offsets" in recorded}
+            if entry["uses_points"]:
+                offsets = recorded["offsets"]
+                entry["offsets"] = ca.Function("offsets", [x], [offsets,
+                                               ca.jacobian(ca.vec(offsets), x)])
+                entry["residual"] = ca.Function("residual", [P, x], [r])
+                entry["jacobian"] = ca.Function(
+                    "jacobian", [P, x, M], [ca.jacobian(r, x) + ca.jtimes(r, P, M)])
+            else:
+                entry["residual"] = ca.Function("residual", [x], [r])
+                entry["jacobian"] = ca.Function("jacobian", [x], [ca.jacobian(r, x)])
+            out.append(entry)
+        return out
+
+    def _model_residual(self, entry: dict, x: np.ndarray, with_jacobian: bool):
+        model = entry["model"]
+        if not entry["uses_points"]:
+            r = np.asarray(entry["residual"](x)).ravel()
+            J = np.asarray(entry["jacobian"](x).full()) if with_jacobian else None
+            return r, J
+        rows = model.dataset.rows
+        offsets, d_offsets = entry["offsets"](x)
+        offsets = np.asarray(offsets)
+        Q, extras, payload_com = self._data(model)
+        p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
+        if not with_jacobian:
+            P = np.asarray(self._mapped(0, rows)(Q, extras, p, theta, offsets, payload_com))
+            return np.asarray(entry["residual"](P.T.ravel(), x)).ravel(), None
+        P, J_p, J_theta, J_offset = (np.asarray(v) for v in self._mapped(1, rows)(
+            Q, extras, p, theta, offsets, payload_com))
+        nx = len(self.unknowns)
+
+        def stacked(block: np.ndarray, width: int) -> np.ndarray:
+            # map concatenates per-row 3 x width blocks side by side: 3 x (rows*width)
+            return block.reshape(3, rows, width).transpose(1, 0, 2)
+
+        M = np.zeros((rows, 3, nx))
+        M[:, :, self.slices["robot"]] = stacked(J_p, len(self.kinematics.registry))
+        n_theta = self.slices["effects"].stop - self.slices["effects"].start
+        if n_theta:
+            M[:, :, self.slices["effects"]] = stacked(J_theta, n_theta)
+        d_offsets = np.asarray(d_offsets.full())
+        if d_offsets.shape[0] == 3:  # one offset for every row
+            d_offsets = np.broadcast_to(d_offsets, (rows, 3, nx))
+        else:
+            d_offsets = d_offsets.reshape(rows, 3, nx)
+        M += np.einsum("nij,njk->nik", stacked(J_offset, 3), d_offsets)
+        P_flat = P.T.ravel()
+        r = np.asarray(entry["residual"](P_flat, x)).ravel()
+        J = np.asarray(entry["jacobian"](P_flat, x, M.reshape(3 * rows, nx)))
+        return r, J
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """Stacked residual [m] at ``x``."""
+        parts = [self._model_residual(e, np.asarray(x, float), False)[0] for e in self._compiled]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """Dense Jacobian d residual / d x at ``x`` (exact, by the chain rule above)."""
+        parts = [self._model_residual(e, np.asarray(x, float), True)[1] for e in self._compiled]
+        return np.vstack(parts)
+
+    def residual_and_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        parts = [self._model_residual(e, np.asarray(x, float), True) for e in self._compiled]
+        return np.concatenate([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+
+    def symbolic_residual(self, x: ca.MX) -> ca.MX:
+        """The residual as one CasADi MX expression of ``x`` (for IPOPT)."""
+        p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
+        parts = []
+        for entry in self._compiled:
+            model = entry["model"]
+            if not entry["uses_points"]:
+                parts.append(entry["residual"](x))
+                continue
+            Q, extras, payload_com = self._data(model)
+            offsets = entry["offsets"](x)[0]
+            P = self._mapped(0, model.dataset.rows)(Q, extras, p, theta, offsets, payload_com)
+            parts.append(entry["residual"](ca.vec(P), x))
+        return ca.vertcat(*parts)
+
+    @property
+    def size(self) -> int:
+        return sum(model.residual_size() for model in self.models)
+
+    def split(self, r: np.ndarray) -> list[np.ndarray]:
+        """Split a stacked residual into per-model pieces."""
+        out, start = [], 0
+        for model in self.models:
+            size = model.residual_size()
+            out.append(r[start:start + size])
+            start += size
+        return out
+
+    def errors(self, x: np.ndarray) -> list[np.ndarray]:
+        """Per-dataset per-measurement error lengths [m] at ``x``."""
+        return [model.errors(r) for model, r in zip(self.models, self.split(self.residual(x)))]
+
+    def rms(self, x: np.ndarray) -> float:
+        """RMS over all datasets' per-measurement errors [m]."""
+        errors = np.concatenate(self.errors(x))
+        return float(np.sqrt(np.mean(errors**2))) if errors.size else float("nan")

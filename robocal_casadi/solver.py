@@ -1,0 +1,210 @@
+"""Nonlinear least squares over a subset of a ``Problem``'s unknowns.
+
+Methods:
+
+* ``lm``: Levenberg-Marquardt on the exact Jacobian, column-scaled, with a QR solve of
+  the damped system (the default: it exploits the least-squares structure);
+* ``ipopt``: the same objective ``0.5 |r|^2`` handed to IPOPT through CasADi;
+* ``linearised``: the patent's iterated ``A dx = b`` (undamped Gauss-Newton steps);
+* ``two_stage``: the patent's scheme: angles with lengths held, then lengths with angles
+  held, each stage iterated, repeated until the update is small.
+
+``loss='huber'`` reweights residual components (iteratively reweighted least squares)
+so that outliers pull less. Standard errors come from ``s^2 (J^T J)^-1`` at the solution
+with ``s^2 = RSS / (m - n)``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from .errors import SolverError
+from .problem import Problem
+
+METHODS = ("lm", "ipopt", "linearised", "two_stage")
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Result of a solve: ``x`` (full vector), ``covariance`` of the free unknowns."""
+
+    x: np.ndarray
+    free: np.ndarray
+    covariance: np.ndarray
+    cost: float
+    iterations: int
+    status: str
+    method: str
+    seconds: float
+    residual: np.ndarray = field(repr=False)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard error of every unknown (NaN for fixed ones) [SI]."""
+        out = np.full(len(self.x), np.nan)
+        out[self.free] = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+        return out
+
+    def __repr__(self) -> str:
+        rms = float(np.sqrt(np.mean(self.residual**2))) if self.residual.size else 0.0
+        return (f"Solution(method={self.method}, status={self.status!r}, free={int(self.free.sum())},"
+                f" iterations={self.iterations}, rms_residual={rms:.4g}, seconds={self.seconds:.3g})")
+
+
+def _huber_weights(r: np.ndarray) -> np.ndarray:
+    sigma = 1.4826 * np.median(np.abs(r - np.median(r))) or 1e-12
+    delta = 1.345 * sigma
+    a = np.abs(r)
+    return np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-300))
+
+
+def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    m, n = J.shape
+    dof = max(m - n, 1)
+    s2 = float(r @ r) / dof
+    try:
+        return s2 * np.linalg.pinv(J.T @ J, rcond=1e-14, hermitian=True)
+    except np.linalg.LinAlgError:
+        return np.full((n, n), np.nan)
+
+
+def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, loss: str,
+                         max_iterations: int, damping: bool, tolerance: float):
+    x = x.copy()
+    lam = 1e-4 if damping else 0.0
+    r = problem.residual(x)
+    weights = _huber_weights(r) if loss == "huber" else np.ones_like(r)
+    cost = 0.5 * float(np.sum(weights * r**2))
+    status = "max_iterations"
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):
+        J = problem.jacobian(x)[:, free]
+        w = np.sqrt(weights)
+        Jw, rw = J * w[:, None], r * w
+        scale = np.linalg.norm(Jw, axis=0)
+        scale[scale == 0] = 1.0
+        Js = Jw / scale
+        while True:
+            if lam > 0:
+                A = np.vstack([Js, np.sqrt(lam) * np.eye(Js.shape[1])])
+                b = np.concatenate([-rw, np.zeros(Js.shape[1])])
+            else:
+                A, b = Js, -rw
+            step_scaled, *_ = np.linalg.lstsq(A, b, rcond=None)
+            step = step_scaled / scale
+            trial = x.copy()
+            trial[free] += step
+            r_trial = problem.residual(trial)
+            cost_trial = 0.5 * float(np.sum(weights * r_trial**2))
+            if not np.isfinite(cost_trial):
+                cost_trial = np.inf
+            if cost_trial <= cost or not damping:
+                break
+            lam = max(lam * 10.0, 1e-8)
+            if lam > 1e12:
+                status = "stalled"
+                break
+        if status == "stalled":
+            break
+        improvement = cost - cost_trial
+        x, r = trial, r_trial
+        if loss == "huber":
+            weights = _huber_weights(r)
+            cost_trial = 0.5 * float(np.sum(weights * r**2))
+        cost = cost_trial
+        if damping:
+            lam = max(lam / 10.0, 1e-12)
+        if np.linalg.norm(step_scaled) < tolerance * (1.0 + np.linalg.norm(x[free] * scale)) \
+                or abs(improvement) <= 1e-15 * max(cost, 1e-300) or cost == 0:
+            status = "converged"
+            break
+    r, covariance = _finish(problem, x, free, loss)
+    return x, r, covariance, cost, iterations, status
+
+
+def _finish(problem: Problem, x: np.ndarray, free: np.ndarray, loss: str):
+    """Residual and covariance of the free unknowns at ``x``."""
+    r = problem.residual(x)
+    w = np.sqrt(_huber_weights(r)) if loss == "huber" else np.ones_like(r)
+    J = problem.jacobian(x)[:, free]
+    return r, _covariance(J * w[:, None], r * w)
+
+
+def _ipopt(problem: Problem, x0: np.ndarray, free: np.ndarray, max_iterations: int):
+    index = np.flatnonzero(free)
+    z = ca.MX.sym("z", len(index))
+    fixed = ca.MX.sym("fixed", len(x0))
+    full = ca.vertcat(*[z[int(np.searchsorted(index, i))] if free[i] else fixed[i]
+                        for i in range(len(x0))])
+    r = problem.symbolic_residual(full)
+    nlp = {"x": z, "p": fixed, "f": 0.5 * ca.dot(r, r)}
+    solver = ca.nlpsol("calibration", "ipopt", nlp, {
+        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iterations, "ipopt.tol": 1e-14,
+        "ipopt.hessian_approximation": "exact"})
+    out = solver(x0=x0[free], p=x0)
+    x = x0.copy()
+    x[free] = np.asarray(out["x"]).ravel()
+    stats = solver.stats()
+    r = problem.residual(x)
+    J = problem.jacobian(x)[:, free]
+    status = "converged" if stats.get("success") else str(stats.get("return_status"))
+    return x, r, _covariance(J, r), 0.5 * float(r @ r), int(stats.get("iter_count", 0)), status
+
+
+def solve(problem: Problem, x0: np.ndarray, free: np.ndarray, *, method: str = "lm",
+          loss: str = "linear", max_iterations: int = 100, tolerance: float = 1e-10) -> Solution:
+    """Minimise ``0.5 |r(x)|^2`` over ``x[free]``, the rest held at ``x0``."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    free = np.asarray(free, dtype=bool)
+    start = time.perf_counter()
+    if not free.any():
+        r = problem.residual(x0)
+        return Solution(x0.copy(), free, np.zeros((0, 0)), 0.5 * float(r @ r), 0, "nothing_free",
+                        method, 0.0, r)
+    if method == "lm":
+        x, r, cov, cost, it, status = _levenberg_marquardt(
+            problem, x0, free, loss=loss, max_iterations=max_iterations, damping=True,
+            tolerance=tolerance)
+    elif method == "linearised":
+        x, r, cov, cost, it, status = _levenberg_marquardt(
+            problem, x0, free, loss=loss, max_iterations=max_iterations, damping=False,
+            tolerance=tolerance)
+    elif method == "ipopt":
+        x, r, cov, cost, it, status = _ipopt(problem, x0, free, max_iterations)
+    else:
+        x, r, cov, cost, it, status = _two_stage(problem, x0, free, loss, max_iterations,
+                                                 tolerance)
+    seconds = time.perf_counter() - start
+    if not np.all(np.isfinite(x)):
+        raise SolverError(f"the {method} solve diverged (non-finite estimate)",
+                          stats={"iterations": it, "status": status})
+    return Solution(x, free, cov, cost, it, status, method, seconds, r)
+
+
+def _two_stage(problem: Problem, x0, free, loss, max_iterations, tolerance):
+    quantity = np.array([problem.unknowns.quantities[i] for i in range(len(x0))])
+    robot = problem.mask("robot")
+    others = free & ~robot
+    angles = free & robot & (quantity == "angle")
+    lengths = free & robot & (quantity != "angle")
+    x = x0.copy()
+    total = 0
+    status = "max_iterations"
+    for _ in range(max(1, max_iterations // 10)):
+        previous = x.copy()
+        for stage in (angles | others, lengths | others):
+            x, *_, it, _ = _levenberg_marquardt(problem, x, stage, loss=loss,
+                                                max_iterations=max_iterations, damping=False,
+                                                tolerance=tolerance)
+            total += it
+        if np.max(np.abs(x - previous)) < 1e-12:
+            status = "converged"
+            break
+    r, covariance = _finish(problem, x, free, loss)
+    return x, r, covariance, 0.5 * float(r @ r), total, status
