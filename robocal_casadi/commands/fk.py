@@ -1,0 +1,88 @@
+"""Tool poses from joint readings (forward kinematics) with a nominal or calibrated robot.
+
+For each row of q1..qn in JOINTS.csv (in the robot file's units) writes the tool pose
+x,y,z,qw,qx,qy,qz in the world frame (lengths in the robot file's unit, quaternion with
+qw >= 0) to POSES.csv. Columns other than q1..qn (time, temperature, ...) are copied
+through, before the pose columns. Readings outside the robot's joint limits are refused.
+
+With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml (a result of
+`robocal calibrate`); the readings and the output keep ROBOT.yaml's units. Only the
+calibrated geometry is used: effects listed in DIR/result.json (joint compliance,
+cyclic errors, thermal drift, ...) are NOT applied by fk.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..datasets import _joints as checked_joint_readings
+from ..errors import InputError
+from ..kinematics import Kinematics
+from ..output import atomic_file
+from ..robot import Robot, load_robot
+from ..table import read_table, write_table
+from ..transforms import quaternion_from_matrix
+
+POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
+CALIBRATED_ROBOT = "robot_calibrated.yaml"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("robot", metavar="ROBOT.yaml", help="robot file (its units apply to the "
+                        "joint readings and the poses)")
+    parser.add_argument("joints", metavar="JOINTS.csv", help="table with columns q1..qn")
+    parser.add_argument("--out", metavar="POSES.csv", required=True,
+                        help="output table: extra input columns, then x,y,z,qw,qx,qy,qz")
+    parser.add_argument("--calibrated", metavar="DIR",
+                        help="use DIR/robot_calibrated.yaml (geometry only; effects in "
+                        "DIR/result.json are not applied)")
+
+
+def calibrated_robot(folder: Path, nominal: Robot, nominal_path: Path) -> Robot:
+    """The calibrated robot of a result folder, checked to have ``nominal``'s joints."""
+    path = folder / CALIBRATED_ROBOT
+    if not folder.is_dir():
+        raise InputError("calibration folder not found", file=folder, where="--calibrated")
+    if not path.is_file():
+        raise InputError(f"no {CALIBRATED_ROBOT} in the calibration folder", file=folder,
+                         where="--calibrated")
+    robot = load_robot(path)
+    if [j.type for j in robot.joints] != [j.type for j in nominal.joints]:
+        raise InputError(
+            f"joints {[j.type for j in robot.joints]} do not match {nominal_path.name}'s "
+            f"{[j.type for j in nominal.joints]}", file=path, where="joints")
+    return robot.with_units(nominal.units)
+
+
+def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
+    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7) in the robot's file units for readings ``Q`` [SI]."""
+    poses = Kinematics(robot).tool_poses(Q)
+    rows = np.empty((len(Q), 7))
+    rows[:, :3] = poses[:, :3, 3] / robot.units.length_scale
+    rows[:, 3:] = [quaternion_from_matrix(T[:3, :3]) for T in poses]
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    robot_path = Path(args.robot)
+    robot = load_robot(robot_path)
+    if args.calibrated is not None:
+        robot = calibrated_robot(Path(args.calibrated), robot, robot_path)
+    table = read_table(args.joints)
+    joint_columns = {f"q{i}" for i in range(1, robot.dof + 1)}
+    used: set[str] = set()
+    Q = checked_joint_readings(table, robot, robot.units, used)
+    extras = [c for c in table.columns if c not in joint_columns]
+    clashes = [c for c in extras if c in POSE_COLUMNS]
+    if clashes:
+        raise InputError(f"column(s) {clashes} would clash with the pose columns "
+                         f"{list(POSE_COLUMNS)} of the output; rename them", file=table.path)
+    poses = tool_pose_rows(robot, Q)
+    copied = [[row[table.columns.index(c)] for c in extras] for row in table.rows]
+    with atomic_file(args.out) as staging:
+        write_table(staging, [*extras, *POSE_COLUMNS],
+                    [[*kept, *pose] for kept, pose in zip(copied, poses)])
+    return 0
