@@ -1,0 +1,263 @@
+"""``Tracker``: keep the tool facing a moving target, level with the worktable, cycle by cycle.
+
+Built once for a robot, a camera mount and a standoff; ``step(q_capture, observation)``
+then computes the goal end pose from the method's frame chain (``tracking.goal``),
+solves the per-cycle NLP from the previous answer (``tracking.problem``,
+``tracking.solver``), takes each revolute joint to the turn nearest the previous answer,
+verifies the constraint errors, and answers with a ``TrackStep``. An answer that is not
+verified is never returned as ``ok``: the step says ``unreachable`` or ``failed`` and hands
+back the last safe joints.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from ..robot import Robot
+from .problem import TrackingProblem
+from .solver import GaussNewtonSolver, NlpsolSolver
+
+#: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
+POSITION_TOLERANCE = 1e-6
+ANGLE_TOLERANCE = 1e-6
+#: How far outside a bound [rad or m] a verified answer may sit (rounding) before clipping.
+BOUND_TOLERANCE = 1e-12
+STATUSES = ("ok", "unreachable", "failed")
+METHODS = ("gauss_newton", "sqpmethod", "ipopt")
+
+
+@dataclass(frozen=True)
+class TrackStep:
+    """One cycle's answer.
+
+    ``q`` (n) the joints to command [rad or m], SI; the last safe joints when ``status``
+    is not ``ok``. ``status`` is ``ok``, ``unreachable`` (no solution within the joint
+    limits and the step bound near the previous joints) or ``failed`` (the solver gave no
+    verified answer, or the observation was not finite). ``solve_ms`` [ms] is the whole
+    cycle (goal, solve, verification). ``constraint_error`` is the larger of
+    ``position_error`` [m] and ``angle_error`` [rad] of the solver's answer (NaN when
+    none was computed); ``iterations`` the solver's iterations.
+    """
+
+    q: np.ndarray
+    status: str
+    solve_ms: float
+    constraint_error: float
+    position_error: float = math.nan
+    angle_error: float = math.nan
+    iterations: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def __repr__(self) -> str:
+        joints = ", ".join(f"{v:.6g}" for v in self.q)
+        return (f"TrackStep(status={self.status!r}, q=[{joints}], solve_ms={self.solve_ms:.3f}, "
+                f"constraint_error={self.constraint_error:.3g}, iterations={self.iterations})")
+
+
+def _vector(value, length: int, name: str) -> np.ndarray:
+    array = np.asarray(value, dtype=float).ravel()
+    if array.shape != (length,):
+        raise InputError(f"expected {length} values, got shape {np.shape(value)}", where=name)
+    return array
+
+
+def unit_up(up: Sequence[float], *, file=None, where: str = "up") -> np.ndarray:
+    """The worktable normal as a unit vector; zero or non-finite is an ``InputError``."""
+    vector = np.asarray(up, dtype=float).ravel()
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+        raise InputError(f"expected 3 finite numbers, got {up!r}", file=file, where=where)
+    norm = float(np.linalg.norm(vector))
+    if norm < 1e-12:
+        raise InputError("the worktable normal must not be zero", file=file, where=where)
+    return vector / norm
+
+
+def reach_bound(robot: Robot, p: np.ndarray | None = None) -> float:
+    """An upper bound [m] on the distance from the joint-1 frame origin to the end origin.
+
+    Sum over links of ``sqrt(a^2 + d^2)`` (a prismatic joint at its farthest reading),
+    plus the tool offset.
+    """
+    model = robot if p is None else robot.with_parameters(p)
+    total = float(np.linalg.norm(model.tool.xyz))
+    for joint in model.joints:
+        d = joint.d
+        if not joint.revolute:
+            lo, hi = joint.limits if joint.limits else (-math.inf, math.inf)
+            d = max(abs(d + lo), abs(d + hi))
+        total += math.hypot(joint.a, d)
+    return total
+
+
+class Tracker:
+    """Real-time tracking of a target seen by a camera on the end frame.
+
+    ``robot`` the arm (at least 6 joints); ``camera_xyz`` [m] the camera origin in the end
+    frame (axes parallel to it); ``standoff`` Z [m] > 0, the target is held at
+    ``(0, 0, Z)`` in the end frame; ``up`` the worktable normal in the world frame
+    (normalised here); ``max_step`` the largest joint move per cycle [rad or m], None for
+    none; ``p`` the geometric parameter vector (``ParameterRegistry`` order, SI; default
+    the robot's own); ``weights`` (n) the weights of the smallest-move objective (default
+    1); ``method`` the NLP solver: ``gauss_newton`` (real-time), ``sqpmethod`` or ``ipopt``
+    (references).
+
+    >>> tracker = Tracker(robot, camera_xyz=[0.05, 0, 0.02], standoff=0.3)
+    >>> step = tracker.step(q_capture, [x, y, z, roll, pitch, yaw])
+    >>> if step.ok: command(step.q)
+    """
+
+    def __init__(self, robot: Robot, camera_xyz: Sequence[float], standoff: float,
+                 up: Sequence[float] = (0.0, 0.0, 1.0), max_step: float | None = None,
+                 p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
+                 method: str = "gauss_newton", problem: TrackingProblem | None = None):
+        if robot.dof < 6:
+            raise InputError(f"tracking needs at least 6 joints (three position and three "
+                             f"orientation conditions); robot {robot.name!r} has {robot.dof}")
+        if method not in METHODS:
+            raise InputError(f"unknown method {method!r}; expected one of {list(METHODS)}",
+                             where="method")
+        self.robot = robot
+        self.problem = problem if problem is not None else TrackingProblem(robot)
+        n = robot.dof
+        self.camera_xyz = _vector(camera_xyz, 3, "camera_xyz")
+        if not np.all(np.isfinite(self.camera_xyz)):
+            raise InputError(f"expected finite numbers, got {camera_xyz!r}", where="camera_xyz")
+        standoff = float(standoff)
+        if not (math.isfinite(standoff) and standoff > 0):
+            raise InputError(f"the standoff must be a positive length, got {standoff}",
+                             where="standoff")
+        self.standoff = standoff
+        self.up = unit_up(up)
+        if max_step is not None and not (math.isfinite(max_step) and max_step > 0):
+            raise InputError(f"max_step must be positive, got {max_step}", where="max_step")
+        self.max_step = max_step
+        self.p = (robot.parameter_vector() if p is None
+                  else _vector(p, self.problem.parameter_count, "p"))
+        self.weights = np.ones(n) if weights is None else _vector(weights, n, "weights")
+        if np.any(self.weights <= 0) or not np.all(np.isfinite(self.weights)):
+            raise InputError(f"weights must be positive, got {list(self.weights)}",
+                             where="weights")
+        self.method = method
+        if method == "gauss_newton":
+            self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights)
+        else:
+            self.solver = NlpsolSolver(self.problem, self.p, self.up, self.weights,
+                                       plugin=method)
+        self.lower = robot.lower_limits
+        self.upper = robot.upper_limits
+        self.revolute = np.array([j.revolute for j in robot.joints])
+        self.reach = reach_bound(robot, self.p)
+        self._base_origin = np.asarray(
+            self.problem.kinematics.joint_frames(np.zeros(n), self.p)[0])[:3, 3]
+        self._previous: np.ndarray | None = None
+        # Goal function through the buffer interface: arrays bound once.
+        self._goal_in = [np.zeros(n), np.zeros(6), self.p.copy(), self.camera_xyz.copy(),
+                         np.array([self.standoff]), self.up.copy()]
+        self._goal_out = np.zeros(12)
+        self._goal_function = self.problem.goal
+        self._goal_buffer, self._goal_evaluate = self._goal_function.buffer()
+        for k, array in enumerate(self._goal_in):
+            self._goal_buffer.set_arg(k, memoryview(array))
+        self._goal_buffer.set_res(0, memoryview(self._goal_out))
+
+    def __repr__(self) -> str:
+        return (f"Tracker({self.robot.name!r}, camera_xyz={list(self.camera_xyz)}, "
+                f"standoff={self.standoff} m, up={list(self.up)}, max_step={self.max_step}, "
+                f"method={self.method!r})")
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def previous(self) -> np.ndarray | None:
+        """The last safe joints [rad or m] (None before the first step)."""
+        return None if self._previous is None else self._previous.copy()
+
+    def reset(self, q: Sequence[float] | None = None) -> None:
+        """Forget the history; the next step starts from ``q`` (default: its capture joints)."""
+        self._previous = None if q is None else _vector(q, self.robot.dof, "q").copy()
+
+    # ------------------------------------------------------------------ one cycle
+
+    def goal(self, q_capture: Sequence[float], observation: Sequence[float]) -> np.ndarray:
+        """The levelled goal end pose ``A''`` (4x4, world frame) [m] of one observation."""
+        vector = self._goal_vector(_vector(q_capture, self.robot.dof, "q_capture"),
+                                   _vector(observation, 6, "observation"))
+        pose = np.eye(4)
+        pose[:3, 3] = vector[0:3]
+        pose[:3, 0], pose[:3, 1], pose[:3, 2] = vector[3:6], vector[6:9], vector[9:12]
+        return pose
+
+    def _goal_vector(self, q_capture: np.ndarray, observation: np.ndarray) -> np.ndarray:
+        self._goal_in[0][:] = q_capture
+        self._goal_in[1][:] = observation
+        self._goal_evaluate()
+        return self._goal_out.copy()
+
+    def step(self, q_capture: Sequence[float], observation: Sequence[float]) -> TrackStep:
+        """One cycle: joints facing the target from the standoff, level, closest to the
+        previous answer.
+
+        ``q_capture`` (n) [rad or m] the joints when the image was taken; ``observation``
+        ``(x, y, z [m], roll, pitch, yaw [rad])`` the target in the camera.
+        """
+        start = time.perf_counter()
+        q_capture = _vector(q_capture, self.robot.dof, "q_capture")
+        observation = _vector(observation, 6, "observation")
+        if self._previous is None:
+            if not np.all(np.isfinite(q_capture)):
+                raise InputError("the first capture joints must be finite", where="q_capture")
+            self._previous = np.clip(q_capture, self.lower, self.upper)
+        previous = self._previous
+        if not (np.all(np.isfinite(q_capture)) and np.all(np.isfinite(observation))):
+            return self._refuse("failed", start)
+        goal = self._goal_vector(q_capture, observation)
+        if np.linalg.norm(goal[0:3] - self._base_origin) > self.reach:
+            return self._refuse("unreachable", start)
+        lower, upper = self.lower, self.upper
+        if self.max_step is not None:
+            lower = np.maximum(lower, previous - self.max_step)
+            upper = np.minimum(upper, previous + self.max_step)
+        outcome = self.solver.solve(previous, goal, lower, upper)
+        q = self._nearest_turn(outcome.q, previous, lower, upper)
+        position_error, angle_error = outcome.position_error, outcome.angle_error
+        if not np.array_equal(q, outcome.q):
+            errors = self.problem.errors(q, goal, self.up, self.p)
+            position_error, angle_error = float(errors[0]), float(errors[1])
+        constraint_error = max(position_error, angle_error)
+        inside = bool(np.all(q >= lower - BOUND_TOLERANCE) and np.all(q <= upper + BOUND_TOLERANCE))
+        verified = (position_error < POSITION_TOLERANCE and angle_error < ANGLE_TOLERANCE
+                    and inside and bool(np.all(np.isfinite(q))))
+        if verified:
+            q = np.clip(q, lower, upper)
+            self._previous = q
+            status = "ok"
+        else:
+            status = "unreachable" if outcome.infeasible else "failed"
+            q = previous.copy()
+        return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
+                         position_error, angle_error, outcome.iterations)
+
+    def _refuse(self, status: str, start: float) -> TrackStep:
+        previous = self._previous if self._previous is not None else np.full(self.robot.dof, np.nan)
+        return TrackStep(previous.copy(), status, (time.perf_counter() - start) * 1e3,
+                         math.nan)
+
+    def _nearest_turn(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
+                      upper: np.ndarray) -> np.ndarray:
+        """Each revolute joint moved by whole turns to the value nearest ``previous`` that
+        stays within the bounds (the constraints are 2 pi periodic in it)."""
+        turns = np.where(self.revolute, np.round((previous - q) / (2 * math.pi)), 0.0)
+        if not turns.any():
+            return q
+        moved = q + 2 * math.pi * turns
+        keep = (moved >= lower) & (moved <= upper)
+        return np.where(keep, moved, q)
