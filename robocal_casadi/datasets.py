@@ -39,7 +39,7 @@ class DatasetBase:
     robot_path: Path
     units: Units
     data_path: Path | None
-    joints: np.ndarray | None
+    joints: np.ndarray | None = None  # no rows when the table is absent (planning)
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read

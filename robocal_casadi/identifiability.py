@@ -98,7 +98,11 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
     for k, index in enumerate(candidates):
         name = names[index]
         if raw_norms[k] <= 1e-12 * max(scale_reference, 1e-300):
-            unidentifiable[name] = f"changes no residual ({invisible_reason})"
+            if name.startswith("tool_"):
+                unidentifiable[name] = ("changes no residual: the measured point is fixed to the "
+                                        "flange, so the tool frame does not enter these data")
+            else:
+                unidentifiable[name] = f"changes no residual ({invisible_reason})"
         elif projected_norms[k] <= tolerance * raw_norms[k] * 10:
             unidentifiable[name] = absorbed_reason
         else:

@@ -43,9 +43,34 @@ def models_for(datasets: Sequence, prefix: str = "") -> list:
     return models
 
 
+def consistent_problem(problem: Problem, x: np.ndarray) -> tuple[Problem, np.ndarray]:
+    """The problem on data made consistent with ``x`` (see ``consistent_dataset``)."""
+    p = x[problem.slices["robot"]]
+    datasets, changed = [], False
+    for model in problem.models:
+        mounted = x[problem.mounted_indices(model)]
+        placement = x[problem.placement_indices(model)]
+        replaced = model.consistent_dataset(problem.kinematics, p, mounted, placement)
+        changed |= replaced is not None
+        datasets.append(replaced if replaced is not None else model.dataset)
+    if not changed:
+        return problem, x
+    labels = [m.label for m in problem.models]
+    models = [type(m)(d, label) for m, d, label in zip(problem.models, datasets, labels)]
+    consistent = Problem(problem.robot, models, problem.effects, kinematics=problem.kinematics,
+                         start=_values(problem, x))
+    out = consistent.initial()
+    out[consistent.mask("placement")] = x[problem.mask("placement")]
+    return consistent, out
+
+
 def analyse_identifiability(problem: Problem, x: np.ndarray,
                             candidates: Sequence[str] | None = None) -> Identifiability:
-    """Identifiability of ``candidates`` (default: robot, effect and mounted unknowns) at ``x``."""
+    """Identifiability of ``candidates`` (default: robot, effect and mounted unknowns) at ``x``.
+
+    Judged on the Jacobian of data made consistent with ``x`` (``consistent_problem``).
+    """
+    problem, x = consistent_problem(problem, x)
     names = problem.unknowns.names
     if candidates is None:
         mask = problem.mask("robot", "effects", "mounted")
@@ -53,12 +78,10 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
     else:
         candidate_index = [problem.unknowns.index(n) for n in candidates]
     placement = list(np.flatnonzero(problem.mask("placement")))
-    model = problem.models[0]
     invisible = "; ".join(sorted({getattr(m, "invisible_reason", "no effect on these data")
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
                                  for m in problem.models}))
-    del model
     return analyse(problem.jacobian(x), names, candidate_index, placement,
                    invisible_reason=invisible, absorbed_reason=absorbed)
 

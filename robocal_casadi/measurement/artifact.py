@@ -39,8 +39,7 @@ class ArtifactModel(MeasurementModel):
     """Residuals of touch data; see the module docstring."""
 
     kind = "artifact_touches"
-    invisible_reason = ("touch data carry no absolute position: a rigid motion of all touched "
-                        "points changes no residual")
+    invisible_reason = "it moves no touched point relative to the others"
     absorbed_reason = "absorbed by the unknown socket positions (touch data carry no absolute position)"
 
     def __init__(self, dataset, label: str):
@@ -86,6 +85,28 @@ class ArtifactModel(MeasurementModel):
                 values[socket.unknown_index:socket.unknown_index + 3] = \
                     world[:, list(socket.rows)].mean(axis=1)
         return values
+
+    def consistent_dataset(self, kinematics, p, mounted, placement):
+        """The dataset with every repeated touch moved onto its socket (joint-space Newton)."""
+        if not any(s.unknown_index is not None for s in self.sockets):
+            return None
+        from dataclasses import replace
+
+        joints = np.array(self.dataset.joints, dtype=float)
+        for socket in self.sockets:
+            if socket.unknown_index is None:
+                continue
+            target = placement[socket.unknown_index:socket.unknown_index + 3]
+            for row in socket.rows:
+                q = joints[row]
+                for _ in range(8):
+                    point, _, J_q, _ = kinematics.point_jacobians(q, p, mounted)
+                    error = target - np.asarray(point).ravel()
+                    if np.linalg.norm(error) < 1e-12:
+                        break
+                    q = q + np.linalg.lstsq(np.asarray(J_q), error, rcond=None)[0]
+                joints[row] = q
+        return replace(self.dataset, joints=joints)
 
     # ------------------------------------------------------------------ residuals
 

@@ -81,6 +81,17 @@ class MeasurementModel(ABC):
     def residual_size(self) -> int:
         """Length of the residual column."""
 
+    def consistent_dataset(self, kinematics, p: np.ndarray, mounted: np.ndarray,
+                           placement: np.ndarray):
+        """A copy of the dataset whose readings the model fits exactly, or None.
+
+        Identifiability is judged on consistent data: where residuals are not zero, a
+        rigid motion of all points also rotates the residual pattern, which looks like
+        information but is not. Models whose Jacobian depends on that pattern (touches
+        spread around a socket, laser points off the sphere) override this.
+        """
+        return None
+
     @property
     def uses_robot(self) -> bool:
         """False when the data carries its own flange poses (pendant readings)."""

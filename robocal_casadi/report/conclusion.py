@@ -1,0 +1,98 @@
+"""A short plain-language conclusion, written from the numbers of a calibration.
+
+Each sentence states a figure and what it means: the error before and after on
+held-out data (or on the fitting data, saying so), what the effects added, how much of
+the model the data could identify, the largest corrections, and warnings when the
+numbers call for them (held-out error far above the fit, poor conditioning, a solver
+that did not converge).
+"""
+
+from __future__ import annotations
+
+from ..results import CalibrationResult
+from .numbers import ErrorStats, error_noun, format_number, pooled
+
+OVERFIT_RATIO = 2.0  # held-out RMS above this multiple of the fit RMS earns a warning
+POOR_CONDITION = 1e4  # condition numbers above this earn a warning
+CONVERGED_WORDS = ("converged", "success", "ok", "solve_succeeded")
+
+
+def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
+    """The conclusion as a few short paragraphs, the headline first."""
+    units = result.units
+    unit = units.length
+
+    def length(value_si: float) -> str:
+        return f"{format_number(value_si / units.length_scale, 3)} {unit}"
+
+    held_out = result.validation is not None
+    summary = result.validation if held_out else result.fit
+    residuals = result.validation_residuals if held_out else result.residuals
+    noun = error_noun(residuals) if residuals else "error"
+    where = "on held-out data" if held_out else "on the data used for fitting"
+    verb = "fell" if summary.rms_final < summary.rms_nominal else "rose"
+    headline = (f"After calibration the {noun} {where} {verb} from {length(summary.rms_nominal)} "
+                f"to {length(summary.rms_final)} RMS")
+    if residuals:
+        before = ErrorStats.of(pooled(residuals, "nominal"))
+        after = ErrorStats.of(pooled(residuals, "final"))
+        headline += (f" (99th percentile from {length(before.p99)} to {length(after.p99)}, "
+                     f"over {after.count} measurements)")
+    paragraphs = [headline + "."]
+    if not held_out:
+        paragraphs.append("No held-out data was given, so this shows how well the model fits, "
+                          "not how well it predicts new poses; calibrate with --validate to "
+                          "check.")
+
+    if result.effects:
+        names = ", ".join(f"{e.name} (joints {', '.join(map(str, e.joints))})" if e.joints
+                          else e.name for e in result.effects)
+        paragraphs.append(f"The geometric calibration alone reached {length(summary.rms_geometric)}"
+                          f" RMS; diagnosis then added {names}, which brought it to "
+                          f"{length(summary.rms_final)}.")
+    else:
+        paragraphs.append(f"The geometric calibration reached {length(summary.rms_geometric)} RMS;"
+                          f" diagnosis found no further effect that the data supports.")
+
+    ident = result.identifiability
+    held = len(ident.candidates) - len(ident.identifiable)
+    text = (f"{len(ident.identifiable)} of {len(ident.candidates)} candidate parameters were "
+            f"identifiable from this data (condition number {format_number(ident.condition_number, 3)})")
+    text += f"; {held} were held at nominal (see Identifiability)." if held else "."
+    changes = _largest_changes(result)
+    if changes:
+        text += " Largest corrections: " + ", ".join(changes) + "."
+    paragraphs.append(text)
+
+    warnings = []
+    if held_out and result.fit.rms_final > 0 and \
+            result.validation.rms_final > OVERFIT_RATIO * result.fit.rms_final:
+        ratio = result.validation.rms_final / result.fit.rms_final
+        warnings.append(f"The held-out error is {format_number(ratio, 2)} times the fitting "
+                        f"error: the held-out poses may lie outside what the fitting data "
+                        f"covered, or the model has absorbed noise; more varied poses would help.")
+    if ident.condition_number > POOR_CONDITION:
+        warnings.append(f"The identification is poorly conditioned (condition number "
+                        f"{format_number(ident.condition_number, 3)}): small measurement errors "
+                        f"move some parameters a lot; a planned set of poses would help.")
+    status = str(result.solver.get("status", "")).lower()
+    if status and not any(word in status for word in CONVERGED_WORDS):
+        warnings.append(f"The solver ended with status '{result.solver.get('status')}'; "
+                        f"treat the numbers with care.")
+    if warnings:
+        paragraphs.append("Caution: " + " ".join(warnings))
+    return paragraphs
+
+
+def _largest_changes(result: CalibrationResult, per_quantity: int = 2) -> list[str]:
+    """The identified lengths and angles that moved most, ``per_quantity`` of each."""
+    units = result.units
+    moved = []
+    for quantity in ("length", "angle"):
+        entries = [p for p in result.parameters if p.identifiable and p.quantity == quantity]
+        entries.sort(key=lambda p: abs(p.estimate - p.nominal), reverse=True)
+        for p in entries[:per_quantity]:
+            change = (p.estimate - p.nominal) / units.scale(quantity)
+            if change != 0:
+                moved.append(f"{p.name} {change:+.3g} {units.unit_name(quantity)}")
+    return moved

@@ -1,0 +1,89 @@
+"""The report as a document: sections of paragraphs, tables and figures.
+
+The content is built once from a ``CalibrationResult`` (``report.sections``) and drawn
+by two renderers: ``report.html`` (one self-contained page) and ``report.pdf``
+(matplotlib's PdfPages). Text is plain; the renderers escape it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Union
+
+from matplotlib.figure import Figure
+
+
+@dataclass(frozen=True)
+class Paragraph:
+    """Plain text; ``kind`` is ``"text"``, ``"note"`` (muted) or ``"conclusion"`` (stands out)."""
+
+    text: str
+    kind: str = "text"
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table of display strings. ``muted[i]`` greys row i (e.g. a parameter held at nominal).
+
+    ``name`` becomes the HTML class, so tests and styles can find the table.
+    ``numeric[j]`` right-aligns column j.
+    """
+
+    name: str
+    caption: str
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    muted: tuple[bool, ...] = ()
+    numeric: tuple[bool, ...] = ()
+
+    def __post_init__(self):
+        for i, row in enumerate(self.rows):
+            if len(row) != len(self.header):
+                raise ValueError(f"table {self.name!r} row {i} has {len(row)} cells, "
+                                 f"header has {len(self.header)}")
+        if not self.muted:
+            object.__setattr__(self, "muted", (False,) * len(self.rows))
+        if not self.numeric:
+            object.__setattr__(self, "numeric", (False,) * len(self.header))
+
+    def __repr__(self) -> str:
+        return f"Table({self.name!r}, {len(self.rows)} rows x {len(self.header)} columns)"
+
+
+@dataclass(frozen=True)
+class Plot:
+    """A figure with its caption; ``draw`` builds a fresh matplotlib ``Figure`` each call."""
+
+    name: str
+    caption: str
+    draw: Callable[[], Figure]
+
+    def __repr__(self) -> str:
+        return f"Plot({self.name!r})"
+
+
+Block = Union[Paragraph, Table, Plot]
+
+
+@dataclass(frozen=True)
+class Section:
+    """One titled part of the report; ``anchor`` is its HTML id."""
+
+    anchor: str
+    title: str
+    blocks: tuple[Block, ...]
+
+    def __repr__(self) -> str:
+        return f"Section({self.anchor!r}, {len(self.blocks)} blocks)"
+
+
+@dataclass(frozen=True)
+class Document:
+    """The whole report: a title, a one-line subtitle and its sections in order."""
+
+    title: str
+    subtitle: str
+    sections: tuple[Section, ...]
+
+    def __repr__(self) -> str:
+        return f"Document({self.title!r}, sections={[s.anchor for s in self.sections]})"

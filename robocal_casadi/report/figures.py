@@ -1,0 +1,308 @@
+"""The report's plots: matplotlib figures in one style, axes labelled with units.
+
+Every function returns a fresh ``matplotlib.figure.Figure`` (no pyplot, no global
+state, Agg canvas), with errors in the robot file's length unit and joint readings in
+its angle unit (length unit for prismatic joints). ``png_bytes`` renders one.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from contextlib import contextmanager
+from typing import Iterator, Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")  # a report never needs a display
+
+import matplotlib.ticker as ticker  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from ..results import DatasetResiduals, EffectFinding, Identifiability  # noqa: E402
+from ..robot import Robot  # noqa: E402
+from ..units import Units  # noqa: E402
+from .numbers import MODEL_TITLES, errors_of, joint_reading_unit  # noqa: E402
+
+COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
+MARKERS = {"nominal": "s", "geometric": "o", "final": "."}
+STYLE = {
+    "font.size": 9.0,
+    "axes.titlesize": 10.0,
+    "axes.labelsize": 9.0,
+    "axes.grid": True,
+    "grid.alpha": 0.35,
+    "grid.linewidth": 0.6,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "legend.fontsize": 8.0,
+    "legend.frameon": False,
+    "xtick.labelsize": 8.0,
+    "ytick.labelsize": 8.0,
+    "figure.dpi": 110,
+    "savefig.dpi": 110,
+    "lines.linewidth": 1.4,
+}
+WIDTH = 8.0  # [in], one figure across the page
+SCATTER_LIMIT = 20000  # points per series drawn; more are thinned evenly
+BINS = 12
+
+
+@contextmanager
+def report_style() -> Iterator[None]:
+    """The report's matplotlib settings, applied only inside the block."""
+    with matplotlib.rc_context(STYLE):
+        yield
+
+
+def new_figure(height: float, width: float = WIDTH) -> Figure:
+    """An Agg-backed figure of ``width`` x ``height`` inches with the report's layout."""
+    figure = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def png_bytes(figure: Figure) -> bytes:
+    """The figure as PNG bytes."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=figure.dpi)
+    return buffer.getvalue()
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _thin(count: int) -> np.ndarray:
+    """Indices of at most ``SCATTER_LIMIT`` evenly spread items out of ``count``."""
+    if count <= SCATTER_LIMIT:
+        return np.arange(count)
+    return np.linspace(0, count - 1, SCATTER_LIMIT).astype(int)
+
+
+def _mapped(residuals: DatasetResiduals) -> np.ndarray:
+    """Positions of the errors that belong to one data row (``rows >= 0``)."""
+    return np.flatnonzero(np.asarray(residuals.rows) >= 0)
+
+
+def _binned_rms(x: np.ndarray, errors: np.ndarray, bins: int = BINS) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and RMS of ``errors`` in ``bins`` equal-width bins of ``x`` (empty bins dropped)."""
+    if x.size == 0 or not np.isfinite(x).any():
+        return np.zeros(0), np.zeros(0)
+    lo, hi = float(np.nanmin(x)), float(np.nanmax(x))
+    if hi <= lo:
+        return np.array([lo]), np.array([math.sqrt(float(np.mean(errors**2)))])
+    edges = np.linspace(lo, hi, bins + 1)
+    which = np.clip(np.digitize(x, edges) - 1, 0, bins - 1)
+    centres, values = [], []
+    for b in range(bins):
+        inside = which == b
+        if inside.any():
+            centres.append(0.5 * (edges[b] + edges[b + 1]))
+            values.append(math.sqrt(float(np.mean(errors[inside] ** 2))))
+    return np.array(centres), np.array(values)
+
+
+def _ecdf(axes, errors: np.ndarray, scale: float, model: str) -> None:
+    magnitude = np.sort(np.abs(errors)) / scale
+    if magnitude.size == 0:
+        return
+    fraction = np.arange(1, magnitude.size + 1) / magnitude.size
+    axes.step(magnitude, fraction, where="post", color=COLOURS[model], label=MODEL_TITLES[model])
+
+
+def _positive_floor(values: np.ndarray) -> float:
+    positive = values[values > 0]
+    return float(positive.min()) if positive.size else 1e-12
+
+
+# ----------------------------------------------------------------------------- figures
+
+
+def singular_values(identifiability: Identifiability) -> Figure:
+    """Singular values of the scaled identification Jacobian, log scale, largest first."""
+    with report_style():
+        figure = new_figure(3.0)
+        axes = figure.add_subplot()
+        values = np.asarray(identifiability.singular_values, dtype=float)
+        index = np.arange(1, values.size + 1)
+        floor = _positive_floor(values) * 1e-3
+        shown = np.where(values > 0, values, floor)
+        axes.semilogy(index, shown, color=COLOURS["final"], marker="o", markersize=4)
+        kept = len(identifiability.identifiable)
+        if 0 < kept < values.size:
+            axes.axvline(kept + 0.5, color=COLOURS["geometric"], linestyle="--", linewidth=1.0,
+                         label=f"{kept} identifiable parameters")
+            axes.legend(loc="lower left")
+        axes.set_xlabel("singular value index (largest first)")
+        axes.set_ylabel("singular value (scaled Jacobian) [-]")
+        axes.set_title(f"Identifiability: condition number "
+                       f"{identifiability.condition_number:.4g}")
+        axes.xaxis.set_major_locator(ticker.MaxNLocator(integer=True))
+    return figure
+
+
+def error_distribution(groups: Sequence[tuple[str, tuple[DatasetResiduals, ...]]],
+                       units: Units) -> Figure:
+    """Empirical cumulative distribution of ``|error|`` per model, one panel per group.
+
+    ``groups`` is e.g. ``[("fit data", residuals), ("validation data", residuals)]``.
+    """
+    scale = units.length_scale
+    with report_style():
+        figure = new_figure(3.2)
+        panels = figure.subplots(1, len(groups), squeeze=False)[0]
+        for axes, (title, residuals) in zip(panels, groups):
+            everything = []
+            for model in ("nominal", "geometric", "final"):
+                errors = np.concatenate([errors_of(r, model) for r in residuals]) \
+                    if residuals else np.zeros(0)
+                everything.append(np.abs(errors))
+                _ecdf(axes, errors, scale, model)
+            pooled = np.concatenate(everything) / scale
+            if (pooled > 0).any():
+                axes.set_xscale("log")
+                axes.set_xlim(left=max(_positive_floor(pooled), pooled.max() * 1e-5))
+            axes.set_xlabel(f"|error| [{units.length}]")
+            axes.set_ylabel("fraction of measurements [-]")
+            axes.set_ylim(0, 1.02)
+            axes.set_title(title)
+            axes.legend(loc="lower right")
+    return figure
+
+
+def error_against_joints(residuals: DatasetResiduals, robot: Robot, units: Units) -> Figure:
+    """Geometric and final errors against each joint reading, one panel per joint."""
+    mapped = _mapped(residuals)
+    joints = np.asarray(residuals.joints)
+    rows = np.asarray(residuals.rows)[mapped]
+    columns = 3 if robot.dof > 4 else robot.dof
+    lines = math.ceil(robot.dof / columns)
+    scale = units.length_scale
+    with report_style():
+        figure = new_figure(2.1 * lines + 0.4)
+        panels = figure.subplots(lines, columns, squeeze=False, sharey=True).ravel()
+        keep = _thin(mapped.size)
+        for j, axes in enumerate(panels):
+            if j >= robot.dof:
+                axes.set_visible(False)
+                continue
+            reading_scale, reading_unit = joint_reading_unit(robot, j, units)
+            x = joints[rows, j] / reading_scale
+            for model in ("geometric", "final"):
+                errors = errors_of(residuals, model)[mapped] / scale
+                axes.scatter(x[keep], errors[keep], s=3, alpha=0.45, color=COLOURS[model],
+                             marker=MARKERS[model], linewidths=0, rasterized=True,
+                             label=MODEL_TITLES[model])
+            axes.set_xlabel(f"q{j + 1} [{reading_unit}]")
+            if j % columns == 0:
+                axes.set_ylabel(f"error [{units.length}]")
+        panels[0].legend(loc="best", markerscale=4)
+        figure.suptitle(f"{residuals.label}: error against each joint reading")
+    return figure
+
+
+def error_over_rows(residuals: DatasetResiduals, units: Units) -> Figure:
+    """``|error|`` of every model against temperature when the data has it, else data order."""
+    mapped = _mapped(residuals)
+    rows = np.asarray(residuals.rows)[mapped]
+    temperature = residuals.extras.get("temperature")
+    if temperature is not None:
+        x = np.asarray(temperature, dtype=float)[rows]
+        label = "temperature [C]"
+    else:
+        x = rows.astype(float)
+        label = "data row (measurement order)"
+    scale = units.length_scale
+    keep = _thin(mapped.size)
+    with report_style():
+        figure = new_figure(3.0)
+        axes = figure.add_subplot()
+        floor = None
+        for model in ("nominal", "geometric", "final"):
+            errors = np.abs(errors_of(residuals, model)[mapped]) / scale
+            floor = _positive_floor(errors) if floor is None else min(floor, _positive_floor(errors))
+            axes.scatter(x[keep], np.maximum(errors[keep], 1e-300), s=3, alpha=0.4, linewidths=0,
+                         color=COLOURS[model], rasterized=True, label=MODEL_TITLES[model])
+        if mapped.size:
+            axes.set_yscale("log")
+            axes.set_ylim(bottom=floor * 0.5)
+        axes.set_xlabel(label)
+        axes.set_ylabel(f"|error| [{units.length}]")
+        axes.set_title(f"{residuals.label}: error against {label.split(' [')[0]}")
+        axes.legend(loc="best", markerscale=4)
+    return figure
+
+
+def effect_variable(effect: EffectFinding,
+                    residuals: tuple[DatasetResiduals, ...]) -> tuple[str, list[int]]:
+    """What an effect is best seen against: ``("joint", [0-based joints])``, or
+    ``("temperature" | "time" | "row", [])`` for effects that do not name joints."""
+    with_joints = [r for r in residuals if r.joints is not None]
+    if effect.joints and with_joints:
+        return "joint", [j - 1 for j in effect.joints]
+    for column in ("temperature", "time"):
+        if any(column in r.extras for r in residuals):
+            return column, []
+    return "row", []
+
+
+def effect_evidence(effect: EffectFinding, residuals: tuple[DatasetResiduals, ...],
+                    robot: Robot, units: Units) -> Figure:
+    """Errors before (geometric) and after (final) the effect against its variable.
+
+    Scatter of both, with the RMS in bins of the variable as a line, so what the effect
+    took out of the residual shows as the gap between the two lines.
+    """
+    variable, joints = effect_variable(effect, residuals)
+    panels_wanted = max(1, len(joints))
+    columns = min(3, panels_wanted)
+    lines = math.ceil(panels_wanted / columns)
+    scale = units.length_scale
+    with report_style():
+        figure = new_figure(2.5 * lines + 0.4)
+        panels = figure.subplots(lines, columns, squeeze=False, sharey=True).ravel()
+        for p, axes in enumerate(panels):
+            if p >= panels_wanted:
+                axes.set_visible(False)
+                continue
+            xs, models = [], {"geometric": [], "final": []}
+            for r in residuals:
+                mapped = _mapped(r)
+                rows = np.asarray(r.rows)[mapped]
+                if variable == "joint":
+                    if r.joints is None:
+                        continue
+                    reading_scale, reading_unit = joint_reading_unit(robot, joints[p], units)
+                    xs.append(np.asarray(r.joints)[rows, joints[p]] / reading_scale)
+                    label = f"q{joints[p] + 1} [{reading_unit}]"
+                elif variable in ("temperature", "time"):
+                    if variable not in r.extras:
+                        continue
+                    xs.append(np.asarray(r.extras[variable], dtype=float)[rows])
+                    label = "temperature [C]" if variable == "temperature" else "time [s]"
+                else:
+                    xs.append(rows.astype(float))
+                    label = "data row (measurement order)"
+                for model in models:
+                    models[model].append(errors_of(r, model)[mapped] / scale)
+            if not xs:
+                continue
+            x = np.concatenate(xs)
+            keep = _thin(x.size)
+            for model, parts in models.items():
+                errors = np.concatenate(parts)
+                axes.scatter(x[keep], errors[keep], s=3, alpha=0.3, linewidths=0,
+                             color=COLOURS[model], rasterized=True)
+                centres, values = _binned_rms(x, errors)
+                axes.plot(centres, values, color=COLOURS[model], marker="o", markersize=3,
+                          label=f"{MODEL_TITLES[model]} (RMS per bin)")
+            axes.set_xlabel(label)
+            if p % columns == 0:
+                axes.set_ylabel(f"error [{units.length}]")
+        panels[0].legend(loc="best")
+        joints_text = f" on joints {', '.join(str(j) for j in effect.joints)}" \
+            if effect.joints else ""
+        figure.suptitle(f"{effect.name}{joints_text}: error before and after the effect")
+    return figure

@@ -1,0 +1,324 @@
+"""The report's content, section by section, from a ``CalibrationResult``.
+
+Each ``*_section`` function returns one ``Section`` (or None when it has nothing to
+say); ``build_document`` puts them in reading order: conclusion first, then robot and
+data, identifiability, parameters, error before and after, effects, sphere and laser,
+instrument. All numbers are shown in the robot file's units (``result.units``).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+
+import numpy as np
+
+from ..results import CalibrationResult
+from ..units import Units
+from . import figures
+from .content import Document, Paragraph, Plot, Section, Table
+from .conclusion import conclusion_paragraphs
+from .numbers import (
+    ErrorStats,
+    errors_of,
+    format_fixed,
+    format_number,
+    parameter_decimals,
+    pooled,
+    quantity_of_placement,
+    row_count,
+)
+
+CONVENTION_TITLES = {"dh": "standard Denavit-Hartenberg (dh)",
+                     "mdh": "modified Denavit-Hartenberg, Craig (mdh)"}
+
+
+def build_document(result: CalibrationResult, title: str | None = None) -> Document:
+    """The whole report of ``result`` as a ``Document``."""
+    robot = result.robot_nominal
+    title = title or f"Calibration report: {robot.name}"
+    subtitle = (f"{robot.dof}-axis robot, {CONVENTION_TITLES.get(robot.convention, robot.convention)}"
+                f"; data: {', '.join(result.datasets)}; units: {result.units.length}, "
+                f"{result.units.angle}")
+    candidates = (conclusion_section(result), robot_and_data_section(result),
+                  identifiability_section(result), parameters_section(result),
+                  errors_section(result), effects_section(result), sphere_section(result),
+                  instrument_section(result))
+    return Document(title, subtitle, tuple(s for s in candidates if s is not None))
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+def conclusion_section(result: CalibrationResult) -> Section:
+    paragraphs = tuple(Paragraph(text, "conclusion" if i == 0 else "text")
+                       for i, text in enumerate(conclusion_paragraphs(result)))
+    return Section("conclusion", "Conclusion", paragraphs + (headline_table(result),))
+
+
+def headline_table(result: CalibrationResult) -> Table:
+    """RMS and 99th percentile of the error, nominal / geometric / final, fit and validation."""
+    units = result.units
+    unit = units.length
+    rows, muted = [], []
+    groups = [("fit", result.fit, result.residuals)]
+    if result.validation is not None:
+        groups.append(("validation", result.validation, result.validation_residuals))
+    for role, summary, residuals in groups:
+        values = [summary.rms_nominal, summary.rms_geometric, summary.rms_final]
+        p99 = [ErrorStats.of(pooled(residuals, m)).p99 for m in ("nominal", "final")]
+        rows.append((role, *(format_number(v / units.length_scale) for v in values),
+                     *(format_number(v / units.length_scale) for v in p99)))
+        muted.append(False)
+    header = ("data", f"RMS nominal [{unit}]", f"RMS geometric [{unit}]", f"RMS final [{unit}]",
+              f"99th percentile nominal [{unit}]", f"99th percentile final [{unit}]")
+    return Table("headline", "Error before and after calibration", header, tuple(rows),
+                 tuple(muted), (False,) + (True,) * 5)
+
+
+def robot_and_data_section(result: CalibrationResult) -> Section:
+    robot, calibrated, units = result.robot_nominal, result.robot_calibrated, result.units
+    kinds = sorted({j.type for j in robot.joints})
+    joint_text = ", ".join(f"{sum(j.type == k for j in robot.joints)} {k}" for k in kinds)
+    facts = (
+        ("robot", robot.name),
+        ("convention", CONVENTION_TITLES.get(robot.convention, robot.convention)),
+        ("degrees of freedom", f"{robot.dof} ({joint_text})"),
+        ("units of the robot file", f"length {units.length}, angle {units.angle}"),
+        ("base frame given", "yes" if robot.has_base else "no"),
+        ("tool frame given", "yes" if robot.has_tool else "no"),
+        ("calibrated robot", calibrated.name),
+    )
+    robot_table = Table("robot", "Robot", ("item", "value"), facts)
+    rows = []
+    for role, residuals in (("fit", result.residuals), ("validation", result.validation_residuals)):
+        for r in residuals:
+            extras = ", ".join(sorted(r.extras)) or "-"
+            rows.append((r.label, role, r.kind, str(row_count(r)), str(len(r.errors_final)), extras))
+    data_table = Table("datasets", "Datasets", ("dataset", "role", "kind", "data rows",
+                                                "errors", "extra columns"), tuple(rows),
+                       numeric=(False, False, False, True, True, False))
+    blocks: list = [robot_table, data_table]
+    solver = [(str(k), _scalar_text(v)) for k, v in result.solver.items()
+              if isinstance(v, (int, float, str, bool))]
+    if solver:
+        blocks.append(Table("solver", "Solver", ("item", "value"), tuple(solver)))
+    return Section("robot-data", "Robot and data", tuple(blocks))
+
+
+def identifiability_section(result: CalibrationResult) -> Section:
+    ident = result.identifiability
+    blocks: list = [Paragraph(
+        f"{len(ident.identifiable)} of {len(ident.candidates)} candidate parameters are "
+        f"identifiable from this data; the condition number of the column-scaled "
+        f"identification Jacobian is {format_number(ident.condition_number)}. The singular "
+        f"values below fall off where the data stops telling parameters apart.")]
+    if len(ident.singular_values):
+        blocks.append(Plot("singular-values", "Singular values of the scaled identification "
+                           "Jacobian (log scale)", partial(figures.singular_values, ident)))
+    if ident.unidentifiable:
+        rows = tuple((name, reason) for name, reason in ident.unidentifiable.items())
+        blocks.append(Table("not-identifiable", "Not identifiable, held at nominal",
+                            ("parameter", "why"), rows))
+    else:
+        blocks.append(Paragraph("Every candidate parameter is identifiable.", "note"))
+    if ident.combinations:
+        blocks.append(Table("combinations", "Base-parameter combinations (only these sums or "
+                            "differences are determined)", ("combination",),
+                            tuple((c,) for c in ident.combinations)))
+    return Section("identifiability", "Identifiability", tuple(blocks))
+
+
+def parameters_section(result: CalibrationResult) -> Section:
+    units = result.units
+    rows, muted = [], []
+    for p in result.parameters:
+        scale = units.scale(p.quantity)
+        decimals = parameter_decimals(units, p.quantity)
+        change = (p.estimate - p.nominal) / scale
+        change_text = format_fixed(change, decimals)
+        if change_text not in ("0",) and not change_text.startswith("-"):
+            change_text = "+" + change_text
+        status = "identified" if p.identifiable else f"held at nominal: {p.reason or 'not identifiable'}"
+        rows.append((p.name, units.unit_name(p.quantity) or "-",
+                     format_fixed(p.nominal / scale, decimals),
+                     format_fixed(p.estimate / scale, decimals), change_text,
+                     format_number(None if p.std is None else p.std / scale, 3), status))
+        muted.append(not p.identifiable)
+    table = Table("parameters", "Geometric parameters", ("parameter", "unit", "nominal",
+                  "estimate", "change", "standard error", "status"), tuple(rows), tuple(muted),
+                  (False, False, True, True, True, True, False))
+    note = Paragraph("Standard errors come from the covariance of the least-squares fit; "
+                     "grey rows were not identifiable and keep their nominal values.", "note")
+    return Section("parameters", "Parameters", (table, note))
+
+
+def errors_section(result: CalibrationResult) -> Section:
+    units = result.units
+    unit = units.length
+    header = ("dataset", "role", "errors", f"RMS nominal [{unit}]", f"RMS geometric [{unit}]",
+              f"RMS final [{unit}]", f"95th percentile final [{unit}]",
+              f"99th percentile final [{unit}]", f"max final [{unit}]")
+    rows = []
+    groups = [("fit", result.residuals)]
+    if result.validation_residuals:
+        groups.append(("validation", result.validation_residuals))
+    for role, residuals in groups:
+        for r in residuals:
+            rows.append(_error_row(r.label, role, [errors_of(r, m) for m in
+                                                   ("nominal", "geometric", "final")], units))
+        if len(residuals) > 1:
+            rows.append(_error_row(f"all {role} data", role, [pooled(residuals, m) for m in
+                                                              ("nominal", "geometric", "final")],
+                                   units))
+    blocks: list = [
+        Paragraph("Nominal: the robot as designed, with only the instrument placement fitted. "
+                  "Geometric: after the geometric calibration. Final: with the effects that "
+                  "diagnosis added (equal to geometric when it added none). Percentiles are "
+                  "of the error magnitude."),
+        Table("errors", "Error per dataset", header, tuple(rows),
+              numeric=(False, False) + (True,) * 7),
+    ]
+    plot_groups = tuple((f"{role} data", residuals) for role, residuals in groups if residuals)
+    if plot_groups:
+        blocks.append(Plot("error-distribution", "Cumulative distribution of the error "
+                           "magnitude (log scale): the further left, the better",
+                           partial(figures.error_distribution, plot_groups, units)))
+    for role, residuals in groups:
+        for r in residuals:
+            if r.joints is not None and (np.asarray(r.rows) >= 0).any():
+                blocks.append(Plot(f"joints-{r.label}", f"{r.label} ({role}): error against "
+                                   f"each joint reading; structure left in the final error is "
+                                   f"what the model still lacks",
+                                   partial(figures.error_against_joints, r,
+                                           result.robot_nominal, units)))
+            if (np.asarray(r.rows) >= 0).any():
+                against = "temperature" if "temperature" in r.extras else "measurement order"
+                blocks.append(Plot(f"order-{r.label}", f"{r.label} ({role}): error magnitude "
+                                   f"against {against}",
+                                   partial(figures.error_over_rows, r, units)))
+    return Section("errors", "Error before and after", tuple(blocks))
+
+
+def effects_section(result: CalibrationResult) -> Section:
+    blocks: list = []
+    if not result.effects:
+        blocks.append(Paragraph("Diagnosis added no effect beyond the geometric model: "
+                                "nothing left in the residual was explained well enough by a "
+                                "candidate effect to justify its parameters."))
+    residuals = result.residuals or result.validation_residuals
+    for effect in result.effects:
+        joints = f" on joint{'s' if len(effect.joints) > 1 else ''} " \
+                 f"{', '.join(str(j) for j in effect.joints)}" if effect.joints else ""
+        blocks.append(Paragraph(f"{effect.name}{joints}. {effect.summary}".strip()))
+        rows = tuple((name, format_number(value, 4),
+                      format_number(effect.std.get(name), 3), effect.unit)
+                     for name, value in effect.parameters.items())
+        blocks.append(Table(f"effect-{effect.name}", f"{effect.name}: parameters",
+                            ("parameter", "value", "standard error", "unit"), rows,
+                            numeric=(False, True, True, False)))
+        if effect.evidence:
+            blocks.append(Table(f"evidence-{effect.name}", f"{effect.name}: evidence",
+                                ("measure", "value"),
+                                tuple((k, format_number(v, 4)) for k, v in effect.evidence.items()),
+                                numeric=(False, True)))
+        if residuals and any((np.asarray(r.rows) >= 0).any() for r in residuals):
+            variable, _ = figures.effect_variable(effect, residuals)
+            shown = "the joint reading" if variable == "joint" else {
+                "temperature": "temperature", "time": "time"}.get(variable, "measurement order")
+            blocks.append(Plot(f"effect-{effect.name}", f"{effect.name}: error before (geometric) "
+                               f"and after (final) the effect, against {shown}",
+                               partial(figures.effect_evidence, effect, residuals,
+                                       result.robot_nominal, result.units)))
+    if result.diagnosis:
+        blocks.append(diagnosis_table(result.diagnosis))
+    return Section("effects", "Effects found", tuple(blocks))
+
+
+def diagnosis_table(diagnosis: tuple[dict, ...]) -> Table:
+    """Every candidate effect diagnosis tested, with the scalar numbers it recorded."""
+    keys: list[str] = []
+    for entry in diagnosis:
+        for k, v in entry.items():
+            if k not in keys and isinstance(v, (int, float, str, bool, list, tuple)):
+                keys.append(k)
+    rows = tuple(tuple(_scalar_text(entry.get(k, "")) for k in keys) for entry in diagnosis)
+    return Table("diagnosis", "Candidates tested by diagnosis", tuple(keys), rows)
+
+
+def sphere_section(result: CalibrationResult) -> Section | None:
+    spheres = [r for r in result.residuals + result.validation_residuals
+               if r.kind == "sphere_laser"]
+    if not spheres:
+        return None
+    units = result.units
+    laser = {k: v for k, v in result.mounted.items()
+             if any(word in k.lower() for word in ("laser", "origin", "direction", "beam"))}
+    laser = laser or dict(result.mounted)
+    blocks: list = [Paragraph(
+        "The laser's reference point p0 and beam direction n are in the flange frame; the "
+        "sphere centre c is in the robot base frame. Each reading l puts the laser spot at "
+        "T (p0 + l n), which must lie on the sphere: |T (p0 + l n) - c| = R.")]
+    blocks.append(_values_table("laser", "Laser on the flange (fitted)",
+                                [(k, v, sd) for k, (v, sd) in laser.items()], units))
+    for r in spheres:
+        centre = [(k, v, None) for k, v in result.placement.items() if k.startswith(r.label)]
+        if centre:
+            blocks.append(_values_table(f"sphere-{r.label}", f"Sphere centre, {r.label} (fitted)",
+                                        centre, units))
+        stats = ErrorStats.of(errors_of(r, "final"))
+        blocks.append(Paragraph(
+            f"{r.label}: {stats.count} readings; distance from the sphere surface after "
+            f"calibration {format_number(stats.rms / units.length_scale)} {units.length} RMS, "
+            f"{format_number(stats.max / units.length_scale)} {units.length} at most."))
+    return Section("sphere", "Sphere and laser", tuple(blocks))
+
+
+def instrument_section(result: CalibrationResult) -> Section | None:
+    if not result.mounted and not result.placement:
+        return None
+    units = result.units
+    blocks: list = [Paragraph("Mounted: what is fixed to the robot (probe, reflector, laser), "
+                              "shared by all datasets. Placement: where the instrument sits in "
+                              "the room, fitted per dataset.", "note")]
+    if result.mounted:
+        blocks.append(_values_table("mounted", "Mounted on the robot",
+                                    [(k, v, sd) for k, (v, sd) in result.mounted.items()], units))
+    if result.placement:
+        blocks.append(_values_table("placement", "Instrument placement",
+                                    [(k, v, None) for k, v in result.placement.items()], units))
+    return Section("instrument", "Instrument", tuple(blocks))
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _error_row(label: str, role: str, errors: list[np.ndarray], units: Units) -> tuple[str, ...]:
+    scale = units.length_scale
+    nominal, geometric, final = (ErrorStats.of(e) for e in errors)
+    return (label, role, str(final.count), format_number(nominal.rms / scale),
+            format_number(geometric.rms / scale), format_number(final.rms / scale),
+            format_number(final.p95 / scale), format_number(final.p99 / scale),
+            format_number(final.max / scale))
+
+
+def _values_table(name: str, caption: str, entries: list[tuple[str, float, float | None]],
+                  units: Units) -> Table:
+    rows = []
+    for key, value, std in entries:
+        quantity = quantity_of_placement(key)
+        scale = units.scale(quantity)
+        rows.append((key, format_fixed(value / scale, parameter_decimals(units, quantity)),
+                     format_number(None if std is None else std / scale, 3),
+                     units.unit_name(quantity) or "-"))
+    return Table(name, caption, ("name", "value", "standard error", "unit"), tuple(rows),
+                 numeric=(False, True, True, False))
+
+
+def _scalar_text(value) -> str:
+    if isinstance(value, float):
+        return format_number(value, 6) if math.isfinite(value) else str(value)
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_scalar_text(v) for v in value)
+    return str(value)
+
