@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from robocal_casadi import examples
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model
+from robocal_casadi.pinocchio_model import (export_urdf, frame_placements, gravity_torques,
+                                            pinocchio_model)
 
 TOLERANCE = 1e-12  # [m] for positions, dimensionless for rotation matrix entries
 STEP = 1e-6  # central-difference step [m] or [rad]
@@ -148,3 +149,27 @@ def test_parallel_axes_stay_parallel_in_ur_type():
         axes = casadi_joint_frames(kinematics, kinematics.nominal, q)[1:4, :3, 2]
         np.testing.assert_allclose(np.cross(axes[0], axes[1]), 0, atol=1e-15)
         np.testing.assert_allclose(np.cross(axes[1], axes[2]), 0, atol=1e-15)
+
+
+def test_urdf_export_reads_back_into_pinocchio(any_robot, samples, tmp_path):
+    """The exported URDF, parsed by pinocchio, gives our frames and our gravity torques."""
+    kinematics = Kinematics(any_robot)
+    p = perturbed_parameters(kinematics, np.random.default_rng(10))
+    robot = any_robot.with_parameters(p)
+    path = tmp_path / "robot.urdf"
+    export_urdf(robot, path)
+    model = pin.buildModelFromUrdf(str(path))
+    model.gravity = pin.Motion(np.asarray(robot.gravity), np.zeros(3))  # URDF has no gravity
+    assert model.nq == robot.dof
+    data = model.createData()
+    names = [f"frame_{i}" for i in range(robot.dof + 1)] + ["tool"]
+    Q = samples(robot, count=8, seed=11)
+    for q in Q:
+        frames = frame_placements(model, q, names)
+        np.testing.assert_allclose(frames[:-1], casadi_joint_frames(kinematics, p, q), rtol=0,
+                                   atol=TOLERANCE)
+        np.testing.assert_allclose(frames[-1], kinematics.tool_poses(q, p)[0], rtol=0,
+                                   atol=TOLERANCE)
+    expected = gravity_torques(robot, Q)
+    read_back = np.array([pin.computeGeneralizedGravity(model, data, q) for q in Q])
+    np.testing.assert_allclose(read_back, expected, rtol=1e-12, atol=1e-10)

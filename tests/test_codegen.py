@@ -1,0 +1,84 @@
+"""Compiled CasADi functions agree with the interpreted ones and are cached on disk."""
+
+from __future__ import annotations
+
+import warnings
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from robocal_casadi import codegen, examples
+from robocal_casadi.kinematics import Kinematics
+
+needs_compiler = pytest.mark.skipif(codegen.compiler() is None,
+                                    reason="no C compiler (cc/gcc) on this machine")
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROBOCAL_CACHE", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+@needs_compiler
+@pytest.mark.parametrize("robot_name", ["industrial_6r", "prismatic_rrp"])
+def test_compiled_agrees_with_interpreted(cache, robot_name):
+    kinematics = Kinematics(examples.ROBOTS[robot_name]())
+    rng = np.random.default_rng(9)
+    p = kinematics.nominal + rng.normal(0, 1e-3, len(kinematics.registry))
+    offset = np.array([0.01, 0.02, 0.12])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", codegen.CompilationWarning)
+        pose = kinematics.compiled("tool_pose")
+        jacobians = kinematics.compiled("point_jacobians")
+    assert pose.is_a("External") and jacobians.is_a("External")
+    assert len(list(cache.glob("*.so"))) == 2
+    Q = rng.uniform(-1, 1, (20, kinematics.dof))
+    for q in Q:
+        np.testing.assert_allclose(np.asarray(pose(q, p)), np.asarray(kinematics.tool_pose(q, p)),
+                                   rtol=1e-14, atol=1e-15)
+        for mine, reference in zip(jacobians(q, p, offset),
+                                   kinematics.point_jacobians(q, p, offset)):
+            np.testing.assert_allclose(np.asarray(mine), np.asarray(reference), rtol=1e-14,
+                                       atol=1e-15)
+    batched = np.asarray(kinematics.mapped(pose, len(Q))(Q.T, p))
+    np.testing.assert_allclose(batched.reshape(4, len(Q), 4).transpose(1, 0, 2),
+                               kinematics.tool_poses(Q, p), rtol=1e-14, atol=1e-15)
+
+
+@needs_compiler
+def test_library_is_reused_across_instances(cache):
+    x = ca.SX.sym("x", 2)
+    function = ca.Function("square_sum", [x], [ca.dot(x, x)])
+    first = codegen.compiled(function)
+    library = next(cache.glob("*.so"))
+    stamp = library.stat().st_mtime_ns
+    codegen._loaded.clear()  # as in a new process: only the file on disk remains
+    second = codegen.compiled(function)
+    assert library.stat().st_mtime_ns == stamp and len(list(cache.glob("*.so"))) == 1
+    assert float(first([3, 4])) == float(second([3, 4])) == 25.0
+
+
+def test_without_compiler_falls_back_with_one_warning(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "compiler", lambda: None)
+    monkeypatch.setattr(codegen, "_warned", set())
+    x = ca.SX.sym("x")
+    function = ca.Function("twice", [x], [2 * x])
+    with pytest.warns(codegen.CompilationWarning, match="no C compiler"):
+        assert codegen.compiled(function) is function
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert codegen.compiled(function) is function  # said once only
+    assert not cache.exists()
+
+
+@needs_compiler
+def test_compilation_failure_falls_back(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "_warned", set())
+    monkeypatch.setattr(codegen, "FLAGS", ("-O2", "-shared", "-fPIC", "--no-such-flag"))
+    x = ca.SX.sym("x")
+    function = ca.Function("thrice", [x], [3 * x])
+    with pytest.warns(codegen.CompilationWarning, match="compiling 'thrice' failed"):
+        assert codegen.compiled(function) is function
+    assert not list(cache.glob("*.so"))
