@@ -183,7 +183,9 @@ class InverseKinematics:
         orientation (point mode, soft, weight ``orientation_weight`` [m/rad] while
         converging). ``bounds`` ``(lower, upper)`` [rad or m], default the robot's limits.
         ``restarts``: further tries from random seeds within the bounds if the first
-        fails (``rng`` a Generator or an int seed).
+        fails (``rng`` a Generator or an int seed); with a preferred orientation they also
+        run while the orientation is off by more than ``orientation_tolerance``, and the
+        closest of the successful starts is kept.
         """
         kin = self.kinematics
         p = kin.nominal if p is None else np.asarray(p, dtype=float)
@@ -204,8 +206,8 @@ class InverseKinematics:
             iterations += result.iterations
             if best is None or _better(result, best):
                 best = result
-            if best.success:
-                break
+            if best.success and not (soft and best.orientation_error > orientation_tolerance):
+                break  # with a preferred orientation, further starts may come closer to it
         assert best is not None
         message = best.message if restarts == 0 else f"{best.message} ({attempt + 1} start(s))"
         return IKResult(best.q, best.success, best.position_error, best.orientation_error,
