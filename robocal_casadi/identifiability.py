@@ -30,17 +30,18 @@ RANK_TOLERANCE = 1e-7  # relative residual norm of a unit column below which it 
 def preference(name: str) -> tuple[int, str]:
     """Order in which equally informative parameters are kept.
 
-    Standard DH parameters first (joint by joint), then the mounted instrument, then the
-    tool, then the base, then the Hayati ``beta`` (only where DH alone is degenerate).
+    The mounted instrument first (its offset is the least known and belongs to the set-up,
+    not to the robot), then standard DH parameters joint by joint, then the tool, then the
+    base, then the Hayati ``beta`` (kept only where DH alone is degenerate).
     """
+    if name.startswith(("probe_", "target_", "laser_")):
+        return (0, name)
     if name.startswith("beta"):
         return (4, name)
     if name.startswith("base_"):
         return (3, name)
     if name.startswith("tool_"):
         return (2, name)
-    if name[:1] in "tda" and any(ch.isdigit() for ch in name):
-        return (0, name)
     return (1, name)
 
 

@@ -1,0 +1,101 @@
+"""Identify the robot model from datasets; write result.json, robot_calibrated.yaml, report.html.
+
+All datasets share one robot file and are solved together. The geometric DH model is
+identified first (what the data cannot determine is reported, with the reason, and held
+at nominal); then, unless --no-diagnose, the residual is tested against effects the model
+lacks (joint compliance, periodic joint errors, gear-ratio errors, thermal drift) and
+those the data support are added. --validate datasets are held out: the robot and what
+is mounted on it come from the calibration, the placement of the instrument is fitted
+again on them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from ..datasets import load_dataset
+from ..identification import calibrate
+from ..output import atomic_directory
+from ..results import CalibrationResult
+from ..robot import save_robot
+from ..solver import METHODS
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("datasets", nargs="+", type=Path, metavar="DATASET.yaml")
+    parser.add_argument("--validate", nargs="+", type=Path, default=[], metavar="VAL.yaml",
+                        help="held-out datasets evaluated with the calibrated model")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="output folder (replaced as a whole when the run succeeds)")
+    parser.add_argument("--no-diagnose", action="store_true",
+                        help="stop after the geometric model")
+    parser.add_argument("--method", choices=METHODS, default="lm",
+                        help="lm: Levenberg-Marquardt (default); ipopt; linearised: iterated "
+                             "A dx = b; two_stage: angles then lengths")
+    parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
+                        help="huber down-weights outliers")
+    parser.add_argument("--no-report", action="store_true", help="skip report.html")
+    parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
+
+
+def _clean(value):
+    """JSON-safe copy: NaN and infinities become null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
+                  pdf: bool = False) -> None:
+    """Write the contract's three files into ``out`` atomically."""
+    with atomic_directory(out) as staging:
+        (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
+        save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
+        if report:
+            from ..report import write_report
+
+            write_report(result, staging / "report.html", pdf=pdf)
+
+
+def summary(result: CalibrationResult) -> str:
+    """A few lines for the terminal: what was identified and the error before and after."""
+    units = result.units
+    s = units.length_scale
+    ident = result.identifiability
+    rows = sum(len(r.errors_final) for r in result.residuals)
+    lines = [f"{rows} measurements from {', '.join(result.datasets)}; "
+             f"{len(ident.identifiable)} of {len(ident.candidates)} parameters identifiable "
+             f"(condition number {result.condition_number:.4g})"]
+    fit = result.fit
+    lines.append(f"fit RMS [{units.length}]: nominal {fit.rms_nominal / s:.4g}, geometric "
+                 f"{fit.rms_geometric / s:.4g}, final {fit.rms_final / s:.4g}")
+    if result.validation is not None:
+        v = result.validation
+        lines.append(f"validation RMS [{units.length}]: nominal {v.rms_nominal / s:.4g}, geometric "
+                     f"{v.rms_geometric / s:.4g}, final {v.rms_final / s:.4g}")
+    if result.effects:
+        for effect in result.effects:
+            lines.append(f"effect: {effect.summary or effect.name}")
+    else:
+        lines.append("effects: none added")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    datasets = [load_dataset(p) for p in args.datasets]
+    validation = [load_dataset(p) for p in args.validate]
+    result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
+                       loss=args.loss, progress=sys.stderr.isatty())
+    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
+    print(summary(result))
+    print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
+          + ("" if args.no_report else ", report.html"))
+    return 0

@@ -1,0 +1,73 @@
+"""Run the whole job on real data shipped with the package and write reports.
+
+Two cases, each calibrated on part of the data and validated on the rest:
+
+* a UR10 measured with a laser tracker (tracker_points): three quarters of series D
+  fit, every fourth pose held out;
+* a Franka Panda seated in the sockets of a plate (artifact_touches): seven plate
+  placements fit, two whole placements held out.
+
+Each case writes result.json, robot_calibrated.yaml and report.html (plus a screenshot
+report.png when Chromium is installed) into OUT/<case>/.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from importlib import resources
+from pathlib import Path
+
+from ..datasets import load_dataset
+from ..identification import calibrate
+from .calibrate import summary, write_outputs
+
+PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
+             "mid_left")
+PANDA_VALIDATION = ("mid-high", "mid_right")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", type=Path, default=Path("reports"),
+                        help="folder for the reports (default: ./reports)")
+    parser.add_argument("--no-diagnose", action="store_true",
+                        help="stop after the geometric model")
+    parser.add_argument("--no-screenshot", action="store_true",
+                        help="do not render report.png with Chromium")
+
+
+def data_folder() -> Path:
+    """The folder of the shipped data sets."""
+    return Path(str(resources.files("robocal_casadi") / "data"))
+
+
+def cases() -> dict[str, tuple[list[Path], list[Path]]]:
+    """Case name -> (fit dataset files, validation dataset files)."""
+    data = data_folder()
+    return {
+        "ur10-tracker": ([data / "ur10-ipa" / "series_D_fit.yaml"],
+                         [data / "ur10-ipa" / "series_D_validation.yaml"]),
+        "panda-sockets": ([data / "panda-mukca" / f"{n}.yaml" for n in PANDA_FIT],
+                          [data / "panda-mukca" / f"{n}.yaml" for n in PANDA_VALIDATION]),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    for name, (fit_files, validation_files) in cases().items():
+        print(f"== {name}")
+        fit = [load_dataset(p) for p in fit_files]
+        validation = [load_dataset(p) for p in validation_files]
+        result = calibrate(fit, validation, diagnose=not args.no_diagnose,
+                           progress=sys.stderr.isatty())
+        out = args.out / name
+        write_outputs(result, out)
+        print(summary(result))
+        if not args.no_screenshot:
+            from ..report import find_chromium, screenshot_report
+
+            if find_chromium():
+                screenshot_report(out / "report.html", out / "report.png")
+            else:
+                print("(no Chromium found: report.png not rendered)")
+        print(f"wrote {out}/report.html")
+    return 0
