@@ -105,7 +105,7 @@ class Tracker:
     frame (axes parallel to it); ``standoff`` Z [m] > 0, the target is held at
     ``(0, 0, Z)`` in the end frame; ``up`` the worktable normal in the world frame
     (normalised here); ``max_step`` the largest joint move per cycle [rad or m], None for
-    none; ``p`` the geometric parameter vector (``ParameterRegistry`` order, SI; default
+    none (one value or one per joint); ``p`` the geometric parameter vector (``ParameterRegistry`` order, SI; default
     the robot's own); ``weights`` (n) the weights of the smallest-move objective (default
     1); ``method`` the NLP solver: ``gauss_newton`` (real-time), ``sqpmethod`` or ``ipopt``
     (references).
@@ -116,7 +116,8 @@ class Tracker:
     """
 
     def __init__(self, robot: Robot, camera_xyz: Sequence[float], standoff: float,
-                 up: Sequence[float] = (0.0, 0.0, 1.0), max_step: float | None = None,
+                 up: Sequence[float] = (0.0, 0.0, 1.0),
+                 max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
                  method: str = "gauss_newton", problem: TrackingProblem | None = None):
         if robot.dof < 6:
@@ -137,9 +138,17 @@ class Tracker:
                              where="standoff")
         self.standoff = standoff
         self.up = unit_up(up)
-        if max_step is not None and not (math.isfinite(max_step) and max_step > 0):
-            raise InputError(f"max_step must be positive, got {max_step}", where="max_step")
-        self.max_step = max_step
+        self.max_step = None
+        if max_step is not None:
+            try:
+                steps = np.broadcast_to(np.asarray(max_step, dtype=float), (n,)).copy()
+            except ValueError:
+                raise InputError(f"expected one value or {n}, got {max_step!r}",
+                                 where="max_step") from None
+            if not (np.all(np.isfinite(steps)) and np.all(steps > 0)):
+                raise InputError(f"max_step must be positive, got {max_step}",
+                                 where="max_step")
+            self.max_step = steps
         self.p = (robot.parameter_vector() if p is None
                   else _vector(p, self.problem.parameter_count, "p"))
         self.weights = np.ones(n) if weights is None else _vector(weights, n, "weights")
@@ -170,8 +179,9 @@ class Tracker:
         self._goal_buffer.set_res(0, memoryview(self._goal_out))
 
     def __repr__(self) -> str:
+        steps = None if self.max_step is None else list(self.max_step)
         return (f"Tracker({self.robot.name!r}, camera_xyz={list(self.camera_xyz)}, "
-                f"standoff={self.standoff} m, up={list(self.up)}, max_step={self.max_step}, "
+                f"standoff={self.standoff} m, up={list(self.up)}, max_step={steps}, "
                 f"method={self.method!r})")
 
     # ------------------------------------------------------------------ state

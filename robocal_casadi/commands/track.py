@@ -1,0 +1,72 @@
+"""Joints that keep the tool facing a moving target, level with the worktable.
+
+Reads a tracking job (kind: tracking; CONTRACT.md "Tracking job"): the robot, the
+camera on the end frame, the standoff Z, the worktable normal `up`, and a table of
+camera observations time,q1..qn,x,y,z,roll,pitch,yaw. For each row it solves one small
+NLP (target at (0, 0, Z) in the end frame, end z axis on the target, end x axis level,
+joint limits, smallest move from the previous answer) and writes JOINTS.csv:
+time,q1..qn,status,solve_ms with the joints in the job's units. `status` is ok,
+unreachable or failed; a row that is not ok keeps the last safe joints (the first row's
+capture joints before any answer). Rows are solved in order, as a controller would.
+
+With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..output import atomic_file
+from ..progress import Progress
+from ..table import write_table
+from ..tracking.job import load_tracking_job
+from ..tracking.tracker import Tracker
+from .fk import calibrated_robot
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("job", metavar="JOB.yaml", help="tracking job file (kind: tracking)")
+    parser.add_argument("--out", metavar="JOINTS.csv", required=True,
+                        help="output table time,q1..qn,status,solve_ms (job's units)")
+    parser.add_argument("--calibrated", metavar="DIR",
+                        help="use DIR/robot_calibrated.yaml instead of the job's robot file")
+    parser.add_argument("--max-step", type=float, metavar="STEP",
+                        help="largest joint move per row, in the job's angle unit (length "
+                        "unit for prismatic joints); a target needing more is unreachable")
+
+
+def run(args: argparse.Namespace) -> int:
+    job_path = Path(args.job)
+    job = load_tracking_job(job_path)
+    if args.calibrated is not None:
+        robot = calibrated_robot(Path(args.calibrated), job.robot, job.robot_path)
+        job = load_tracking_job(job_path, robot=robot)
+    scales = np.array([job.units.angle_scale if j.revolute else job.units.length_scale
+                       for j in job.robot.joints])
+    max_step = None
+    if args.max_step is not None:
+        if not (np.isfinite(args.max_step) and args.max_step > 0):
+            raise InputError(f"expected a positive number, got {args.max_step}",
+                             where="--max-step")
+        max_step = scales * args.max_step
+    tracker = Tracker(job.robot, job.camera_xyz, job.standoff, up=job.up, max_step=max_step)
+    rows = []
+    counts = {"ok": 0, "unreachable": 0, "failed": 0}
+    with Progress("track", total=job.rows) as bar:
+        for i in range(job.rows):
+            step = tracker.step(job.joints[i], job.observations[i])
+            counts[step.status] += 1
+            rows.append([job.time[i], *(step.q / scales), step.status, step.solve_ms])
+            bar.update(i + 1)
+    columns = ["time", *(f"q{i}" for i in range(1, job.robot.dof + 1)), "status", "solve_ms"]
+    with atomic_file(args.out) as staging:
+        write_table(staging, columns, rows)
+    times = np.array([r[-1] for r in rows])
+    print(f"{job.rows} rows: {counts['ok']} ok, {counts['unreachable']} unreachable, "
+          f"{counts['failed']} failed; solve time median {np.median(times):.3f} ms, "
+          f"max {times.max():.3f} ms -> {args.out}")
+    return 0
