@@ -27,7 +27,7 @@ from ..units import Units  # noqa: E402
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit  # noqa: E402
 
 COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
-MARKERS = {"nominal": "s", "geometric": "o", "final": "."}
+ALPHA = {"nominal": 0.35, "geometric": 0.45, "final": 0.6}
 STYLE = {
     "font.size": 9.0,
     "axes.titlesize": 10.0,
@@ -192,9 +192,8 @@ def error_against_joints(residuals: DatasetResiduals, robot: Robot, units: Units
             x = joints[rows, j] / reading_scale
             for model in ("geometric", "final"):
                 errors = errors_of(residuals, model)[mapped] / scale
-                axes.scatter(x[keep], errors[keep], s=3, alpha=0.45, color=COLOURS[model],
-                             marker=MARKERS[model], linewidths=0, rasterized=True,
-                             label=MODEL_TITLES[model])
+                axes.scatter(x[keep], errors[keep], s=5, alpha=ALPHA[model], color=COLOURS[model],
+                             linewidths=0, rasterized=True, label=MODEL_TITLES[model])
             axes.set_xlabel(f"q{j + 1} [{reading_unit}]")
             if j % columns == 0:
                 axes.set_ylabel(f"error [{units.length}]")
@@ -223,7 +222,8 @@ def error_over_rows(residuals: DatasetResiduals, units: Units) -> Figure:
         for model in ("nominal", "geometric", "final"):
             errors = np.abs(errors_of(residuals, model)[mapped]) / scale
             floor = _positive_floor(errors) if floor is None else min(floor, _positive_floor(errors))
-            axes.scatter(x[keep], np.maximum(errors[keep], 1e-300), s=3, alpha=0.4, linewidths=0,
+            axes.scatter(x[keep], np.maximum(errors[keep], 1e-300), s=5, alpha=ALPHA[model],
+                         linewidths=0,
                          color=COLOURS[model], rasterized=True, label=MODEL_TITLES[model])
         if mapped.size:
             axes.set_yscale("log")
@@ -293,7 +293,7 @@ def effect_evidence(effect: EffectFinding, residuals: tuple[DatasetResiduals, ..
             keep = _thin(x.size)
             for model, parts in models.items():
                 errors = np.concatenate(parts)
-                axes.scatter(x[keep], errors[keep], s=3, alpha=0.3, linewidths=0,
+                axes.scatter(x[keep], errors[keep], s=4, alpha=0.3, linewidths=0,
                              color=COLOURS[model], rasterized=True)
                 centres, values = _binned_rms(x, errors)
                 axes.plot(centres, values, color=COLOURS[model], marker="o", markersize=3,

@@ -70,9 +70,9 @@ def headline_table(result: CalibrationResult) -> Table:
         rows.append((role, *(format_number(v / units.length_scale) for v in values),
                      *(format_number(v / units.length_scale) for v in p99)))
         muted.append(False)
-    header = ("data", f"RMS nominal [{unit}]", f"RMS geometric [{unit}]", f"RMS final [{unit}]",
-              f"99th percentile nominal [{unit}]", f"99th percentile final [{unit}]")
-    return Table("headline", "Error before and after calibration", header, tuple(rows),
+    header = ("data", "RMS nominal", "RMS geometric", "RMS final", "99th percentile nominal",
+              "99th percentile final")
+    return Table("headline", f"Error before and after calibration [{unit}]", header, tuple(rows),
                  tuple(muted), (False,) + (True,) * 5)
 
 
@@ -156,9 +156,8 @@ def parameters_section(result: CalibrationResult) -> Section:
 def errors_section(result: CalibrationResult) -> Section:
     units = result.units
     unit = units.length
-    header = ("dataset", "role", "errors", f"RMS nominal [{unit}]", f"RMS geometric [{unit}]",
-              f"RMS final [{unit}]", f"95th percentile final [{unit}]",
-              f"99th percentile final [{unit}]", f"max final [{unit}]")
+    header = ("dataset", "role", "errors", "RMS nominal", "RMS geometric", "RMS final",
+              "95th percentile final", "99th percentile final", "max final")
     rows = []
     groups = [("fit", result.residuals)]
     if result.validation_residuals:
@@ -176,7 +175,7 @@ def errors_section(result: CalibrationResult) -> Section:
                   "Geometric: after the geometric calibration. Final: with the effects that "
                   "diagnosis added (equal to geometric when it added none). Percentiles are "
                   "of the error magnitude."),
-        Table("errors", "Error per dataset", header, tuple(rows),
+        Table("errors", f"Error per dataset [{unit}]", header, tuple(rows),
               numeric=(False, False) + (True,) * 7),
     ]
     plot_groups = tuple((f"{role} data", residuals) for role, residuals in groups if residuals)
@@ -210,7 +209,8 @@ def effects_section(result: CalibrationResult) -> Section:
     for effect in result.effects:
         joints = f" on joint{'s' if len(effect.joints) > 1 else ''} " \
                  f"{', '.join(str(j) for j in effect.joints)}" if effect.joints else ""
-        blocks.append(Paragraph(f"{effect.name}{joints}. {effect.summary}".strip()))
+        summary = f": {effect.summary[:1].upper()}{effect.summary[1:]}" if effect.summary else ""
+        blocks.append(Paragraph(f"{effect.name}{joints}{summary}".rstrip(".") + "."))
         rows = tuple((name, format_number(value, 4),
                       format_number(effect.std.get(name), 3), effect.unit)
                      for name, value in effect.parameters.items())

@@ -1,0 +1,56 @@
+"""The report in a real browser: headless Chromium loads it offline, every image decodes,
+and a screenshot of the page is a valid, non-blank PNG.
+
+Skipped when Chromium is not installed (``apt-get install chromium``; ``.ci/run`` does it).
+"""
+
+from __future__ import annotations
+
+import re
+
+import matplotlib.image
+import numpy as np
+import pytest
+from test_report import synthetic_result
+
+from robocal_casadi.report import find_chromium, page_state, screenshot_report, write_report
+
+pytestmark = pytest.mark.skipif(find_chromium() is None,
+                                reason="Chromium not installed (apt-get install chromium)")
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    path = tmp_path_factory.mktemp("browser") / "report.html"
+    return write_report(synthetic_result(sphere=True), path)
+
+
+def test_page_loads_with_every_image_decoded(report):
+    images_in_file = len(re.findall(r"<img\b", report.read_text(encoding="utf-8")))
+    state = page_state(report)
+    assert images_in_file > 0
+    assert state.get("report-ready") == "true", state
+    assert int(state["images-total"]) == images_in_file
+    assert int(state["images-loaded"]) == images_in_file
+    assert int(state["page-height"]) > 2000  # many sections and figures, not an empty page
+
+
+def test_screenshot_is_a_non_blank_png(report, tmp_path):
+    png = screenshot_report(report, tmp_path / "shots" / "report.png", height=2000)
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    pixels = matplotlib.image.imread(png)
+    assert pixels.shape[:2] == (2000, 1280)
+    grey = pixels[..., :3].mean(axis=2)
+    assert (grey < 0.5).mean() > 0.002, "no dark ink: the page did not render"
+    assert (grey > 0.9).mean() > 0.5, "no white page background"
+    assert float(np.std(grey)) > 0.05
+    # the report's accent colour (the header rule, #1f6fb2) is on screen
+    accent = np.abs(pixels[..., :3] - np.array([0x1F, 0x6F, 0xB2]) / 255).max(axis=2) < 0.05
+    assert accent.sum() > 500
+
+
+def test_full_page_screenshot_is_as_tall_as_the_page(report, tmp_path):
+    height = int(page_state(report)["page-height"])
+    png = screenshot_report(report, tmp_path / "full.png")
+    assert matplotlib.image.imread(png).shape[:2] == (min(height, 30000), 1280)
