@@ -37,7 +37,8 @@ from .errors import InputError, SolverError
 
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order
-FLANGE_AXES = np.vstack([np.eye(3), -np.eye(3)])  # direction candidates when none is given
+FLANGE_AXES = np.vstack([np.eye(3), -np.eye(3)])  # fallback direction candidates
+RETRY_RATIO = 0.01  # start RMS / radius above which the flange axes are tried as well
 START_ITERATIONS = 6  # LM steps given to each start before the best one is kept
 IPOPT_ACCEPTED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
 
@@ -316,29 +317,74 @@ def _check_inputs(flange_poses, distance, radius) -> Scan:
     return Scan.from_poses(flange_poses, distance, radius)
 
 
+def algebraic_start(scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closed-form ``(p0, n, c)`` from the squared model, linear after lifting.
+
+    Squaring ``||R_i (p0 + l_i n) + t_i - c|| = R`` and using ``|n| = 1`` gives, per reading,
+    an equation linear in ``z = [k, g, c, p0, n, vec(M), vec(K)]`` (29 unknowns) with
+    ``k = |p0|^2 + |c|^2``, ``g = p0.n``, ``M = c p0^T``, ``K = c n^T``::
+
+        k + 2 l g - 2 t.c + 2 (R^T t).p0 + 2 l (R^T t).n - 2 <R, M> - 2 l <R, K>
+            = R^2 - l^2 - |t|^2
+
+    Solved by column-scaled least squares, ignoring the products' structure; ``p0``,
+    ``n`` (normalised) and ``c`` are read from the linear part. Exact without noise when
+    the orientations and distances vary enough; a start, not an estimate.
+    """
+    R, t, l = scan.rotations, scan.translations, scan.distance
+    count = len(l)
+    rotated = np.einsum("jin,jn->in", R, t)  # R_i^T t_i, 3 x N
+    entries = R.reshape(9, count)  # R_i[j, k] at row 3 j + k, matching vec(M) row-major
+    A = np.vstack([np.ones(count), 2 * l, -2 * t, 2 * rotated, 2 * l * rotated,
+                   -2 * entries, -2 * l * entries]).T
+    b = scan.radius ** 2 - l ** 2 - np.sum(t * t, axis=0)
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    z, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    z /= scale
+    n = z[8:11]
+    norm = np.linalg.norm(n)
+    n = n / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
+    return z[5:8], n, z[2:5]
+
+
 def initial_values(scan: Scan, origin_guess=None, direction_guess=None, centre_guess=None):
     """A start ``(origin, direction, centre)`` without user help.
 
-    ``p0`` starts at the guess or the flange origin; each direction candidate (the guess,
-    else the six flange axes) gets its centre from ``sphere_centre`` and a few LM steps;
-    the start with the smallest cost is kept.
+    Starts: ``algebraic_start`` and, where the user gave guesses, the guesses (``p0`` at
+    the flange origin and the centre from ``sphere_centre`` where not given). Each gets
+    a few LM steps and the lowest cost wins. If that start still leaves an RMS above
+    ``RETRY_RATIO`` times the radius, the six flange axes are tried as directions too.
     """
+    starts = [algebraic_start(scan)]
+    if origin_guess is not None or direction_guess is not None or centre_guess is not None:
+        starts.append(_guessed(scan, origin_guess, direction_guess, centre_guess))
+    best = _best_start(scan, starts)
+    if np.sqrt(best[0] / len(scan)) > RETRY_RATIO * scan.radius:
+        best = min(best, _best_start(scan, [_guessed(scan, origin_guess, axis, centre_guess)
+                                            for axis in FLANGE_AXES]), key=lambda b: b[0])
+    return best[1]
+
+
+def _guessed(scan: Scan, origin_guess, direction_guess, centre_guess):
     origin = np.zeros(3) if origin_guess is None else np.asarray(origin_guess, float)
-    if direction_guess is not None:
-        directions = [np.asarray(direction_guess, float) / np.linalg.norm(direction_guess)]
-    else:
-        directions = list(FLANGE_AXES)
+    n = np.array([0.0, 0.0, 1.0]) if direction_guess is None else \
+        np.asarray(direction_guess, float) / np.linalg.norm(direction_guess)
+    if centre_guess is not None:
+        return origin, n, np.asarray(centre_guess, float)
+    return origin, n, sphere_centre(scan.points(origin, n).T, scan.radius, beam=scan.beams(n).T)
+
+
+def _best_start(scan: Scan, starts):
     best = None
-    for n in directions:
-        if centre_guess is not None:
-            c = np.asarray(centre_guess, float)
-        else:
-            c = sphere_centre(scan.points(origin, n).T, scan.radius, beam=scan.beams(n).T)
+    for origin, n, c in starts:
+        if not (np.all(np.isfinite(origin)) and np.all(np.isfinite(c))):
+            continue
         trial = _levenberg_marquardt(scan, origin, n, c, max_iterations=START_ITERATIONS)
         cost = float(np.sum(scan.residuals(*trial[:3]) ** 2))
-        if best is None or cost < best[0]:
+        if np.isfinite(cost) and (best is None or cost < best[0]):
             best = (cost, trial[:3])
-    return best[1]
+    return best if best is not None else (np.inf, starts[0])
 
 
 def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
@@ -348,8 +394,8 @@ def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
 
     ``flange_poses`` (N x 4 x 4) [m], base frame; ``distance`` (N,) [m] raw laser readings;
     ``radius`` [m]. Guesses are optional (``origin_guess`` [m] and ``direction_guess`` in
-    the flange frame, ``centre_guess`` [m] in the base frame): without a direction the
-    six flange axes +-x, +-y, +-z are tried for a few steps and the best start continues.
+    the flange frame, ``centre_guess`` [m] in the base frame); without them the start is
+    closed-form (``initial_values``).
     ``method`` is ``"lm"`` (closed-form Jacobian, fastest) or ``"ipopt"`` (CasADi, exact
     derivatives, ``|n| = 1`` as a constraint).
 
@@ -367,6 +413,31 @@ def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
         origin, direction, centre, iterations, status = _ipopt(scan, origin, direction, centre)
     return summarise(scan, origin, direction, centre, iterations=iterations, status=status,
                      method=method)
+
+
+def fit_dataset(dataset, *, method: str = "lm", robot=None) -> SensorFit:
+    """``fit_sensor`` on a ``sphere_laser`` dataset, with the file's guesses.
+
+    Pendant tables use their own flange poses; joint readings use the flange poses of
+    ``robot`` (default: the dataset's robot, nominal), so the robot's own errors stay in
+    the residual. A scan that cannot separate ``p0`` from ``c`` raises ``InputError``
+    naming the table.
+    """
+    poses = dataset.flange_poses
+    if poses is None:
+        from .kinematics import Kinematics
+
+        poses = Kinematics(robot or dataset.robot).flange_poses(dataset.joints)
+    try:
+        return fit_sensor(poses, dataset.distance, dataset.radius,
+                          origin_guess=dataset.origin_guess,
+                          direction_guess=dataset.direction_guess,
+                          centre_guess=dataset.centre_guess, method=method)
+    except InputError as error:
+        if error.file is not None:
+            raise
+        raise InputError(error.what, file=dataset.data_path or dataset.path,
+                         where="scan") from None
 
 
 def summarise(scan: Scan, origin, direction, centre, *, iterations: int = 0,
@@ -417,17 +488,20 @@ def check_identifiable(singular_values: np.ndarray, vectors: np.ndarray,
     weak = np.flatnonzero(s < ratio * s[0])
     if weak.size == 0:
         return
+    origin_part = vectors[0:3, weak]
     v = vectors[:, weak[-1]]
     d_origin, d_centre = v[0:3], v[5:8]
-    shown = ", ".join(f"{x:.3g}" for x in s)
-    if np.linalg.norm(d_origin) > 1e-3:
+    if weak.size >= 3 and np.linalg.matrix_rank(origin_part, tol=1e-3) == 3:
+        detail = ("p0 + d and c + R*d fit equally for every d (R the flange rotation, the "
+                  "same in every reading: a pure translation scan)")
+    elif np.linalg.norm(d_origin) > 1e-3:
         scale = np.linalg.norm(d_origin)
         d = d_origin / scale
         along = abs(float(d @ direction))
         what = "the beam direction n" if along > 0.999 else f"{along:.3f} along the beam"
         detail = (f"p0 + t*d and c + t*R*d fit equally (R the flange rotation) for "
                   f"d = [{d[0]:.4f}, {d[1]:.4f}, {d[2]:.4f}] (flange frame, {what}), "
-                  f"centre moving along [{', '.join(f'{x:.4f}' for x in d_centre / scale)}]")
+                  f"the centre moving along [{', '.join(f'{x:.4f}' for x in d_centre / scale)}]")
     else:
         detail = "undetermined combination [" + ", ".join(
             f"{name} {x:.3f}" for name, x in zip(PARAMETER_NAMES, v)) + "]"

@@ -1,0 +1,130 @@
+"""A point laser on the flange measuring a sphere of known radius (``sphere_laser``).
+
+Unknowns (METHODS.md section 2):
+
+* mounted, shared by name: the laser reference point ``laser_x, laser_y, laser_z`` [m]
+  and the beam direction ``laser_nx, laser_ny, laser_nz``, both in the flange frame;
+* placement, per dataset: the sphere centre ``<label>/sphere_x, _y, _z`` [m], base frame.
+
+Residual per reading ``i`` [m], the distance of the laser point from the sphere surface::
+
+    r_i = || T_i (p0 + l_i n) - c || - R,      n = v / |v|,  v = (laser_nx, laser_ny, laser_nz)
+
+``T_i`` is the flange pose: from the robot model and the joint readings, or, for a table
+of pendant poses (``x, y, z, qw, qx, qy, qz``), the pose as read (the robot then plays no
+part, ``uses_robot`` is False).
+
+Unit beam direction: the engine treats mounted values as free unknowns, so the model
+uses ``n = v / |v|`` (any direction, no pole, no sign choice) and adds one last residual
+``(|v| - 1) * 1 m``. The distance residuals do not change with ``|v|``, so that row is
+zero at the solution and only fixes the length of ``v``: the estimate of ``v`` is a unit
+vector, its covariance is that of the constrained direction, and the Jacobian has full
+rank. ``errors`` leaves that row out.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..errors import InputError
+from ..parameters import ParameterRegistry
+from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
+from .base import MeasurementModel, PointsFunction
+
+MOUNTED_NAMES = ("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny", "laser_nz")
+GAUGE_LENGTH = 1.0  # [m] weight of the |v| = 1 row
+
+
+class SphereLaserModel(MeasurementModel):
+    """Residuals of point-laser readings of a sphere; see the module docstring."""
+
+    kind = "sphere_laser"
+    invisible_reason = "has no effect on the laser points' distances from the sphere centre"
+    absorbed_reason = ("absorbed by the unknown sphere centre (distances from one point do not "
+                       "change when the whole robot moves or turns about it)")
+
+    def __init__(self, dataset, label: str):
+        super().__init__(dataset, label)
+        if dataset.distance is None:
+            raise InputError("sphere_laser dataset has no readings (no data table)",
+                             file=dataset.path, where="data")
+        self.count = len(dataset.distance)
+        self._placement = ParameterRegistry(
+            tuple(f"{label}/sphere_{axis}" for axis in "xyz"), ("length",) * 3)
+        self._scan = None if dataset.flange_poses is None else Scan.from_poses(
+            dataset.flange_poses, dataset.distance, dataset.radius)
+        self._sensor: SensorFit | None = None
+
+    # ------------------------------------------------------------------ unknowns
+
+    @property
+    def mounted(self) -> ParameterRegistry:
+        return ParameterRegistry(MOUNTED_NAMES, ("length",) * 3 + ("none",) * 3)
+
+    @property
+    def placement(self) -> ParameterRegistry:
+        return self._placement
+
+    @property
+    def uses_robot(self) -> bool:
+        return self.dataset.flange_poses is None
+
+    def sensor_fit(self) -> SensorFit:
+        """Sensor-only calibration on the pendant poses, or on the nominal robot's flange
+        poses for joint readings (``sphere_fit.fit_sensor``), computed once."""
+        if self._sensor is None:
+            self._sensor = fit_dataset(self.dataset)
+        return self._sensor
+
+    def initial_mounted(self) -> np.ndarray:
+        """``[p0 [m], n]`` from the sensor-only fit (file guesses only seed that fit)."""
+        fit = self.sensor_fit()
+        return np.concatenate([fit.origin, fit.direction])
+
+    def initial_placement(self, points, mounted) -> np.ndarray:
+        """Sphere centre [m] through the laser points of the current robot and laser."""
+        origin, direction = laser_of(mounted)
+        offsets = origin[:, None] + direction[:, None] * self.dataset.distance[None, :]
+        if self.uses_robot:
+            hit = np.asarray(points(offsets), float)
+            beam = np.asarray(points(offsets + direction[:, None]), float) - hit
+        else:
+            hit = self._scan.points(origin, direction)
+            beam = self._scan.beams(direction)
+        return sphere_centre(hit.T, self.dataset.radius, beam=beam.T)
+
+    # ------------------------------------------------------------------ residuals
+
+    def residual_size(self) -> int:
+        return self.count + 1
+
+    def residual(self, points: PointsFunction, mounted, placement) -> ca.MX:
+        origin, v, centre = mounted[0:3], mounted[3:6], placement[0:3]
+        length = ca.sqrt(ca.sumsqr(v))
+        n = v / length
+        distance = ca.DM(self.dataset.distance.reshape(1, -1))
+        offsets = ca.repmat(origin, 1, self.count) + ca.mtimes(n, distance)  # 3 x N
+        if self.uses_robot:
+            world = points(offsets)
+        else:
+            R, t = self._scan.rotations, self._scan.translations
+            world = ca.vertcat(*[
+                sum(ca.DM(R[k, j].reshape(1, -1)) * offsets[j, :] for j in range(3))
+                + ca.DM(t[k].reshape(1, -1)) for k in range(3)])
+        w = world - ca.repmat(centre, 1, self.count)
+        surface = ca.sqrt(ca.sum1(w * w)) - self.dataset.radius
+        return ca.vertcat(surface.T, GAUGE_LENGTH * (length - 1.0))
+
+    def errors(self, residual: np.ndarray) -> np.ndarray:
+        """|distance of each laser point from the sphere surface| [m] (gauge row left out)."""
+        return np.abs(np.asarray(residual, float).ravel()[:self.count])
+
+    def error_rows(self) -> np.ndarray:
+        return np.arange(self.count)
+
+
+def laser_of(mounted) -> tuple[np.ndarray, np.ndarray]:
+    """``(p0 [m], unit n)`` from mounted values ``[x, y, z, nx, ny, nz]`` (flange frame)."""
+    mounted = np.asarray(mounted, float)
+    return mounted[0:3], mounted[3:6] / np.linalg.norm(mounted[3:6])
