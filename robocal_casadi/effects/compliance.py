@@ -121,6 +121,7 @@ class JointCompliance(Effect):
 
     name = "joint_compliance"
     unit = "rad/Nm"
+    typical = 1e-6  # a typical parameter size, for judging whether the data see it
 
     def __init__(self, joints: tuple[int, ...], robot: Robot | None = None,
                  payload: bool = False):

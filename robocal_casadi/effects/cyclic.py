@@ -22,6 +22,7 @@ class JointCyclic(Effect):
 
     name = "joint_cyclic"
     unit = "rad"
+    typical = 1e-4  # a typical parameter size, for judging whether the data see it
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{h}_{j}" for j in self.joints for h in HARMONICS)

@@ -18,6 +18,7 @@ class JointScale(Effect):
 
     name = "joint_scale"
     unit = "1"
+    typical = 1e-4  # a typical parameter size, for judging whether the data see it
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"s{j}" for j in self.joints)

@@ -28,6 +28,7 @@ class ThermalDrift(Effect):
     """
 
     name = "thermal_drift"
+    typical = 1e-5  # a typical parameter size, for judging whether the data see it
 
     def __init__(self, joints: tuple[int, ...] = (), column: str = "temperature",
                  reference_value: float | None = None):

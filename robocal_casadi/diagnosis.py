@@ -1,0 +1,584 @@
+"""Diagnosis: trace what the geometric residual still holds to effects the model lacks.
+
+After the geometric fit, every candidate effect (each effect type on each joint; thermal
+drift once per ``temperature`` or ``time`` column) is tested against the residual:
+
+1. Visible? The effect's Jacobian columns, times a typical parameter size
+   (``Effect.typical``), must move the measurements by more than 1e-9 m RMS.
+2. Not absorbed? Each column, scaled to unit length, is projected out of the span of
+   the unknowns already free (identifiable geometry, mounted instrument, placements,
+   effects added before). A column whose remaining norm is below 1e-3 is something the
+   model can already do (e.g. a cosine of a joint that hardly moves looks like its
+   ``theta`` offset); it is held at zero. A candidate with nothing left is no finding.
+3. Supported? From the Gauss-Newton linearisation at the current solution: the residual
+   sum of squares with the effect's remaining columns added gives the drop of the
+   Bayesian information criterion ``BIC = n log(RSS/n) + k log n`` (n residuals, k
+   parameters added), and K-fold cross-validation gives the held-out RMS before and
+   after: folds of data rows (tracker, sphere) or of whole placements (artifacts,
+   bars); the fold's own placement unknowns (socket positions) are fitted on the held-out
+   data, as in validation. Both come from per-fold Gram matrices, so testing every
+   candidate costs one Jacobian.
+
+The candidate with the largest BIC drop among those with a BIC drop above 10 and a
+lower held-out RMS is then added and everything is re-identified jointly with the
+nonlinear solver; it is kept if the refitted model still passes both tests. This repeats
+until no candidate is supported. All effects of one type found over the rounds form one
+finding (e.g. ``joint_compliance`` on joints 2 and 3).
+
+Residual RMS values are over the contract's per-measurement errors [m] (for tracker data
+the 3-D point error), as ``Problem.rms``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from .effects import make_effect
+from .effects.base import Effect
+from .problem import Problem
+from .progress import Progress
+from .results import EffectFinding, Identifiability
+from .solver import Solution, solve
+
+BIC_THRESHOLD = 10.0
+ABSORBED = 1e-3  # relative remaining column norm below which the geometry holds the effect
+INVISIBLE = 1e-9  # [m] RMS change of a typical-size effect below which the data do not see it
+FOLDS = 5
+MAX_ROUNDS = 8
+EFFECT_TYPES = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift")
+THERMAL_COLUMNS = ("temperature", "time")
+
+
+# ----------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class CandidateTest(Mapping):
+    """One candidate tested in one round, with its numbers (also readable as a mapping).
+
+    ``parameters`` counts the columns kept after the identifiability check, ``held`` names
+    those the geometry absorbs; ``remaining_norm`` is the smallest relative norm among
+    the kept columns after projection (1 = orthogonal to the model). ``rss_drop``
+    (relative) and ``bic_drop`` are from the linearisation, or from the nonlinear refit
+    when ``decision`` is ``added`` or ``rejected after refit``; ``cv_rms_*`` [m] are
+    held-out RMS values of the per-measurement errors.
+    """
+
+    round: int
+    effect: str
+    joints: tuple[int, ...]
+    parameters: int
+    held: tuple[str, ...]
+    remaining_norm: float
+    rss_drop: float
+    bic_drop: float
+    cv_rms_before: float
+    cv_rms_after: float
+    decision: str
+
+    def __getitem__(self, key: str):
+        if key not in self._keys():
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys())
+
+    def __len__(self) -> int:
+        return len(self._keys())
+
+    @classmethod
+    def _keys(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+    def __repr__(self) -> str:
+        return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "
+                f"k={self.parameters}, bic_drop={self.bic_drop:.4g}, cv_rms "
+                f"{self.cv_rms_before:.4g} -> {self.cv_rms_after:.4g} m: {self.decision})")
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What diagnosis added and everything it tested.
+
+    ``problem`` is the final identification problem (declared effects plus the added
+    ones) and ``solution`` its joint solution; ``x_final`` its unknowns (``problem``'s
+    layout, SI).
+    """
+
+    added: tuple[EffectFinding, ...]
+    tested: tuple[CandidateTest, ...]
+    problem: Problem
+    solution: Solution
+    rounds: int
+    seconds: float
+    effects: tuple[Effect, ...] = field(default=())
+
+    @property
+    def x_final(self) -> np.ndarray:
+        return self.solution.x
+
+    def __repr__(self) -> str:
+        lines = [f"Diagnosis({len(self.tested)} candidate tests in {self.rounds} round(s), "
+                 f"{self.seconds:.3g} s)"]
+        if not self.added:
+            lines.append("  nothing added: no candidate effect is supported by the data")
+        for finding in self.added:
+            lines.append(f"  {finding.name} {list(finding.joints)}: {finding.summary}")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- candidates
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    effect: str
+    joints: tuple[int, ...]
+    names: tuple[str, ...]  # parameter names in the problem
+    typical: float
+    column: str | None = None  # thermal: which data column
+
+
+def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
+    """Extra columns present in every dataset, joined; ``payload`` if any dataset has it."""
+    datasets = [m.dataset for m in problem.models]
+    out: dict[str, np.ndarray] = {}
+    for column in THERMAL_COLUMNS:
+        if all(column in d.extras for d in datasets):
+            values = np.concatenate([np.asarray(d.extras[column], dtype=float) for d in datasets])
+            if np.all(np.isfinite(values)) and np.ptp(values) > 0:
+                out[column] = values
+    if any("payload" in d.extras for d in datasets):
+        out["payload"] = np.concatenate([np.asarray(d.extras.get("payload", np.zeros(d.rows)),
+                                                    dtype=float) for d in datasets])
+    return out
+
+
+def _candidates(problem: Problem, extras: dict) -> tuple[list[_Candidate], list[Effect]]:
+    """Per-joint candidates and the full effects that hold all their parameters."""
+    robot = problem.robot
+    taken = set(problem.unknowns.names)
+    candidates: list[_Candidate] = []
+    effects: list[Effect] = []
+    for name in EFFECT_TYPES:
+        if name == "thermal_drift":
+            for column in THERMAL_COLUMNS:
+                if column not in extras:
+                    continue
+                effect = make_effect(name, (), robot, {column: extras[column]})
+                if set(effect.parameter_names()) & taken:
+                    continue
+                candidates.append(_Candidate(name, (), effect.parameter_names(),
+                                             effect.typical, column))  # type: ignore[attr-defined]
+                effects.append(effect)
+            continue
+        joints = []
+        for j in range(1, robot.dof + 1):
+            if name == "joint_cyclic" and not robot.joints[j - 1].revolute:
+                continue
+            single = make_effect(name, (j,), robot, extras)
+            names = single.parameter_names()
+            if not names or set(names) & taken:
+                continue
+            candidates.append(_Candidate(name, (j,), names,
+                                         single.typical))  # type: ignore[attr-defined]
+            joints.append(j)
+        if joints:
+            effects.append(make_effect(name, tuple(joints), robot, extras))
+    return candidates, effects
+
+
+# ----------------------------------------------------------------------------- problems
+
+
+def sibling_problem(problem: Problem, effects: Sequence[Effect]) -> Problem:
+    """A problem over the same models with ``effects``, in the same placement frames.
+
+    Creating a problem re-initialises the placements, and a model may keep state from
+    that (the tracker's reference rotation); it is restored so that placement values
+    carry over by name unchanged.
+    """
+    states = [dict(vars(model)) for model in problem.models]
+    try:
+        sibling = Problem(problem.robot, problem.models, effects, kinematics=problem.kinematics)
+    finally:
+        for model, state in zip(problem.models, states):
+            vars(model).update(state)
+    return sibling
+
+
+def embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
+    """``x`` of ``source`` in ``target``'s layout by name (unknowns ``source`` lacks: zero)."""
+    out = np.zeros(len(target.unknowns))
+    for i, name in enumerate(source.unknowns.names):
+        if name in target.unknowns:
+            out[target.unknowns.index(name)] = x[i]
+    return out
+
+
+def _mask_of(problem: Problem, names) -> np.ndarray:
+    mask = np.zeros(len(problem.unknowns), dtype=bool)
+    mask[problem.unknowns.indices(list(names))] = True
+    return mask
+
+
+# ----------------------------------------------------------------------------- folds
+
+
+def residual_groups(model) -> np.ndarray:
+    """For each residual entry of ``model``, the unit cross-validation holds out together.
+
+    Tracker and sphere data: the data row. Artifact and bar data: the placement (pose),
+    since socket positions are per placement.
+    """
+    if hasattr(model, "residual_groups"):
+        return np.asarray(model.residual_groups())
+    size = model.residual_size()
+    dataset = model.dataset
+    if hasattr(model, "sockets") and hasattr(model, "_poses"):
+        groups: list[int] = []
+        for socket in model.sockets:
+            if socket.unknown_index is not None:
+                groups += [socket.pose] * (3 * len(socket.rows))
+        for pose in model._poses():
+            groups += [pose] * (len(model._distances(pose)) + len(model._perpendiculars(pose)))
+        if len(groups) == size:
+            return np.array(groups)
+    rows = max(dataset.rows, 1)
+    if size % rows == 0:
+        return np.repeat(np.arange(rows), size // rows)
+    return np.arange(size) * 20 // max(size, 1)  # contiguous blocks
+
+
+def fold_of_entries(problem: Problem, folds: int, seed: int) -> np.ndarray:
+    """Fold number of every residual entry (-1 when there are too few groups to fold)."""
+    keys = []
+    for k, model in enumerate(problem.models):
+        groups = residual_groups(model)
+        keys += [(k, int(g)) for g in groups]
+    unique = sorted(set(keys))
+    if len(unique) < 3:
+        return np.full(len(keys), -1)
+    count = min(folds, len(unique))
+    order = np.random.default_rng(seed).permutation(len(unique))
+    fold_of_group = {unique[i]: rank % count for rank, i in enumerate(order)}
+    return np.array([fold_of_group[key] for key in keys])
+
+
+class _FoldGrams:
+    """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation."""
+
+    def __init__(self, Z: np.ndarray, fold: np.ndarray):
+        self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
+        self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
+        self.total = Z.T @ Z
+        self.r = Z.shape[1] - 1
+
+    def held_out_sse(self, columns: Sequence[int]) -> float:
+        """Sum over folds of the held-out squared residual after fitting ``columns``.
+
+        Columns with no weight in a fold's training rows (that fold's own placement) are
+        fitted on its held-out rows instead.
+        """
+        if not self.count:
+            return float("nan")
+        S = np.asarray(columns, dtype=int)
+        r = self.r
+        total = 0.0
+        for Gf in self.parts:
+            Gt = self.total - Gf
+            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
+            shared, own = S[~local], S[local]
+            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
+            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
+            if own.size:
+                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
+                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
+            total += max(float(sse), 0.0)
+        return total
+
+
+# ----------------------------------------------------------------------------- screening
+
+
+@dataclass(frozen=True)
+class _Screen:
+    candidate: _Candidate
+    kept: tuple[str, ...]
+    held: tuple[str, ...]
+    remaining: float
+    rss_drop: float
+    bic_drop: float
+    cv_after: float
+    decision: str
+
+
+def _pivoted(columns: np.ndarray, threshold: float) -> tuple[list[int], list[float]]:
+    """Greedy pivoted Gram-Schmidt: columns whose remaining norm exceeds ``threshold``."""
+    A = columns.copy()
+    chosen, norms = [], []
+    available = list(range(A.shape[1]))
+    while available:
+        remaining = np.linalg.norm(A[:, available], axis=0)
+        best = int(np.argmax(remaining))
+        if remaining[best] <= threshold:
+            break
+        k = available.pop(best)
+        chosen.append(k)
+        norms.append(float(remaining[best]))
+        u = A[:, k] / remaining[best]
+        A -= np.outer(u, u @ A)
+    return chosen, norms
+
+
+class _Screening:
+    """Everything one round needs from one residual and Jacobian."""
+
+    def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray, free: np.ndarray,
+                 candidates: Sequence[_Candidate], fold: np.ndarray, n_errors: int):
+        self.problem, self.r, self.n_errors = problem, r, n_errors
+        self.n = len(r)
+        self.rss = float(r @ r)
+        self.free_index = np.flatnonzero(free)
+        A = J[:, self.free_index]
+        norms = np.linalg.norm(A, axis=0)
+        norms[norms == 0] = 1.0
+        self.Q, _ = np.linalg.qr(A / norms)
+        self.candidates = list(candidates)
+        names = sorted({n for c in candidates for n in c.names},
+                       key=problem.unknowns.index)
+        self.effect_index = {n: problem.unknowns.index(n) for n in names}
+        E = J[:, [self.effect_index[n] for n in names]] if names else np.zeros((self.n, 0))
+        self.raw_norm = dict(zip(names, np.linalg.norm(E, axis=0)))
+        E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
+        self.E = E / E_norms
+        self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
+        Z = np.column_stack([A / norms, self.E, r])
+        self.grams = _FoldGrams(Z, fold)
+        self.cv_before = self._cv(range(len(self.free_index)))
+        self.r_perp = r - self.Q @ (self.Q.T @ r)
+
+    def _cv(self, columns) -> float:
+        sse = self.grams.held_out_sse(list(columns))
+        return math.sqrt(sse / self.n_errors) if np.isfinite(sse) else float("nan")
+
+    def bic_drop(self, rss_after: float, k: int) -> float:
+        return self.n * math.log(self.rss / max(rss_after, 1e-300)) - k * math.log(self.n)
+
+    def screen(self, candidate: _Candidate) -> _Screen:
+        names = candidate.names
+        moves = [candidate.typical * self.raw_norm[n] / math.sqrt(self.n_errors) for n in names]
+        nan = float("nan")
+        if max(moves) < INVISIBLE:
+            return _Screen(candidate, (), names, 0.0, 0.0, 0.0, nan, "no effect on these data")
+        columns = np.column_stack([self.E[:, self.column_of[n] - len(self.free_index)]
+                                   for n in names])
+        projected = columns - self.Q @ (self.Q.T @ columns)
+        visible = [k for k, m in enumerate(moves) if m >= INVISIBLE]
+        chosen, remaining = _pivoted(projected[:, visible], ABSORBED)
+        kept = tuple(names[visible[k]] for k in chosen)
+        held = tuple(n for n in names if n not in kept)
+        if not kept:
+            return _Screen(candidate, (), held, 0.0, 0.0, 0.0, nan, "absorbed by the geometry")
+        P = projected[:, [visible[k] for k in chosen]]
+        coefficients = np.linalg.lstsq(P, self.r_perp, rcond=None)[0]
+        after = self.r_perp - P @ coefficients
+        rss_after = float(after @ after) + float(self.rss - self.r_perp @ self.r_perp)
+        cv_after = self._cv(list(range(len(self.free_index))) + [self.column_of[n] for n in kept])
+        bic = self.bic_drop(rss_after, len(kept))
+        return _Screen(candidate, kept, held, min(remaining), 1 - rss_after / self.rss, bic,
+                       cv_after, "")
+
+    def supported(self, bic: float, cv_after: float, threshold: float) -> bool:
+        better = not np.isfinite(self.cv_before) or cv_after < self.cv_before
+        return bic > threshold and better
+
+
+# ----------------------------------------------------------------------------- the loop
+
+
+@dataclass
+class _Step:
+    candidate: _Candidate
+    kept: tuple[str, ...]
+    held: tuple[str, ...]
+    rms_before: float
+    rms_after: float
+    cv_before: float
+    cv_after: float
+    bic_drop: float
+
+
+def run(problem: Problem, geometric: Solution, identifiability: Identifiability | None = None,
+        *, method: str = "lm", loss: str = "linear", folds: int = FOLDS,
+        bic_threshold: float = BIC_THRESHOLD, max_rounds: int = MAX_ROUNDS, seed: int = 0,
+        progress: bool = True) -> Diagnosis:
+    """Diagnose the residual of ``geometric`` (a solution of ``problem``); see the module.
+
+    ``identifiability`` is accepted for the caller's convenience; the free set is
+    ``geometric.free``. ``method``/``loss`` go to ``solver.solve`` for the refits.
+    """
+    del identifiability
+    start = time.perf_counter()
+    extras = _joined_extras(problem)
+    candidates, candidate_effects = _candidates(problem, extras)
+    tested: list[CandidateTest] = []
+    steps: list[_Step] = []
+    if not candidates:
+        return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
+
+    big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
+    x = embed(problem, geometric.x, big)
+    free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
+    n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
+    fold = fold_of_entries(big, folds, seed)
+    remaining = list(candidates)
+    r, J = big.residual_and_jacobian(x)
+    rounds = 0
+    with Progress("diagnosis", total=max_rounds, force=False) as bar:
+        for rounds in range(1, max_rounds + 1):
+            if progress:
+                bar.update(rounds - 1, f"{len(steps)} effect(s) added")
+            screening = _Screening(big, r, J, free, remaining, fold, n_errors)
+            screens = [screening.screen(c) for c in remaining]
+            passing = sorted((s for s in screens if not s.decision and screening.supported(
+                s.bic_drop, s.cv_after, bic_threshold)), key=lambda s: -s.bic_drop)
+            decisions = {id(s): s.decision or "not supported" for s in screens}
+            for s in passing:
+                decisions[id(s)] = "supported, weaker than the one added"
+            numbers = {id(s): (s.rss_drop, s.bic_drop, s.cv_after) for s in screens}
+            accepted = None
+            for s in passing:
+                trial_free = free | _mask_of(big, s.kept)
+                solution = solve(big, x, trial_free, method=method, loss=loss)
+                r_new, J_new = big.residual_and_jacobian(solution.x)
+                rss_new = float(r_new @ r_new)
+                bic = screening.bic_drop(rss_new, len(s.kept))
+                after = _Screening(big, r_new, J_new, trial_free, [], fold, n_errors).cv_before
+                numbers[id(s)] = (1 - rss_new / screening.rss, bic, after)
+                if screening.supported(bic, after, bic_threshold):
+                    decisions[id(s)] = "added"
+                    accepted = (s, solution, r_new, J_new, trial_free, bic, after)
+                    break
+                decisions[id(s)] = "rejected after refit"
+            for s in screens:
+                rss_drop, bic, after = numbers[id(s)]
+                tested.append(CandidateTest(
+                    round=rounds, effect=s.candidate.effect, joints=s.candidate.joints,
+                    parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
+                    rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
+                    cv_rms_after=after, decision=decisions[id(s)]))
+            if accepted is None:
+                break
+            s, solution, r_new, J_new, trial_free, bic, after = accepted
+            steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
+                               screening.cv_before, after, bic))
+            x, r, J, free = solution.x, r_new, J_new, trial_free
+            remaining = [c for c in remaining if c is not s.candidate]
+            if not remaining:
+                break
+
+    if not steps:
+        return Diagnosis((), tuple(tested), problem, geometric, rounds,
+                         time.perf_counter() - start)
+    final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
+    findings = _findings(final, solution, steps)
+    return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
+                     time.perf_counter() - start, effects)
+
+
+def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,
+           steps: list[_Step], extras: dict, method: str, loss: str):
+    """The problem with the declared and the added effects only, solved jointly."""
+    joints: dict[tuple[str, str | None], list[int]] = {}
+    for step in steps:
+        key = (step.candidate.effect, step.candidate.column)
+        joints.setdefault(key, []).extend(step.candidate.joints)
+    added: list[Effect] = []
+    for (name, column), js in joints.items():
+        data = {column: extras[column]} if column else extras
+        added.append(make_effect(name, tuple(sorted(js)), problem.robot, data))
+    effects = tuple(problem.effects) + tuple(added)
+    final = sibling_problem(problem, effects)
+    x_final = embed(big, x, final)
+    free_final = _mask_of(final, [big.unknowns.names[i] for i in np.flatnonzero(free)])
+    solution = solve(final, x_final, free_final, method=method, loss=loss)
+    return final, solution, tuple(added)
+
+
+# ----------------------------------------------------------------------------- findings
+
+
+def _findings(problem: Problem, solution: Solution, steps: list[_Step]) -> list[EffectFinding]:
+    groups: dict[tuple[str, str | None], list[_Step]] = {}
+    for step in steps:
+        groups.setdefault((step.candidate.effect, step.candidate.column), []).append(step)
+    units = problem.robot.units
+    std = solution.std
+    findings = []
+    for (name, _), group in groups.items():
+        joints = tuple(sorted(j for s in group for j in s.candidate.joints))
+        kept = [n for s in group for n in s.kept]
+        held = [n for s in group for n in s.held]
+        values = {n: float(solution.x[problem.unknowns.index(n)]) for n in kept}
+        errors = {n: float(std[problem.unknowns.index(n)]) for n in kept}
+        first, last = group[0], group[-1]
+        evidence = {
+            "rms_drop": 1.0 - last.rms_after / first.rms_before,
+            "bic_drop": float(sum(s.bic_drop for s in group)),
+            "cv_rms_before": first.cv_before,
+            "cv_rms_after": last.cv_after,
+        }
+        effect = next(e for e in problem.effects if e.name == name
+                      and set(kept) <= set(e.parameter_names()))
+        text = _describe(name, effect, joints, values, units)
+        scale = units.length_scale
+        held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
+        summary = (f"{text}{held_text}; adding it lowers the held-out RMS from "
+                   f"{first.cv_before / scale:.3g} {units.length} to "
+                   f"{last.cv_after / scale:.3g} {units.length}")
+        findings.append(EffectFinding(name=name, joints=joints, parameters=values,
+                                      unit=effect.unit, evidence=evidence, std=errors,
+                                      summary=summary))
+    return findings
+
+
+def _joint_list(joints: Sequence[int]) -> str:
+    if len(joints) == 1:
+        return f"joint {joints[0]}"
+    return "joints " + ", ".join(str(j) for j in joints[:-1]) + f" and {joints[-1]}"
+
+
+def _describe(name: str, effect: Effect, joints, values: dict, units) -> str:
+    """One sentence of what the parameters say, in the robot file's units."""
+    if name == "joint_compliance":
+        if getattr(effect, "lumped", False):
+            return (f"{_joint_list(joints)} deflect under gravity (lumped link masses: "
+                    f"{len(values)} terms)")
+        parts = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
+        return f"{_joint_list(joints)} deflect under gravity ({parts} {effect.unit})"
+    if name == "joint_cyclic":
+        parts = []
+        for j in joints:
+            first = math.hypot(values.get(f"a1_{j}", 0.0), values.get(f"b1_{j}", 0.0))
+            second = math.hypot(values.get(f"a2_{j}", 0.0), values.get(f"b2_{j}", 0.0))
+            a = units.angle_scale
+            parts.append(f"joint {j}: {first / a:.3g} {units.angle} once and {second / a:.3g} "
+                         f"{units.angle} twice per turn")
+        return "periodic reading error, " + "; ".join(parts)
+    if name == "joint_scale":
+        parts = "; ".join(f"joint {k[1:]} turns (1 + {v:.3g}) times its reading"
+                          for k, v in values.items())
+        return f"gear-ratio error: {parts}"
+    if name == "thermal_drift":
+        (key, value), = values.items()
+        per = "K" if key == "k_T" else "s"
+        return f"link lengths grow by {value:.3g} per {per} ({key})"
+    return ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
