@@ -1,0 +1,196 @@
+"""Write a synthetic dataset (robot, dataset file, table, truth) from a true model.
+
+The true robot is the nominal one (--robot or --example) plus geometric errors
+(--errors random, or --error by name); the instrument mounted on the flange gets its own
+small error (--mounted-error); effects (--effect) act on the true robot; noise (--noise)
+is added to what is measured. DIR receives robot.yaml (nominal), dataset.yaml, the
+table (points.csv, touches.csv or scan.csv) and truth.yaml (everything that was true),
+all at once: on any error nothing is written. Joint readings in the table are what the
+controller reports; the measurements come from the true robot at the true joints.
+
+Lengths and angles on the command line are in the robot file's units (the example
+robots: industrial_6r, ur_type, prismatic_rrp in mm/deg, panda_7dof in m/rad).
+
+--rows N counts readings (tracker_points, sphere_laser) or placements of the bar or
+artifact (cross_bar: 4 touches each; artifact_touches: --sockets x --touches each).
+--noise STD: tracker_points, per measured coordinate; cross_bar and artifact_touches,
+per coordinate of the probe's seat in its socket; sphere_laser, of the laser distance.
+
+--effect NAME[:SPEC], repeatable (values in SI, joints 1-based; without values the
+typical magnitudes shown in brackets are used):
+  joint_compliance:2,3 or joint_compliance:2=1e-6,3=2e-6   c [rad/Nm]  [1e-6]
+      q_true = q_read - c g(q_read), g the gravity torque (links + payload column)
+  joint_cyclic:2 or joint_cyclic:2=a1/b1/a2/b2              [rad]  [2e-4/1e-4/1e-4/5e-5]
+      q_true = q_read + a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q
+  joint_scale:3 or joint_scale:3=5e-4                       s [1]  [5e-4]
+      q_true = (1 + s) q_read
+  thermal_drift or thermal_drift:1.2e-5                     k [1/K]  [1.2e-5]
+      every d_i, a_i of the true robot becomes L (1 + k (T - T_ref)); a drifting
+      temperature column is written (see --temperature, --reference-temperature)
+
+Example:
+  robocal simulate --example industrial_6r --kind tracker_points --rows 500 \\
+      --noise 0.01 --errors 0.5,0.05 --effect joint_compliance:2,3 --seed 1 --out sim
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import InputError
+from ..examples import ROBOTS
+from ..robot import Robot, load_robot
+from ..simulate import EFFECT_NAMES, READINGS, simulate
+from ..units import Units, parse_units
+
+DEFAULTS = {"joint_compliance": 1e-6, "joint_cyclic": (2e-4, 1e-4, 1e-4, 5e-5),
+            "joint_scale": 5e-4, "thermal_drift": 1.2e-5}
+KIND_CHOICES = ("tracker_points", "cross_bar", "artifact_touches", "sphere_laser")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--robot", metavar="ROBOT.yaml", help="nominal robot file")
+    source.add_argument("--example", choices=sorted(ROBOTS), help="a built-in example robot")
+    parser.add_argument("--kind", required=True, choices=KIND_CHOICES, help="dataset kind")
+    parser.add_argument("--rows", "--count", dest="rows", type=int, default=100, metavar="N",
+                        help="readings, or bar/artifact placements (default 100)")
+    parser.add_argument("--noise", type=float, default=0.0, metavar="STD",
+                        help="measurement noise std, robot length unit (default 0)")
+    errors = parser.add_mutually_exclusive_group()
+    errors.add_argument("--errors", metavar="LENGTH,ANGLE",
+                        help="random geometric errors: std of theta/d/a/alpha (and beta where "
+                        "the file has one) of every joint, robot file units")
+    errors.add_argument("--error", action="append", default=[], metavar="NAME=VALUE",
+                        help="an explicit geometric error by parameter name (e.g. a2=0.3), "
+                        "robot file units; repeatable")
+    parser.add_argument("--mounted-error", type=float, metavar="STD",
+                        help="std of the mounted instrument's offset from its nominal value "
+                        "(default: the --errors length std)")
+    parser.add_argument("--effect", action="append", default=[], metavar="NAME[:SPEC]",
+                        help="an effect of the true robot (see above); repeatable")
+    parser.add_argument("--payload", metavar="KG|LOW,HIGH",
+                        help="write a payload column [kg]: a constant or uniform per row")
+    parser.add_argument("--payload-com", metavar="X,Y,Z",
+                        help="payload centre of mass in the flange frame (robot length unit)")
+    parser.add_argument("--temperature", metavar="START,END",
+                        help="write a temperature column drifting from START to END [C]")
+    parser.add_argument("--reference-temperature", type=float, default=20.0, metavar="C",
+                        help="T_ref of thermal drift [C] (default 20)")
+    parser.add_argument("--readings", choices=READINGS, default="joints",
+                        help="sphere_laser: joint readings or pendant poses (default joints)")
+    parser.add_argument("--bar-length", type=float, metavar="L",
+                        help="cross_bar arm length |AC| = |BD| (default 400 mm)")
+    parser.add_argument("--socket-distance", type=float, metavar="D",
+                        help="artifact_touches: distance of neighbouring sockets (default 50 mm)")
+    parser.add_argument("--sockets", type=int, default=2,
+                        help="artifact_touches: sockets on the plate (default 2)")
+    parser.add_argument("--touches", type=int, default=5,
+                        help="artifact_touches: touches per socket and placement (default 5)")
+    parser.add_argument("--sphere-radius", type=float, metavar="R",
+                        help="sphere_laser: sphere radius (default 25 mm)")
+    parser.add_argument("--units", metavar="LENGTH,ANGLE",
+                        help="units of the dataset file and table, e.g. mm,deg (default: the "
+                        "robot file's)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+
+
+def _floats(text: str, count: int | None, option: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"expected comma-separated numbers, got {text!r}", where=option) from None
+    if count is not None and len(values) != count:
+        raise InputError(f"expected {count} numbers, got {text!r}", where=option)
+    return values
+
+
+def parse_effect_options(options: list[str], robot: Robot) -> dict:
+    """``--effect`` strings as the ``effects`` mapping of ``simulate`` (SI)."""
+    effects: dict = {}
+    for option in options:
+        name, _, spec = option.partition(":")
+        name = name.strip()
+        where = f"--effect {option}"
+        if name not in EFFECT_NAMES:
+            raise InputError(f"unknown effect {name!r}; expected one of {list(EFFECT_NAMES)}",
+                             where=where)
+        if name == "thermal_drift":
+            effects[name] = float(_floats(spec, 1, where)[0]) if spec else DEFAULTS[name]
+            continue
+        if not spec:
+            raise InputError("name the joints, e.g. joint_compliance:2,3", where=where)
+        entries = effects.setdefault(name, {})
+        for item in spec.split(","):
+            joint_text, _, value_text = item.partition("=")
+            try:
+                joint = int(joint_text)
+            except ValueError:
+                raise InputError(f"expected a joint number, got {joint_text!r}",
+                                 where=where) from None
+            if not 1 <= joint <= robot.dof:
+                raise InputError(f"joint {joint} out of range 1..{robot.dof}", where=where)
+            if not value_text:
+                entries[joint] = DEFAULTS[name]
+            elif name == "joint_cyclic":
+                entries[joint] = tuple(_floats(value_text.replace("/", ","), 4, where))
+            else:
+                entries[joint] = _floats(value_text, 1, where)[0]
+    return effects
+
+
+def run(args: argparse.Namespace) -> int:
+    robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
+    L, A = robot.units.length_scale, robot.units.angle_scale
+    geometric_errors = None
+    mounted_error = None if args.mounted_error is None else args.mounted_error * L
+    if args.errors:
+        length_std, angle_std = _floats(args.errors, 2, "--errors")
+        geometric_errors = (length_std * L, angle_std * A)
+    elif args.error:
+        registry = robot.parameters()
+        geometric_errors = {}
+        for item in args.error:
+            name, _, value = item.partition("=")
+            name = name.strip()
+            if name not in registry:
+                raise InputError(f"unknown parameter {name!r}; valid names: "
+                                 f"{', '.join(registry.names)}", where=f"--error {item}")
+            number = _floats(value, 1, f"--error {item}")[0]
+            geometric_errors[name] = number * robot.units.scale(registry.quantity(name))
+    payload = None
+    if args.payload:
+        values = _floats(args.payload, None, "--payload")
+        if len(values) not in (1, 2) or min(values) < 0:
+            raise InputError(f"expected KG or LOW,HIGH (non-negative), got {args.payload!r}",
+                             where="--payload")
+        payload = values[0] if len(values) == 1 else (values[0], values[1])
+    payload_com = None
+    if args.payload_com:
+        payload_com = [v * L for v in _floats(args.payload_com, 3, "--payload-com")]
+    temperature = None
+    if args.temperature:
+        start, end = _floats(args.temperature, 2, "--temperature")
+        temperature = (start, end)
+    units = None
+    if args.units:
+        length, _, angle = args.units.partition(",")
+        units = parse_units({"length": length.strip(), "angle": angle.strip()}, file=None,
+                            key="--units")
+    options = {}
+    for key, default in (("bar_length", 0.4), ("socket_distance", 0.05),
+                         ("sphere_radius", 0.025)):
+        value = getattr(args, key)
+        options[key] = default if value is None else value * L
+    result = simulate(
+        robot, args.kind, out_dir=Path(args.out), rows=args.rows, noise=args.noise * L,
+        geometric_errors=geometric_errors, effects=parse_effect_options(args.effect, robot),
+        seed=args.seed, units=units if isinstance(units, Units) else None,
+        mounted_error=mounted_error, payload=payload, payload_com=payload_com,
+        temperature=temperature, reference_temperature=args.reference_temperature,
+        readings=args.readings, sockets=args.sockets, touches=args.touches, **options)
+    print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
+          f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
+    return 0
