@@ -488,6 +488,7 @@ def check_identifiable(singular_values: np.ndarray, vectors: np.ndarray,
     weak = np.flatnonzero(s < ratio * s[0])
     if weak.size == 0:
         return
+    shown = ", ".join(f"{x:.3g}" for x in s)
     origin_part = vectors[0:3, weak]
     v = vectors[:, weak[-1]]
     d_origin, d_centre = v[0:3], v[5:8]

@@ -94,6 +94,31 @@ class SphereLaserModel(MeasurementModel):
             beam = self._scan.beams(direction)
         return sphere_centre(hit.T, self.dataset.radius, beam=beam.T)
 
+    def consistent_dataset(self, kinematics, p, mounted, placement):
+        """The dataset with every distance replaced by where the beam meets the sphere.
+
+        For the robot ``p`` [SI], laser ``mounted`` and centre ``placement`` [m], reading
+        ``i``'s beam ``T_i p0 + l R_i n`` meets the sphere at the root ``l`` of
+        ``|w + l d|^2 = R^2`` (``w = T_i p0 - c``, ``d = R_i n``) nearest the measured
+        distance; a beam that misses takes its closest approach.
+        """
+        from dataclasses import replace
+
+        origin, direction = laser_of(mounted)
+        scan = self._scan
+        if scan is None:
+            poses = kinematics.flange_poses(self.dataset.joints, p)
+            scan = Scan.from_poses(poses, self.dataset.distance, self.dataset.radius)
+        w = scan.points(origin, direction) - scan.distance * scan.beams(direction) \
+            - np.asarray(placement, float)[:3, None]
+        d = scan.beams(direction)
+        along = np.sum(d * w, axis=0)
+        root = np.sqrt(np.maximum(along ** 2 - np.sum(w * w, axis=0) + scan.radius ** 2, 0.0))
+        near, far = -along - root, -along + root
+        distance = np.where(np.abs(near - scan.distance) <= np.abs(far - scan.distance),
+                            near, far)
+        return replace(self.dataset, distance=distance)
+
     # ------------------------------------------------------------------ residuals
 
     def residual_size(self) -> int:

@@ -1,0 +1,425 @@
+"""Point laser and sphere: the sensor-only fit, its identifiability check, the measurement
+model, dataset checks, and robot plus sensor through ``calibrate``.
+
+The truths are synthesised here with plain numpy (rotations by Rodrigues, standard DH by
+hand, ray-sphere intersection), independently of the code under test.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+import yaml
+
+from robocal_casadi import examples
+from robocal_casadi.datasets import load_dataset
+from robocal_casadi.errors import InputError
+from robocal_casadi.measurement import MODELS
+from robocal_casadi.measurement.sphere_laser import SphereLaserModel
+from robocal_casadi.robot import save_robot
+from robocal_casadi.sphere_fit import (Scan, algebraic_start, fit_dataset, fit_sensor,
+                                       surface_residuals, tangent_basis)
+
+# The patent's example: [x0, y0, z0, nx, ny, xc, yc, zc] in mm (nx, ny unitless).
+PATENT = np.array([61.236, -15.643, 139.778, 0.016, 0.020, -119.193, -305.573, 106.620])
+RADIUS = 0.025  # [m], our choice of sphere
+NOISE = 0.01e-3  # [m], laser distance noise (standard deviation)
+
+
+def patent_truth() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``p0`` [m], unit ``n``, ``c`` [m] of the patent's example (``nz > 0``)."""
+    nx, ny = PATENT[3], PATENT[4]
+    n = np.array([nx, ny, math.sqrt(1.0 - nx * nx - ny * ny)])
+    return PATENT[0:3] * 1e-3, n, PATENT[5:8] * 1e-3
+
+
+# ----------------------------------------------------------------------------- plain numpy truth
+
+
+def rodrigues(axis, angle: float) -> np.ndarray:
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def rotation_taking(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation with ``R a = b`` (unit vectors)."""
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        return rodrigues(np.cross(a, np.eye(3)[np.argmin(np.abs(a))]), math.pi)
+    return rodrigues(axis, math.atan2(s, c))
+
+
+def tilting_scan(rng, count: int, origin, direction, centre, *, radius: float = RADIUS,
+                 noise: float = NOISE, max_tilt_deg: float = 30.0, spin_deg: float = 90.0,
+                 translate_only: bool = False, beam_axis=(0.0, 0.0, -1.0)):
+    """Flange poses (N x 4 x 4) [m], noisy distances (N,) [m] and ``cos`` of incidence.
+
+    The beam (base frame) tilts up to ``max_tilt_deg`` about ``beam_axis`` and spins up
+    to ``spin_deg`` about itself; it hits the sphere within 40 deg of the point facing it;
+    the raw distance lies in [-20, 20] mm about the laser reference point.
+    """
+    beam_axis = np.asarray(beam_axis, float) / np.linalg.norm(beam_axis)
+    lift = rotation_taking(np.array([0.0, 0.0, -1.0]), beam_axis)
+    fixed = rotation_taking(direction, beam_axis)
+    poses = np.tile(np.eye(4), (count, 1, 1))
+    distance, incidence = np.empty(count), np.empty(count)
+    for i in range(count):
+        if translate_only:
+            R = fixed
+        else:
+            tilt = math.radians(max_tilt_deg) * math.sqrt(rng.uniform())
+            azimuth = rng.uniform(0, 2 * math.pi)
+            local = np.array([math.sin(tilt) * math.cos(azimuth),
+                              math.sin(tilt) * math.sin(azimuth), -math.cos(tilt)])
+            d = lift @ local
+            R = rodrigues(d, math.radians(rng.uniform(-spin_deg, spin_deg))) \
+                @ rotation_taking(direction, d)
+        d = R @ direction
+        while True:  # the hit point's outward normal, facing the beam
+            m = rng.normal(size=3)
+            m /= np.linalg.norm(m)
+            if -m @ d > math.cos(math.radians(40.0)):
+                break
+        surface = centre + radius * m
+        length = rng.uniform(-0.02, 0.02)
+        reference = surface - length * d
+        poses[i, :3, :3] = R
+        poses[i, :3, 3] = reference - R @ origin
+        distance[i], incidence[i] = length, d @ m
+    return poses, distance + rng.normal(0.0, noise, count), incidence
+
+
+def noise_floor(incidence: np.ndarray, noise: float = NOISE, unknowns: int = 8) -> float:
+    """Expected residual RMS [m]: distance noise seen along the surface normal."""
+    count = len(incidence)
+    return noise * math.sqrt(np.mean(incidence ** 2) * (count - unknowns) / count)
+
+
+def quaternion_wxyz(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return np.array([w, x, y, z])
+
+
+def write_pendant_dataset(folder: Path, poses, distance, *, radius=RADIUS, extra_rows=None,
+                          laser=None) -> Path:
+    """A sphere_laser dataset (mm, deg) with pendant poses; ``extra_rows`` edit cells."""
+    folder.mkdir(parents=True, exist_ok=True)
+    save_robot(examples.industrial_6r(), folder / "robot.yaml")
+    rows = []
+    for T, length in zip(poses, distance):
+        q = quaternion_wxyz(T[:3, :3])
+        rows.append([repr(float(v)) for v in (*(T[:3, 3] * 1e3), *q, length * 1e3)])
+    for index, column, text in extra_rows or ():
+        rows[index][column] = text
+    lines = ["x,y,z,qw,qx,qy,qz,distance"] + [",".join(r) for r in rows]
+    (folder / "scan.csv").write_text("\n".join(lines) + "\n")
+    content = {"kind": "sphere_laser", "robot": "robot.yaml",
+               "units": {"length": "mm", "angle": "deg"}, "sphere": {"radius": radius * 1e3},
+               "data": "scan.csv"}
+    if laser:
+        content["laser"] = laser
+    (folder / "scan.yaml").write_text(yaml.safe_dump(content))
+    return folder / "scan.yaml"
+
+
+# ----------------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope="module")
+def patent_scan():
+    rng = np.random.default_rng(0)
+    p0, n, c = patent_truth()
+    poses, distance, incidence = tilting_scan(rng, 820, p0, n, c)
+    return poses, distance, incidence
+
+
+# ----------------------------------------------------------------------------- residual and Jacobian
+
+
+def test_residuals_match_a_plain_loop(patent_scan):
+    poses, distance, _ = patent_scan
+    p0, n, c = patent_truth()
+    expected = [np.linalg.norm(T[:3, :3] @ (p0 + l * n) + T[:3, 3] - c) - RADIUS
+                for T, l in zip(poses[:50], distance[:50])]
+    got = surface_residuals(poses[:50], distance[:50], RADIUS, p0, n, c)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("direction", [(0, 0, 1), (1, 0, 0), (0, -1, 0), (0.3, -0.5, -0.8)])
+def test_jacobian_matches_finite_differences(patent_scan, direction):
+    poses, distance, _ = patent_scan
+    poses, distance = poses[:40], distance[:40]
+    n = np.asarray(direction, float) / np.linalg.norm(direction)
+    p0, c = np.array([0.05, -0.02, 0.13]), np.array([-0.1, -0.3, 0.1])
+    E = tangent_basis(n)
+    scan = Scan.from_poses(poses, distance, RADIUS)
+    _, J = scan.residual_and_jacobian(p0, n, c, E)
+
+    def residual(delta):
+        moved = n + E @ delta[3:5]
+        return surface_residuals(poses, distance, RADIUS, p0 + delta[0:3],
+                                 moved / np.linalg.norm(moved), c + delta[5:8])
+
+    h = 1e-6
+    numeric = np.column_stack([(residual(h * e) - residual(-h * e)) / (2 * h) for e in np.eye(8)])
+    np.testing.assert_allclose(J, numeric, rtol=0, atol=1e-8)
+
+
+def test_tangent_basis_is_orthonormal_for_any_direction():
+    rng = np.random.default_rng(3)
+    for n in [*np.eye(3), *(-np.eye(3)), *rng.normal(size=(20, 3))]:
+        n = n / np.linalg.norm(n)
+        frame = np.column_stack([tangent_basis(n), n])
+        np.testing.assert_allclose(frame.T @ frame, np.eye(3), atol=1e-14)
+        assert np.linalg.det(frame) == pytest.approx(1.0)
+
+
+def test_algebraic_start_is_exact_without_noise():
+    rng = np.random.default_rng(5)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 200, p0, n, c, noise=0.0)
+    origin, direction, centre = algebraic_start(Scan.from_poses(poses, distance, RADIUS))
+    np.testing.assert_allclose(origin, p0, atol=1e-9)
+    np.testing.assert_allclose(direction, n, atol=1e-9)
+    np.testing.assert_allclose(centre, c, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- the patent's case
+
+
+@pytest.mark.parametrize("method", ["lm", "ipopt"])
+def test_patent_case_recovered_within_three_std(patent_scan, method):
+    poses, distance, incidence = patent_scan
+    p0, n, c = patent_truth()
+    fit = fit_sensor(poses, distance, RADIUS, method=method)
+    truth = np.concatenate([p0, n, c])
+    estimate = np.concatenate([fit.origin, fit.direction, fit.centre])
+    std = np.concatenate([fit.origin_std, fit.direction_std, fit.centre_std])
+    assert np.all(np.abs(estimate - truth) <= 3 * std), (estimate - truth) / std
+    assert np.all(std[[0, 1, 2, 6, 7, 8]] < 5e-6)  # a few micrometres: the data do pin it
+    floor = noise_floor(incidence)
+    assert abs(fit.residual_rms - floor) <= 0.1 * floor
+    assert np.linalg.norm(fit.direction) == pytest.approx(1.0, abs=1e-14)
+    assert fit.patent_vector().shape == (8,)
+    assert fit.status in ("converged", "Solve_Succeeded", "Solved_To_Acceptable_Level",
+                          "Search_Direction_Becomes_Too_Small")
+
+
+def test_lm_and_ipopt_reach_the_same_minimum(patent_scan):
+    poses, distance, _ = patent_scan
+    lm = fit_sensor(poses, distance, RADIUS, method="lm")
+    ipopt = fit_sensor(poses, distance, RADIUS, method="ipopt")
+    np.testing.assert_allclose(lm.origin, ipopt.origin, atol=1e-9)
+    np.testing.assert_allclose(lm.direction, ipopt.direction, atol=1e-8)
+    np.testing.assert_allclose(lm.centre, ipopt.centre, atol=1e-9)
+
+
+def test_covariance_matches_the_spread_over_repeated_scans():
+    """The reported std is the scatter of the estimate over independent noise draws."""
+    p0, n, c = patent_truth()
+    rng = np.random.default_rng(11)
+    poses, clean, _ = tilting_scan(rng, 300, p0, n, c, noise=0.0)
+    estimates, stds = [], []
+    for _ in range(40):
+        fit = fit_sensor(poses, clean + rng.normal(0, NOISE, len(clean)), RADIUS,
+                         direction_guess=[0, 0, 1])
+        estimates.append(np.concatenate([fit.origin, fit.centre]))
+        stds.append(np.concatenate([fit.origin_std, fit.centre_std]))
+    ratio = np.std(estimates, axis=0) / np.mean(stds, axis=0)
+    assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
+
+
+def test_sensor_fit_repr_reads_in_millimetres(patent_scan):
+    poses, distance, _ = patent_scan
+    text = repr(fit_sensor(poses, distance, RADIUS))
+    assert text.startswith("SensorFit(origin=[61.2")
+    assert "mm" in text and "residual_rms=" in text and "status=" in text
+
+
+# ----------------------------------------------------------------------------- any direction, no guess
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_any_beam_direction_without_guesses(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = [*np.eye(3), *(-np.eye(3))][seed] if seed < 6 else rng.normal(size=3)
+    n = n / np.linalg.norm(n)
+    p0, c = rng.uniform(-0.2, 0.2, 3), rng.uniform(-0.8, 0.8, 3)
+    radius = rng.uniform(0.01, 0.1)
+    poses, distance, _ = tilting_scan(rng, 300, p0, n, c, radius=radius,
+                                      beam_axis=rng.normal(size=3))
+    fit = fit_sensor(poses, distance, radius)
+    truth = np.concatenate([p0, n, c])
+    estimate = np.concatenate([fit.origin, fit.direction, fit.centre])
+    std = np.concatenate([fit.origin_std, fit.direction_std, fit.centre_std])
+    assert np.all(np.abs(estimate - truth) <= 4 * std + 1e-12), (estimate - truth) / std
+
+
+def test_a_wrong_guess_does_not_mislead():
+    rng = np.random.default_rng(7)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 200, p0, n, c)
+    fit = fit_sensor(poses, distance, RADIUS, direction_guess=[0, 0, -1],
+                     origin_guess=[0.0, 0.0, 0.0], centre_guess=[0.5, 0.5, 0.5])
+    np.testing.assert_allclose(fit.origin, p0, atol=2e-5)
+    np.testing.assert_allclose(fit.centre, c, atol=2e-5)
+
+
+# ----------------------------------------------------------------------------- identifiability
+
+
+@pytest.mark.parametrize("method", ["lm", "ipopt"])
+def test_pure_translation_scan_is_refused_with_the_numbers(method):
+    rng = np.random.default_rng(1)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 820, p0, n, c, translate_only=True)
+    with pytest.raises(InputError) as caught:
+        fit_sensor(poses, distance, RADIUS, method=method)
+    message = str(caught.value)
+    assert "\n" not in message
+    assert "does not separate the laser origin from the sphere centre" in message
+    assert "3 of 8 singular values" in message and "pure translation" in message
+    assert "p0 + d and c + R*d fit equally" in message
+
+
+def test_spin_about_the_beam_only_leaves_p0_along_n_free():
+    rng = np.random.default_rng(2)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 300, p0, n, c, max_tilt_deg=0.0, spin_deg=180.0)
+    with pytest.raises(InputError) as caught:
+        fit_sensor(poses, distance, RADIUS)
+    message = str(caught.value)
+    assert "1 of 8 singular values" in message
+    assert "p0 + t*d and c + t*R*d fit equally" in message and "the beam direction n" in message
+    numbers = message.split("d = [")[1].split("]")[0]
+    d = np.array([float(v) for v in numbers.split(",")])
+    assert abs(abs(d @ n) - 1.0) < 1e-3
+
+
+def test_a_little_tilt_is_enough_and_shows_in_the_std():
+    rng = np.random.default_rng(2)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 300, p0, n, c, max_tilt_deg=2.0, spin_deg=180.0)
+    fit = fit_sensor(poses, distance, RADIUS)
+    wide = fit_sensor(*tilting_scan(rng, 300, p0, n, c)[:2], RADIUS)
+    assert fit.origin_std[2] > 5 * wide.origin_std[2]  # p0 along the beam is the weak one
+    assert abs(fit.origin[2] - p0[2]) <= 3 * fit.origin_std[2]
+
+
+def test_too_few_readings_and_bad_arrays_are_input_errors():
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(np.random.default_rng(0), 7, p0, n, c)
+    with pytest.raises(InputError, match="7 readings cannot determine"):
+        fit_sensor(poses, distance, RADIUS)
+    poses, distance, _ = tilting_scan(np.random.default_rng(0), 20, p0, n, c)
+    distance[3] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        fit_sensor(poses, distance, RADIUS)
+    with pytest.raises(InputError, match="radius must be positive"):
+        fit_sensor(poses, np.zeros(20), -1.0)
+
+
+# ----------------------------------------------------------------------------- dataset files
+
+
+def test_pendant_dataset_fit_and_model(tmp_path, patent_scan):
+    poses, distance, _ = patent_scan
+    path = write_pendant_dataset(tmp_path, poses, distance)
+    dataset = load_dataset(path)
+    p0, n, c = patent_truth()
+    fit = fit_dataset(dataset)
+    np.testing.assert_allclose(fit.origin, p0, atol=5 * fit.origin_std.max())
+
+    model = MODELS["sphere_laser"](dataset, "scan")
+    assert isinstance(model, SphereLaserModel) and not model.uses_robot
+    assert model.mounted.names == ("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny",
+                                   "laser_nz")
+    assert model.placement.names == ("scan/sphere_x", "scan/sphere_y", "scan/sphere_z")
+    mounted = model.initial_mounted()
+    np.testing.assert_allclose(mounted, np.concatenate([fit.origin, fit.direction]))
+
+    def no_robot(offsets):
+        raise AssertionError("pendant data must not ask the robot for points")
+
+    centre = model.initial_placement(no_robot, mounted)
+    np.testing.assert_allclose(centre, fit.centre, atol=1e-7)
+
+    # the CasADi residual against plain numpy, and the gauge row
+    x = ca.MX.sym("x", 9)
+    r = ca.Function("r", [x], [model.residual(no_robot, x[0:6], x[6:9])])
+    v = 1.5 * n  # a non-unit v: the model normalises, the gauge row reports |v| - 1
+    values = np.asarray(r(np.concatenate([p0, v, c]))).ravel()
+    assert len(values) == model.residual_size() == len(distance) + 1
+    np.testing.assert_allclose(values[:-1], surface_residuals(poses, distance, RADIUS, p0, n, c),
+                               atol=1e-12)
+    assert values[-1] == pytest.approx(0.5)
+    np.testing.assert_allclose(model.errors(values), np.abs(values[:-1]))
+    np.testing.assert_array_equal(model.error_rows(), np.arange(len(distance)))
+
+
+def test_consistent_dataset_puts_every_point_on_the_sphere(tmp_path, patent_scan):
+    poses, distance, _ = patent_scan
+    dataset = load_dataset(write_pendant_dataset(tmp_path, poses[:100], distance[:100]))
+    model = SphereLaserModel(dataset, "scan")
+    p0, n, c = patent_truth()
+    consistent = model.consistent_dataset(None, None, np.concatenate([p0, n]), c)
+    residual = surface_residuals(poses[:100], consistent.distance, RADIUS, p0, n, c)
+    assert np.max(np.abs(residual)) < 1e-12
+    assert np.max(np.abs(consistent.distance - distance[:100])) < 10 * NOISE
+
+
+def test_degenerate_pendant_file_names_the_table(tmp_path):
+    rng = np.random.default_rng(1)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 100, p0, n, c, translate_only=True)
+    dataset = load_dataset(write_pendant_dataset(tmp_path, poses, distance))
+    with pytest.raises(InputError) as caught:
+        SphereLaserModel(dataset, "scan").initial_mounted()
+    assert str(caught.value).startswith(str(tmp_path / "scan.csv") + ": scan: the scan does not")
+
+
+@pytest.mark.parametrize("column, text, expected", [
+    (7, "", "line 5: column 'distance': expected a number, got ''"),
+    (7, "nan", "line 5: column 'distance': expected a finite number, got 'nan'"),
+    (3, "nan", "line 5: column 'qw': expected a finite number, got 'nan'"),
+    (4, "0.5", "line 5: quaternion (qw, qx, qy, qz) has norm"),
+])
+def test_bad_rows_are_refused_by_name(tmp_path, patent_scan, column, text, expected):
+    poses, distance, _ = patent_scan
+    path = write_pendant_dataset(tmp_path, poses[:20], distance[:20],
+                                 extra_rows=[(3, column, text)])
+    with pytest.raises(InputError) as caught:
+        load_dataset(path)
+    assert "scan.csv" in str(caught.value) and expected in str(caught.value)
+
+
+def test_quaternion_off_unit_by_more_than_1e_6_is_refused(tmp_path, patent_scan):
+    poses, distance, _ = patent_scan
+    path = write_pendant_dataset(tmp_path, poses[:20], distance[:20])
+    lines = (tmp_path / "scan.csv").read_text().splitlines()
+    cells = lines[6].split(",")
+    for k in range(3, 7):  # the quaternion scaled: its norm is 1 + 2e-6
+        cells[k] = repr(float(cells[k]) * (1 + 2e-6))
+    lines[6] = ",".join(cells)
+    (tmp_path / "scan.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 7: quaternion"):
+        load_dataset(path)
+
+
+def test_missing_distance_column_is_named(tmp_path, patent_scan):
+    poses, distance, _ = patent_scan
+    path = write_pendant_dataset(tmp_path, poses[:20], distance[:20])
+    lines = (tmp_path / "scan.csv").read_text().splitlines()
+    (tmp_path / "scan.csv").write_text("\n".join(line.rsplit(",", 1)[0] for line in lines))
+    with pytest.raises(InputError, match="scan.csv: missing column 'distance'"):
+        load_dataset(path)
