@@ -1,4 +1,4 @@
-"""Compiling CasADi functions to machine code, once, with the system C compiler.
+"""Compiling CasADi functions to machine code, once, and evaluating them over batches.
 
 ``compiled(function)`` generates C for ``function``, compiles it with
 ``cc -O2 -shared -fPIC`` into a cache folder and loads it with ``casadi.external``. The
@@ -10,6 +10,12 @@ compiler: ``$CC`` if set, else ``cc``, else ``gcc``.
 Where no compiler is found or compilation fails, the interpreted function is returned
 unchanged and a warning says why (once per reason), so callers never depend on a
 compiler being present.
+
+``BatchFunction`` evaluates a function over many rows (e.g. joint readings) that share
+the other inputs (e.g. the parameter vector): whatever depends on the shared inputs
+alone (sines and cosines of DH angles, base and tool rotations, ...) is computed once
+per chunk of rows, the rest in a compiled loop, reading and writing numpy arrays in
+place.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ import warnings
 from pathlib import Path
 
 import casadi as ca
+import numpy as np
 
 FLAGS = ("-O2", "-shared", "-fPIC")
 _warned: set[str] = set()
@@ -117,3 +124,114 @@ def _compile(cc: str, source: str, library: Path) -> None:
 def _short(error: BaseException) -> str:
     text = " ".join(str(error).split())
     return text if len(text) < 300 else text[:297] + "..."
+
+
+# ----------------------------------------------------------------------------- batches
+
+
+def hoisted_map(function: ca.Function, count: int, per_row: tuple[str, ...] = ("q",)) -> ca.Function:
+    """``function`` over ``count`` rows, its shared-only subexpressions computed once.
+
+    Inputs named in ``per_row`` take ``count`` columns (one per row); the others are
+    shared by all rows and given once. Outputs are dense, the rows side by side
+    (``rows x (columns * count)``). Built from an SX ``function`` with CasADi's
+    ``extract_parametric``; the result is an MX function ready for ``compiled``.
+    """
+    names = function.name_in()
+    unknown = set(per_row) - set(names)
+    if unknown:
+        raise ValueError(f"{function.name()!r} has no input(s) {sorted(unknown)}; inputs: {names}")
+    symbols = function.sx_in()
+    shared = [x for x, n in zip(symbols, names) if n not in per_row]
+    varying = [x for x, n in zip(symbols, names) if n in per_row]
+    outputs = [ca.densify(y) for y in function.call(symbols)]
+    core_outputs, extracted, parametric = ca.extract_parametric(outputs, shared)
+    constants = ca.vertcat(*extracted) if extracted else ca.SX(0, 1)
+    prepare = ca.Function(f"{function.name()}_shared", shared,
+                          [ca.vertcat(*parametric) if extracted else ca.SX(0, 1)])
+    core = ca.Function(f"{function.name()}_row", [*varying, constants, *shared], core_outputs)
+    reduced = list(range(len(varying), len(varying) + 1 + len(shared)))
+    loop = core.map(f"{function.name()}_rows", "serial", count, reduced, [])
+    inputs = [ca.MX.sym(n, x.size1(), x.size2() * (count if n in per_row else 1))
+              for x, n in zip(symbols, names)]
+    shared_inputs = [x for x, n in zip(inputs, names) if n not in per_row]
+    results = loop(*[x for x, n in zip(inputs, names) if n in per_row],
+                   prepare(*shared_inputs), *shared_inputs)
+    results = results if isinstance(results, (list, tuple)) else [results]
+    return ca.Function(f"{function.name()}_batch{count}", inputs, list(results), names,
+                       function.name_out())
+
+
+class BatchFunction:
+    """``function`` evaluated over N rows, compiled, reading and writing numpy arrays.
+
+    ``batch(*inputs)``: an input named in ``per_row`` is an ``N x size`` array (row k for
+    row k; e.g. ``Q`` N x dof), the others are given once (e.g. ``p``). Returns one
+    array per output, shaped ``N x rows`` for column outputs and ``N x rows x columns``
+    otherwise. Rows go through in chunks of ``chunk`` (the compiled size; a shorter last
+    chunk is padded). Not thread-safe: one instance holds one set of work buffers.
+    """
+
+    def __init__(self, function: ca.Function, per_row: tuple[str, ...] = ("q",),
+                 chunk: int = 256, compile: bool = True):
+        self.name = function.name()
+        self.chunk = chunk
+        batched = hoisted_map(function, chunk, per_row)
+        self.function = compiled(batched) if compile else batched
+        self.per_row = tuple(n in per_row for n in function.name_in())
+        self.in_shapes = [(function.size1_in(i), function.size2_in(i))
+                          for i in range(function.n_in())]
+        self.out_shapes = [(function.size1_out(i), function.size2_out(i))
+                           for i in range(function.n_out())]
+        self._buffer, self._evaluate = self.function.buffer()
+        self._alive: tuple = ()
+
+    def __repr__(self) -> str:
+        kind = "compiled" if self.function.is_a("External") else "interpreted"
+        return f"BatchFunction({self.name!r}, {kind}, chunk={self.chunk})"
+
+    def __call__(self, *inputs) -> tuple[np.ndarray, ...]:
+        if len(inputs) != len(self.in_shapes):
+            raise ValueError(f"{self.name}: expected {len(self.in_shapes)} inputs, got {len(inputs)}")
+        arrays, count = [], None
+        for value, (rows, columns), varying in zip(inputs, self.in_shapes, self.per_row):
+            value = np.asarray(value, dtype=float)
+            if varying:
+                value = np.ascontiguousarray(value.reshape(len(value), rows * columns) if
+                                             value.ndim > 1 else value.reshape(-1, rows * columns))
+                count = len(value) if count is None else count
+                if len(value) != count:
+                    raise ValueError(f"{self.name}: per-row inputs have different row counts")
+            else:
+                # Column-major, as CasADi stores matrices.
+                value = np.ascontiguousarray(value.reshape(rows, columns).T).ravel()
+            arrays.append(value)
+        count = count or 0
+        outputs = [np.empty((count, columns, rows)) for rows, columns in self.out_shapes]
+        scratch_in = scratch_out = None
+        for start in range(0, count, self.chunk):
+            stop = min(start + self.chunk, count)
+            full = stop - start == self.chunk
+            if not full:
+                scratch_in = [np.zeros((self.chunk, a.shape[1])) if v else a
+                              for a, v in zip(arrays, self.per_row)]
+                for s_, a, v in zip(scratch_in, arrays, self.per_row):
+                    if v:
+                        s_[: stop - start] = a[start:stop]
+                scratch_out = [np.empty((self.chunk,) + o.shape[1:]) for o in outputs]
+            for i, (a, v) in enumerate(zip(arrays, self.per_row)):
+                source = (a[start:stop] if full else scratch_in[i]) if v else a
+                self._buffer.set_arg(i, memoryview(source))
+            for i, o in enumerate(outputs):
+                self._buffer.set_res(i, memoryview(o[start:stop] if full else scratch_out[i]))
+            self._evaluate()
+            if not full:
+                for o, s_ in zip(outputs, scratch_out):
+                    o[start:stop] = s_[: stop - start]
+        # The buffer keeps raw pointers: hold what they point to until the next call.
+        self._alive = (arrays, outputs, scratch_in, scratch_out)
+        # Each row's block is stored column-major: swap to rows x columns.
+        shaped = []
+        for o, (rows, columns) in zip(outputs, self.out_shapes):
+            shaped.append(o[:, 0, :] if columns == 1 else o.transpose(0, 2, 1))
+        return tuple(shaped)

@@ -165,6 +165,21 @@ class Kinematics:
             cache[name] = compiled(renamed)
         return cache[name]
 
+    def batch(self, name: str, chunk: int = 256):
+        """The function ``name`` over many joint readings, compiled: a ``codegen.BatchFunction``.
+
+        ``kinematics.batch("point_jacobians")(Q, p, offset)`` with ``Q`` (N x dof) returns
+        numpy arrays with one row per reading (here ``p_world`` N x 3, ``J_p`` N x 3 x
+        n_p, ...); ``p`` and the other inputs are shared by all rows, and what depends on
+        them alone is computed once per chunk. Built once per (name, chunk) and cached.
+        """
+        cache = self.__dict__.setdefault("_batches", {})
+        if (name, chunk) not in cache:
+            from .codegen import BatchFunction
+
+            cache[name, chunk] = BatchFunction(getattr(self, name), ("q",), chunk)
+        return cache[name, chunk]
+
     # ------------------------------------------------------------------ numeric helpers
 
     def mapped(self, function: ca.Function, count: int) -> ca.Function:
