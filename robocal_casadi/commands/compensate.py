@@ -1,0 +1,122 @@
+"""Joint commands that put the calibrated robot's tool on Cartesian targets.
+
+ROBOT is a robot file or a calibration folder (a result of `robocal calibrate`, whose
+robot_calibrated.yaml is used). TARGETS.csv has columns x,y,z (tool position) and
+optionally qw,qx,qy,qz (tool orientation), in ROBOT's length unit and world frame; other
+columns are copied through. JOINTS.csv gets those columns, then q1..qn (ROBOT's units),
+status (ok or unreachable: no joints within the limits reach the target; its joint
+cells are left empty), position_error and, with orientations, orientation_error (the
+residual of the solve, ROBOT's units).
+
+Position-only targets leave the tool orientation free; each solve starts from the
+previous solution, so a path of targets gives a smooth joint path. Only the calibrated
+geometry is used: effects listed in the folder's result.json are not applied.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..compensation import compensate
+from ..errors import InputError
+from ..output import atomic_file
+from ..robot import Robot, load_robot
+from ..table import read_table, write_table
+
+CALIBRATED_ROBOT = "robot_calibrated.yaml"
+POSITION = ("x", "y", "z")
+QUATERNION = ("qw", "qx", "qy", "qz")
+QUATERNION_TOLERANCE = 1e-6
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("robot", metavar="ROBOT_OR_CALIBRATED_DIR",
+                        help="robot file, or a calibration folder with robot_calibrated.yaml")
+    parser.add_argument("targets", metavar="TARGETS.csv",
+                        help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame)")
+    parser.add_argument("--out", metavar="JOINTS.csv", required=True,
+                        help="output table: extra input columns, q1..qn, status, errors")
+    parser.add_argument("--start", metavar="Q1,...,QN",
+                        help="joints to start the first solve from (robot units; default the "
+                        "middle of the limits)")
+    parser.add_argument("--restarts", type=int, default=10,
+                        help="random starts per target before it is unreachable (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random starts")
+
+
+def robot_of(argument: str) -> Robot:
+    """The robot file, or a calibration folder's robot_calibrated.yaml."""
+    path = Path(argument)
+    if path.is_dir():
+        calibrated = path / CALIBRATED_ROBOT
+        if not calibrated.is_file():
+            raise InputError(f"no {CALIBRATED_ROBOT} in the calibration folder", file=path)
+        return load_robot(calibrated)
+    if not path.exists():
+        raise InputError("robot file or calibration folder not found", file=path)
+    return load_robot(path)
+
+
+def run(args: argparse.Namespace) -> int:
+    robot = robot_of(args.robot)
+    table = read_table(args.targets, required=POSITION)
+    L, A = robot.units.length_scale, robot.units.angle_scale
+    has_orientation = [c for c in QUATERNION if table.has(c)]
+    if has_orientation and len(has_orientation) != 4:
+        missing = [c for c in QUATERNION if not table.has(c)]
+        raise InputError(f"orientation columns need all of {list(QUATERNION)}; missing "
+                         f"{missing}", file=table.path)
+    columns = POSITION + (QUATERNION if has_orientation else ())
+    targets = np.column_stack([table.numbers(c) for c in columns])
+    targets[:, :3] *= L
+    if has_orientation:
+        norms = np.linalg.norm(targets[:, 3:], axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_TOLERANCE)
+        if bad.size:
+            row = int(bad[0])
+            raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 "
+                             f"within {QUATERNION_TOLERANCE:g}", file=table.path,
+                             where=f"line {table.line(row)}")
+    joint_names = [f"q{i}" for i in range(1, robot.dof + 1)]
+    extras = [c for c in table.columns if c not in columns]
+    clashes = [c for c in extras if c in joint_names or c in ("status", "position_error",
+                                                              "orientation_error")]
+    if clashes:
+        raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path)
+    scales = robot.reading_scales()
+    start = None
+    if args.start:
+        try:
+            start = np.array([float(v) for v in args.start.split(",")])
+        except ValueError:
+            raise InputError(f"expected comma-separated numbers, got {args.start!r}",
+                             where="--start") from None
+        if len(start) != robot.dof:
+            raise InputError(f"expected {robot.dof} joint values, got {len(start)}",
+                             where="--start")
+        start = start * scales
+    if args.restarts < 0:
+        raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
+    result = compensate(robot, targets, start=start, restarts=args.restarts, seed=args.seed)
+    out_columns = extras + joint_names + ["status", "position_error"]
+    if has_orientation:
+        out_columns.append("orientation_error")
+    rows = []
+    text = {c: table.text(c) for c in extras}
+    for i in range(len(result)):
+        row: list = [text[c][i] for c in extras]
+        row += list(result.joints[i] / scales)
+        row += [result.status[i], result.position_error[i] / L]
+        if has_orientation:
+            error = result.orientation_error[i]
+            row.append(error / A if math.isfinite(error) else math.nan)
+        rows.append(row)
+    with atomic_file(args.out) as staging:
+        write_table(staging, out_columns, rows)
+    unreachable = sum(s != "ok" for s in result.status)
+    print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable)")
+    return 0
