@@ -24,7 +24,8 @@ import numpy as np
 
 from .results import Identifiability
 
-RANK_TOLERANCE = 1e-7  # relative residual norm of a unit column below which it is dependent
+RANK_TOLERANCE = 1e-7
+PREFERENCE_BAND = 0.5  # a preferred column may be picked if it has half the best remaining norm  # relative residual norm of a unit column below which it is dependent
 
 
 def preference(name: str) -> tuple[int, str]:
@@ -49,8 +50,9 @@ def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
                      tolerance: float = RANK_TOLERANCE) -> tuple[list[int], np.ndarray]:
     """Greedy column-pivoted Gram-Schmidt on unit columns.
 
-    Picks, at each step, the column with the largest remaining norm; ties (within 1e-9)
-    go to the smallest ``priority``. Returns the chosen column indices and the remaining
+    At each step, among the columns whose remaining norm is at least ``PREFERENCE_BAND``
+    times the largest, picks the one with the smallest ``priority``: natural parameters
+    win over equivalent ones while every pick stays well conditioned. Returns the chosen column indices and the remaining
     norms of all columns after the last pick.
     """
     A = columns.copy()
@@ -62,7 +64,7 @@ def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
         best = norms.max()
         if best < tolerance:
             break
-        ties = [available[k] for k in np.flatnonzero(norms >= best * (1 - 1e-9) - 1e-15)]
+        ties = [available[k] for k in np.flatnonzero(norms >= best * PREFERENCE_BAND)]
         pick = min(ties, key=lambda j: priority[j])
         chosen.append(pick)
         available.remove(pick)

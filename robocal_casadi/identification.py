@@ -163,6 +163,14 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         raise InputError(f"{problem.size} residuals cannot identify {rows_needed} unknowns; "
                          f"add data", file=datasets[0].path)
     geometric = solve(problem, nominal.x, free, method=method, loss=loss)
+    # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
+    # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
+    # estimate and, where more parameters turn out identifiable, solve once more.
+    revised = analyse_identifiability(problem, geometric.x)
+    if set(revised.identifiable) - set(identifiability.identifiable):
+        identifiability = revised
+        free = _free_mask(problem, identifiability)
+        geometric = solve(problem, geometric.x, free, method=method, loss=loss)
     if geometric.status not in ("converged", "max_iterations"):
         raise SolverError(f"the geometric calibration did not converge ({geometric.status})",
                           stats={"iterations": geometric.iterations})

@@ -62,6 +62,23 @@ def _huber_weights(r: np.ndarray) -> np.ndarray:
     return np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-300))
 
 
+def _damped_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray:
+    """Minimiser of ``|J s + r|^2 + lam |s|^2`` for unit-scaled columns.
+
+    Normal equations with a Cholesky factor: the columns are scaled to unit norm, so
+    ``J^T J`` is well scaled; a rank-deficient system falls back to an SVD solve.
+    """
+    A = J.T @ J
+    A[np.diag_indices_from(A)] += lam
+    g = -(J.T @ r)
+    try:
+        L = np.linalg.cholesky(A)
+        return np.linalg.solve(L.T, np.linalg.solve(L, g))
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(np.vstack([J, np.sqrt(lam) * np.eye(J.shape[1])]),
+                               np.concatenate([-r, np.zeros(J.shape[1])]), rcond=None)[0]
+
+
 def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     m, n = J.shape
     dof = max(m - n, 1)
@@ -89,12 +106,7 @@ def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, l
         scale[scale == 0] = 1.0
         Js = Jw / scale
         while True:
-            if lam > 0:
-                A = np.vstack([Js, np.sqrt(lam) * np.eye(Js.shape[1])])
-                b = np.concatenate([-rw, np.zeros(Js.shape[1])])
-            else:
-                A, b = Js, -rw
-            step_scaled, *_ = np.linalg.lstsq(A, b, rcond=None)
+            step_scaled = _damped_step(Js, rw, lam)
             step = step_scaled / scale
             trial = x.copy()
             trial[free] += step
