@@ -1,0 +1,148 @@
+"""Designing measurement poses for a dataset's set-up: ``design_plan``.
+
+1. draw a pool of feasible candidates (``candidates``),
+2. compute each candidate's Jacobian rows at the nominal robot (``rows``),
+3. find the identifiable parameters on the whole pool (``information``),
+4. choose ``count`` candidates: greedy start, then exchanges for the chosen index
+   (``selection``), optionally refine the chosen joints continuously (``refine``),
+5. report the index of the plan beside the median of random feasible plans of the
+   same size drawn from the same pool.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from robocal_casadi.datasets import Dataset
+from robocal_casadi.errors import InputError
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.progress import Progress
+
+from .candidates import Candidate, generate
+from .indices import DESCRIPTIONS, canonical, index_value
+from .information import Information
+from .reach import Workspace
+from .rows import RowModel
+from .selection import exchange, greedy, random_designs
+from .setup import PlanSetup, setup_from_dataset
+
+RANDOM_PLANS = 20
+REFINE_ROUNDS = 3  # each round moves joints at most refine.STEP
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A designed set of measurements and how good it is.
+
+    ``candidates`` the chosen placements or readings; ``index`` (canonical name, e.g.
+    ``O2``) and its ``value`` for the plan; ``random_values`` the same index for random
+    feasible plans of the same size; ``singular_values`` of the plan's column-scaled
+    identification Jacobian; ``identifiable`` the parameters it is computed over.
+    """
+
+    setup: PlanSetup
+    candidates: tuple[Candidate, ...]
+    index: str
+    value: float
+    random_values: np.ndarray
+    singular_values: np.ndarray
+    identifiable: tuple[str, ...]
+    pool_size: int
+    swaps: int
+    refined: bool = False
+
+    @property
+    def random_median(self) -> float:
+        return float(np.median(self.random_values))
+
+    @property
+    def joints(self) -> np.ndarray:
+        """All rows' joint readings (R x dof) [rad or m]."""
+        return np.vstack([c.joints for c in self.candidates])
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Placement id (1-based) of each row."""
+        return np.concatenate([np.full(len(c.joints), k + 1) for k, c in enumerate(self.candidates)])
+
+    @property
+    def points(self) -> tuple[str, ...]:
+        return tuple(p for c in self.candidates for p in c.points)
+
+    def __repr__(self) -> str:
+        return (f"Plan({self.setup.kind}, {len(self.candidates)} of {self.pool_size} candidates, "
+                f"{self.index} = {self.value:.6g} vs random median {self.random_median:.6g}, "
+                f"{len(self.identifiable)} identifiable parameters)")
+
+    def summary(self) -> str:
+        what = "placements" if self.setup.kind in ("cross_bar", "artifact_touches") else "readings"
+        ratio = self.value / self.random_median if self.random_median else math.nan
+        return (f"planned {len(self.candidates)} {what} ({len(self.joints)} rows) for "
+                f"{len(self.identifiable)} identifiable parameters, chosen from "
+                f"{self.pool_size} feasible candidates\n"
+                f"{self.index} ({DESCRIPTIONS[self.index]}): plan {self.value:.6g}, random "
+                f"feasible plans of the same size: median {self.random_median:.6g} "
+                f"(ratio {ratio:.3g}, {len(self.random_values)} plans)")
+
+
+def pool_size_for(count: int, kind: str) -> int:
+    """How many feasible candidates to draw for a plan of ``count``."""
+    if kind in ("cross_bar", "artifact_touches"):
+        return max(120, 6 * count)
+    return max(300, 10 * count)
+
+
+def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int = 0,
+                pool: int | None = None, refine: bool = True, quiet: bool = False) -> Plan:
+    """Design ``count`` placements (touch kinds) or readings for ``dataset``'s set-up."""
+    index = canonical(index)
+    if count < 1:
+        raise InputError(f"--count must be at least 1, got {count}")
+    setup = setup_from_dataset(dataset)
+    kinematics = Kinematics(setup.robot)
+    workspace = Workspace(kinematics, table_height=setup.table_height)
+    rng = np.random.default_rng(seed)
+    size = pool or pool_size_for(count, setup.kind)
+    stream = None if not quiet else open("/dev/null", "w")  # noqa: SIM115
+    with Progress("plan: candidates", total=size, stream=stream) as progress:
+        candidates = generate(setup, workspace, size, rng, progress)
+    if len(candidates) < count:
+        raise InputError(f"only {len(candidates)} feasible candidates found; ask for at most "
+                         f"that many (--count {count})", file=setup.path)
+    row_model = RowModel(setup, kinematics)
+    info = Information(row_model.blocks(candidates), row_model.parameters, row_model.shared)
+    needed = math.ceil((info.m + info.shared) / info.rows_per_candidate())
+    if count < needed:
+        what = "placements" if setup.kind in ("cross_bar", "artifact_touches") else "readings"
+        raise InputError(
+            f"--count {count} is too few: {info.m} identifiable parameters"
+            f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
+            f"{needed} {what} of this kind", file=setup.path)
+    chosen = greedy(info, count, rng)
+    with Progress("plan: exchange", total=None, stream=stream) as progress:
+        chosen, swaps = exchange(info, chosen, index, progress=progress)
+    if stream is not None:
+        stream.close()
+    chosen_candidates = tuple(candidates[i] for i in chosen)
+    spectrum = info.spectrum(chosen)
+    refined = False
+    if refine:
+        from .refine import refine_plan
+
+        for _ in range(REFINE_ROUNDS):
+            better = refine_plan(setup, workspace, row_model, info, chosen_candidates, index)
+            if better is None:
+                break
+            chosen_candidates, spectrum = better
+            refined = True
+    value = index_value(index, spectrum)
+    if not np.isfinite(value) or spectrum[-1] <= 1e-10 * spectrum[0]:
+        raise InputError(f"no plan of {count} found that identifies all {info.m} parameters; "
+                         f"ask for more (--count)", file=setup.path)
+    random_values = np.array([index_value(index, info.spectrum(d))
+                              for d in random_designs(info, count, RANDOM_PLANS, rng)])
+    return Plan(setup, chosen_candidates, index, value, random_values, spectrum,
+                info.identifiable_names, len(candidates), swaps, refined)

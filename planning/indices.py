@@ -1,0 +1,90 @@
+"""Observability indices of an identification Jacobian.
+
+All indices are functions of the singular values ``s_1 >= ... >= s_m`` of the
+column-scaled identification Jacobian ``J`` (rows: residuals [m], columns: the ``m``
+identifiable parameters, each column divided by its norm, placement unknowns projected
+out). They are singular values of ``J`` itself, not eigenvalues of ``J^T J``.
+
+* ``O1`` geometric mean ``(prod s_i)^(1/m)`` (maximise; Borm and Menq)
+* ``O2`` condition number ``s_max / s_min`` (minimise; Driels and Pathre); alias ``cond``
+* ``O3`` smallest singular value ``s_min`` (maximise; Nahvi and Hollerbach)
+* ``O4`` noise amplification ``s_min^2 / s_max`` (maximise; Nahvi and Hollerbach)
+* ``O5`` ``1 / sum(1 / s_i)`` (maximise; Sun and Hollerbach)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+INDICES = ("O1", "O2", "O3", "O4", "O5")
+ALIASES = {"cond": "O2"}
+DEFAULT_INDEX = "cond"
+DESCRIPTIONS = {
+    "O1": "geometric mean of the singular values",
+    "O2": "condition number",
+    "O3": "smallest singular value",
+    "O4": "noise amplification index",
+    "O5": "inverse sum of inverse singular values",
+}
+MAXIMISE = {"O1": True, "O2": False, "O3": True, "O4": True, "O5": True}
+
+
+def canonical(name: str) -> str:
+    """``'cond'`` -> ``'O2'``; other valid names unchanged; anything else raises ValueError."""
+    key = ALIASES.get(name, name)
+    if key not in INDICES:
+        raise ValueError(f"unknown observability index {name!r}; expected one of "
+                         f"{['cond', *INDICES]}")
+    return key
+
+
+def singular_values(J: np.ndarray) -> np.ndarray:
+    """Singular values of ``J`` (rows x m), largest first."""
+    return np.linalg.svd(np.asarray(J, dtype=float), compute_uv=False)
+
+
+def scale_columns(J: np.ndarray) -> np.ndarray:
+    """``J`` with every non-zero column divided by its Euclidean norm."""
+    J = np.asarray(J, dtype=float)
+    norms = np.linalg.norm(J, axis=0)
+    return J / np.where(norms > 0, norms, 1.0)
+
+
+def index_value(name: str, s: np.ndarray) -> float:
+    """Index ``name`` of singular values ``s`` (any order); a zero ``s_min`` gives the worst value."""
+    key = canonical(name)
+    s = np.sort(np.asarray(s, dtype=float))[::-1]
+    if s.size == 0:
+        raise ValueError("no singular values")
+    s_max, s_min = float(s[0]), float(s[-1])
+    if s_min <= 0.0:
+        return np.inf if key == "O2" else 0.0
+    if key == "O1":
+        return float(np.exp(np.mean(np.log(s))))
+    if key == "O2":
+        return s_max / s_min
+    if key == "O3":
+        return s_min
+    if key == "O4":
+        return s_min**2 / s_max
+    return float(1.0 / np.sum(1.0 / s))
+
+
+def index_of_jacobian(name: str, J: np.ndarray, *, scaled: bool = True) -> float:
+    """Index ``name`` of ``J``; with ``scaled`` its columns are normalised first."""
+    return index_value(name, singular_values(scale_columns(J) if scaled else J))
+
+
+def maximise(name: str) -> bool:
+    """True when a larger value of index ``name`` is better."""
+    return MAXIMISE[canonical(name)]
+
+
+def better(name: str, a: float, b: float) -> bool:
+    """True when value ``a`` of index ``name`` is strictly better than ``b``."""
+    return a > b if maximise(name) else a < b
+
+
+def score(name: str, value: float) -> float:
+    """A number to maximise for index ``name`` (the value, or minus it for ``O2``)."""
+    return value if maximise(name) else -value

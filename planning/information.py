@@ -1,0 +1,99 @@
+"""Information of candidate blocks and the spectra of designs made of them.
+
+The design's Jacobian stacks the candidates' blocks ``X = [G S]``; its shared placement
+columns ``S`` are projected out, the identifiable parameter columns kept and each scaled
+to unit norm. Its singular values come exactly from an SVD (``spectrum``) or, for the
+thousands of trial designs of a search, from the eigenvalues of the Schur complement of
+the summed information ``sum X^T X`` (``spectra``, batched): the same numbers, squared.
+The identifiable parameters are judged once on the whole pool of candidates by the
+engine's rule (``robocal_casadi.identifiability.analyse``), so a plan is scored over the
+same parameters the calibration will estimate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robocal_casadi.identifiability import analyse
+
+from .rows import Block
+
+
+
+class Information:
+    """Per-candidate information matrices restricted to identifiable + shared columns."""
+
+    def __init__(self, blocks: list[Block], parameters: tuple[str, ...], shared: int):
+        self.parameters = parameters
+        self.shared = shared
+        n_par = len(parameters)
+        full = np.array([b.X.T @ b.X for b in blocks])  # C x n x n
+        X = np.vstack([b.X for b in blocks])
+        shared_names = tuple(f"placement_{k}" for k in range(shared))
+        judged = analyse(X, parameters + shared_names, range(n_par),
+                         range(n_par, n_par + shared),
+                         invisible_reason="no effect on these measurements",
+                         absorbed_reason="absorbed by the placement unknowns")
+        self.identifiable = np.array([parameters.index(n) for n in judged.identifiable], int)
+        self.reasons = dict(judged.unidentifiable)
+        keep = np.concatenate([self.identifiable, np.arange(n_par, n_par + shared)]).astype(int)
+        self.columns = keep
+        self.blocks = [b.X[:, keep] for b in blocks]
+        self.matrices = full[:, keep][:, :, keep]
+        self.m = len(self.identifiable)
+
+    def __repr__(self) -> str:
+        return (f"Information({len(self.blocks)} candidates, {self.m} identifiable of "
+                f"{len(self.parameters)} parameters, shared={self.shared})")
+
+    @property
+    def identifiable_names(self) -> tuple[str, ...]:
+        return tuple(self.parameters[i] for i in self.identifiable)
+
+    def rows_per_candidate(self) -> float:
+        return float(np.mean([len(b) for b in self.blocks]))
+
+    def spectra(self, matrices: np.ndarray) -> np.ndarray:
+        """Singular values (B x m, largest first) of designs with information ``matrices``."""
+        M = _schur(matrices, self.m, self.shared)
+        d = np.sqrt(np.clip(np.einsum("bii->bi", M), 1e-300, None))
+        M = M / d[:, :, None] / d[:, None, :]
+        lam = np.linalg.eigvalsh(M)[:, ::-1]
+        return np.sqrt(np.clip(lam, 0.0, None))
+
+    def spectrum(self, chosen) -> np.ndarray:
+        """Exact singular values (largest first) of the design made of candidates ``chosen``."""
+        return self.spectrum_of([self.blocks[i] for i in chosen])
+
+    def restrict(self, block: Block) -> np.ndarray:
+        """A new candidate's rows on this design's columns (identifiable, then shared)."""
+        return block.X[:, self.columns]
+
+    def spectrum_of(self, rows: list[np.ndarray]) -> np.ndarray:
+        """Exact singular values of the design whose (restricted) row blocks are ``rows``."""
+        X = np.vstack(rows)
+        J = _project_shared(X[:, :self.m], X[:, self.m:])
+        norms = np.linalg.norm(J, axis=0)
+        return np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
+
+    def jacobian(self, chosen) -> np.ndarray:
+        """The design's identification Jacobian rows (identifiable then shared columns)."""
+        return np.vstack([self.blocks[i] for i in chosen])
+
+
+def _schur(A: np.ndarray, m: int, shared: int) -> np.ndarray:
+    """``A_pp - A_ps A_ss^-1 A_sp`` for a batch of (m + shared) square matrices."""
+    if shared == 0:
+        return A[:, :m, :m]
+    App, Aps, Ass = A[:, :m, :m], A[:, :m, m:], A[:, m:, m:]
+    ridge = 1e-12 * np.einsum("bii->b", Ass)[:, None, None] * np.eye(shared) + 1e-300
+    return App - Aps @ np.linalg.solve(Ass + ridge, np.swapaxes(Aps, 1, 2))
+
+
+def _project_shared(J: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``J`` with its component in the column space of ``S`` removed (SVD, exact)."""
+    if S.shape[1] == 0:
+        return J
+    U, s, _ = np.linalg.svd(S, full_matrices=False)
+    U = U[:, s > 1e-12 * s.max()]
+    return J - U @ (U.T @ J)

@@ -1,0 +1,198 @@
+"""Continuous refinement of a chosen plan in CasADi (IPOPT).
+
+The joint readings of the chosen candidates become the variables; the objective is
+``-log det`` of the plan's scaled information (Schur complement of the shared placement
+unknowns, columns scaled to unit norm), a smooth surrogate of every index; the
+constraints keep each reading runnable:
+
+* all kinds: joint limits, every joint frame origin and the measured point above the
+  worktable, each joint within ``STEP`` [rad or m] of the chosen candidate (the model is
+  trusted locally only);
+* tracker: the target faces the instrument (within the visibility cone);
+* bars and artifacts: the probe stays on its socket (the placement is kept, the joints
+  are re-solved), polished afterwards by inverse kinematics to 1e-9 m;
+* sphere: the beam still hits the sphere within the incidence limit and the sensor's
+  range; the expected reading follows the pose.
+
+The refined plan replaces the chosen one only when it is feasible and improves the
+user's index.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .candidates import Candidate, visible
+from .indices import better, index_value
+from .information import Information
+from .reach import Workspace
+from .rows import RowModel
+
+STEP = 0.35  # [rad] largest change of a joint during refinement
+MARGIN = 1e-3  # [m] clearance kept above the worktable
+ANGLE_MARGIN = 1e-4  # [rad] kept inside the visibility cone and incidence limit
+
+
+def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Information,
+                candidates: tuple[Candidate, ...], index: str, max_iterations: int = 60):
+    """``(refined candidates, spectrum)`` or None when refinement does not help."""
+    before = index_value(index, info.spectrum_of([info.restrict(b)
+                                                  for b in row_model.blocks(list(candidates))]))
+    try:
+        Q_new = _solve(setup, workspace, row_model, info, candidates, max_iterations)
+    except RuntimeError:
+        return None
+    if Q_new is None:
+        return None
+    refined = _rebuild(setup, workspace, candidates, Q_new)
+    if refined is None:
+        return None
+    spectrum = info.spectrum_of([info.restrict(b) for b in row_model.blocks(refined)])
+    if not better(index, index_value(index, spectrum), before):
+        return None
+    return tuple(refined), spectrum
+
+
+def _solve(setup, workspace, row_model, info, candidates, max_iterations):
+    kin = workspace.kinematics
+    p = row_model.p
+    dof = kin.dof
+    variables, starts, lower, upper = [], [], [], []
+    constraints, c_lower, c_upper = [], [], []
+    blocks = []
+    keep = info.columns
+    heights_fn = workspace.heights
+    for c, candidate in enumerate(candidates):
+        Q0 = candidate.joints
+        Q = ca.MX.sym(f"Q{c}", dof, len(Q0))
+        variables.append(ca.vec(Q))
+        starts.append(Q0.T.ravel(order="F"))
+        lo = np.maximum(workspace.lower, -np.inf)
+        hi = workspace.upper
+        lower.append(np.maximum(np.tile(lo, (len(Q0), 1)), Q0 - STEP).T.ravel(order="F"))
+        upper.append(np.minimum(np.tile(hi, (len(Q0), 1)), Q0 + STEP).T.ravel(order="F"))
+        for k in range(len(Q0)):
+            constraints.append(heights_fn(Q[:, k], p))
+            c_lower.append(np.full(dof, workspace.table_height + MARGIN))
+            c_upper.append(np.full(dof, np.inf))
+        if setup.kind == "tracker_points":
+            q = Q[:, 0]
+            world, J_p, _, J_offset = kin.point_jacobians(q, p, setup.offset)
+            S = ca.horzcat(ca.DM.eye(3), -_skew(world))
+            blocks.append(ca.horzcat(J_p, J_offset, S))
+            constraints.append(world[2])
+            c_lower.append([workspace.table_height + MARGIN])
+            c_upper.append([np.inf])
+            if setup.instrument is not None:
+                T = kin.flange_pose(q, p)
+                towards = setup.instrument - world
+                constraints.append(ca.dot(T[:3, 2], towards) / ca.norm_2(towards))
+                c_lower.append([np.cos(setup.visibility_cone - ANGLE_MARGIN)])
+                c_upper.append([1.0])
+        elif setup.kind == "sphere_laser":
+            q = Q[:, 0]
+            T = kin.flange_pose(q, p)
+            o = T[:3, :3] @ setup.offset + T[:3, 3]
+            axis = setup.axis / np.linalg.norm(setup.axis)
+            d = T[:3, :3] @ axis
+            v = o - setup.centre
+            b = ca.dot(d, v)
+            disc = b**2 - (ca.dot(v, v) - setup.radius**2)
+            reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
+            hit_normal = (o + reading * d - setup.centre) / setup.radius
+            constraints += [disc, reading, -ca.dot(d, hit_normal), o[2]]
+            c_lower += [[1e-8], [setup.laser_range[0]], [np.cos(setup.max_incidence - ANGLE_MARGIN)],
+                        [workspace.table_height + MARGIN]]
+            c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
+            G, S = row_model._sphere(q, p, setup.offset, np.zeros(2), setup.centre, reading)
+            blocks.append(ca.horzcat(G, S))
+        else:
+            function = row_model._touch_function(candidate.points)
+            repeated = sorted({n for n in candidate.points if candidate.points.count(n) > 1})
+            local = (np.concatenate([candidate.sockets[n] for n in repeated]) if repeated
+                     else np.zeros(0))
+            G, L = function(Q, p, setup.offset, local)
+            if repeated:
+                P = ca.DM.eye(G.shape[0]) - L @ ca.solve(L.T @ L, L.T)
+                G = P @ G
+            blocks.append(G)
+            for k, name in enumerate(candidate.points):
+                constraints.append(kin.point(Q[:, k], p, setup.offset) - candidate.sockets[name])
+                c_lower.append(np.zeros(3))
+                c_upper.append(np.zeros(3))
+    m, shared = info.m, info.shared
+    A = 0
+    for X in blocks:
+        Xk = ca.horzcat(*[X[:, int(j)] for j in keep])
+        A = A + Xk.T @ Xk
+    M = A[:m, :m]
+    if shared:
+        M = M - A[:m, m:] @ ca.solve(A[m:, m:], A[m:, :m])
+    d = ca.sqrt(ca.diag(M))
+    Ms = M / (d @ d.T)
+    objective = -ca.log(ca.det(Ms))
+    x = ca.vertcat(*variables)
+    g = ca.vertcat(*constraints)
+    solver = ca.nlpsol("refine", "ipopt", {"x": x, "f": objective, "g": g},
+                       {"print_time": False,
+                        "ipopt": {"print_level": 0, "sb": "yes", "max_iter": max_iterations,
+                                  "hessian_approximation": "limited-memory",
+                                  "tol": 1e-6, "constr_viol_tol": 1e-9,
+                                  "bound_relax_factor": 0.0}})
+    x0 = np.concatenate(starts)
+    result = solver(x0=x0, lbx=np.concatenate(lower), ubx=np.concatenate(upper),
+                    lbg=np.concatenate([np.ravel(v) for v in c_lower]),
+                    ubg=np.concatenate([np.ravel(v) for v in c_upper]))
+    values = np.asarray(result["x"]).ravel()
+    out, start = [], 0
+    for candidate in candidates:
+        size = candidate.joints.size
+        out.append(values[start:start + size].reshape(len(candidate.joints), dof))
+        start += size
+    return out
+
+
+def _rebuild(setup, workspace, candidates, Q_new):
+    """Feasible candidates at the refined joints (polished), or None."""
+    kin = workspace.kinematics
+    rebuilt = []
+    for candidate, Q in zip(candidates, Q_new):
+        Q = np.clip(Q, workspace.lower, workspace.upper)
+        if setup.kind in ("cross_bar", "artifact_touches"):
+            targets = np.array([candidate.sockets[n] for n in candidate.points])
+            solved = workspace.solve_points(targets, setup.offset, Q)
+            if not solved.ok.all():
+                return None
+            Q = solved.joints
+            points = targets
+        elif setup.kind == "sphere_laser":
+            pose = kin.flange_poses(Q, workspace.p)[0]
+            o = pose[:3, :3] @ setup.offset + pose[:3, 3]
+            d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
+            v = o - setup.centre
+            b = d @ v
+            disc = b * b - (v @ v - setup.radius**2)
+            if disc <= 0:
+                return None
+            reading = -b - np.sqrt(disc)
+            lo, hi = setup.laser_range
+            normal = (o + reading * d - setup.centre) / setup.radius
+            if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
+                return None
+            candidate = Candidate(Q, distance=np.array([reading]))
+            points = o[None]
+        else:
+            points = kin.points(Q, setup.offset, workspace.p)
+            if not visible(setup, kin.flange_poses(Q, workspace.p)).all():
+                return None
+        if not (workspace.within_limits(Q).all() and workspace.clear_of_table(Q, points).all()):
+            return None
+        rebuilt.append(Candidate(Q, candidate.points, candidate.sockets, candidate.distance))
+    return rebuilt
+
+
+def _skew(v):
+    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
+                      ca.horzcat(-v[1], v[0], 0))
+

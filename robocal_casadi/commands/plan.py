@@ -1,0 +1,50 @@
+"""Design measurement poses for the set-up a dataset file describes.
+
+Chooses, from bar/artifact placements, laser poses or configurations the robot can
+really run (joint limits, above the worktable, target facing the instrument), the ones
+that make the identification Jacobian best conditioned for the chosen observability
+index, and writes them as the dataset's data table with the measured columns empty
+(and, for bars and artifacts, where to put each socket). Prints the index of the plan
+and the median of random feasible plans of the same size.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..datasets import load_dataset
+from ..errors import InputError
+
+INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", metavar="DATASET.yaml",
+                        help="dataset file: kind, robot, units, instrument geometry "
+                             "(its data table need not exist)")
+    parser.add_argument("--count", type=int, required=True, metavar="N",
+                        help="bar or artifact placements, or readings, to plan")
+    parser.add_argument("--out", required=True, metavar="PLAN.csv", help="plan table to write")
+    parser.add_argument("--index", default="cond", choices=INDEX_CHOICES,
+                        help="observability index to optimise: cond = O2 condition number "
+                             "(default), O1 geometric mean of singular values, O3 smallest "
+                             "singular value, O4 noise amplification, O5 inverse sum of inverses")
+    parser.add_argument("--seed", type=int, default=0, metavar="S",
+                        help="random seed of the candidate search (default 0)")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="skip the continuous refinement of the chosen joints")
+
+
+def run(args: argparse.Namespace) -> int:
+    from planning.design import design_plan
+    from planning.plan_table import write_plan
+
+    if args.count < 1:
+        raise InputError(f"expected a positive count, got {args.count}", where="--count")
+    dataset = load_dataset(args.dataset, require_data=False)
+    plan = design_plan(dataset, args.count, args.index, seed=args.seed,
+                       refine=not args.no_refine)
+    write_plan(plan, args.out)
+    print(plan.summary())
+    print(f"wrote {args.out}")
+    return 0
