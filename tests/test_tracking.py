@@ -23,6 +23,7 @@ from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp
 from robocal_casadi.kinematics import nominal_pose
 from robocal_casadi.robot import Joint, Robot, save_robot
 from robocal_casadi.tracking import R_B, Tracker, TrackingProblem
+from robocal_casadi.tracking import observation_for as observation_for_pose
 from robocal_casadi.transforms import rpy_from_matrix
 from robocal_casadi.units import Units
 
@@ -145,6 +146,16 @@ def test_goal_with_tilted_worktable_normal():
         rot("z", 0.4) @ rot("y", 0.05) @ rot("x", -0.15), [0, 0, 0])
     A_prime = T @ np.linalg.inv(pose(R_B[:3, :3], [0, 0, STANDOFF]))
     assert goal == pytest.approx(level_pose(A_prime, up / np.linalg.norm(up)), abs=1e-12)
+
+
+def test_observation_for_inverts_the_chain():
+    robot = industrial_6r()
+    q_capture = START["industrial_6r"]
+    wanted = nominal_pose(robot, q_capture + np.array([0.1, -0.05, 0.05, 0.2, -0.1, 0.3]))
+    observation = observation_for_pose(nominal_pose(robot, q_capture), wanted, CAMERA, STANDOFF)
+    assert observation == pytest.approx(observation_for(robot, q_capture, wanted), abs=1e-12)
+    goal = Tracker(robot, CAMERA, STANDOFF).goal(q_capture, observation)
+    assert goal == pytest.approx(level_pose(wanted), abs=1e-12)
 
 
 # ----------------------------------------------------------------------------- the NLP

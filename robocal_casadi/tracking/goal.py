@@ -29,7 +29,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..transforms import pose_from_xyz_rpy, rot_x, rot_z, translation
+from ..transforms import pose_from_xyz_rpy, rot_x, rot_z, rpy_from_matrix, translation
 
 #: Fixed rotation of the target frame in the end frame: ``Rx(90 deg) Rz(90 deg)`` (4x4).
 R_B = rot_x(math.pi / 2) @ rot_z(math.pi / 2)
@@ -106,3 +106,13 @@ def goal_pose(T_world_end, camera_xyz, observation, standoff, up):
     """
     target = target_in_world(T_world_end, camera_xyz, observation)
     return level_turn(facing_pose(target, standoff), up)
+
+
+def observation_for(T_world_end, T_world_end_goal, camera_xyz, standoff) -> np.ndarray:
+    """The inverse of the chain: the observation ``(x, y, z [m], roll, pitch, yaw [rad])``
+    seen from the end pose ``T_world_end`` whose facing pose ``A'`` is ``T_world_end_goal``
+    (the target at ``T = A' Tz(Z) R_B``). For simulations and benchmarks (numpy only)."""
+    T_world_target = T_world_end_goal @ translation(0.0, 0.0, standoff) @ R_B
+    B_C = np.linalg.solve(T_world_end, T_world_target)
+    xyz = B_C[:3, 3] - np.asarray(camera_xyz, dtype=float)
+    return np.concatenate([xyz, rpy_from_matrix(R_B[:3, :3].T @ B_C[:3, :3])])

@@ -30,6 +30,7 @@ from functools import cached_property
 
 import casadi as ca
 
+from ..codegen import compiled
 from ..kinematics import Kinematics
 from ..robot import Robot
 from .goal import goal_pose
@@ -175,6 +176,16 @@ class TrackingProblem:
             ["q", "q_previous", "goal", "up", "p", "weights", "free", "multipliers_previous"],
             ["dq", "multipliers", "multiplier_test", "position_error", "angle_error"],
         )
+
+    @cached_property
+    def compiled_step(self) -> ca.Function:
+        """``step`` as machine code (``codegen.compiled``; ``step`` itself without a compiler)."""
+        return compiled(self.step)
+
+    @cached_property
+    def compiled_goal(self) -> ca.Function:
+        """``goal`` as machine code (``codegen.compiled``; ``goal`` itself without a compiler)."""
+        return compiled(self.goal)
 
     @cached_property
     def nlp(self) -> dict:

@@ -13,6 +13,7 @@ which verifies the constraint errors itself.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -61,13 +62,15 @@ class GaussNewtonSolver:
     """Closed-form Gauss-Newton SQP with an active set on the joint bounds.
 
     Built once per (problem, robot parameters ``p``, ``up``, ``weights``); ``solve`` then
-    allocates nothing in CasADi. Each iteration: one evaluation of the step function at
+    allocates nothing in CasADi. ``compiled`` uses the step function as machine code
+    (``codegen.compiled``: generated C, compiled once and cached on disk; the
+    interpreted function where no C compiler is found). Each iteration: one evaluation of the step function at
     the current joints, the step shortened to ``LONGEST_STEP``, joints leaving their bounds
     clipped and held, held joints with a wrong-signed multiplier let go.
     """
 
     def __init__(self, problem: TrackingProblem, p: np.ndarray, up: np.ndarray,
-                 weights: np.ndarray, *, max_iterations: int = 40):
+                 weights: np.ndarray, *, max_iterations: int = 40, compiled: bool = True):
         n = problem.dof
         self.problem = problem
         self.max_iterations = max_iterations
@@ -85,7 +88,8 @@ class GaussNewtonSolver:
         self._position_error = np.zeros(1)
         self._angle_error = np.zeros(1)
         # Keep the function alive with its buffer; arrays are bound once, filled per call.
-        self._function = problem.step
+        self.compiled = compiled
+        self._function = problem.compiled_step if compiled else problem.step
         self._buffer, self._evaluate = self._function.buffer()
         for k, array in enumerate((self._q, self._q_previous, self._goal, self._up, self._p,
                                    self._weights, self._free, self._multipliers_previous)):
@@ -95,7 +99,8 @@ class GaussNewtonSolver:
             self._buffer.set_res(k, memoryview(array))
 
     def __repr__(self) -> str:
-        return f"GaussNewtonSolver({self.problem.robot.name!r}, max_iterations={self.max_iterations})"
+        return (f"GaussNewtonSolver({self.problem.robot.name!r}, "
+                f"max_iterations={self.max_iterations}, compiled={self.compiled})")
 
     def solve(self, previous: np.ndarray, goal: np.ndarray, lower: np.ndarray,
               upper: np.ndarray) -> SolveOutcome:
@@ -103,31 +108,35 @@ class GaussNewtonSolver:
         q, free, dq, test = self._q, self._free, self._dq, self._test
         self._q_previous[:] = previous
         self._goal[:] = goal
-        np.clip(previous, lower, upper, out=q)
-        free[:] = 1.0
-        self._multipliers_previous[:] = 0.0
+        np.maximum(previous, lower, out=q)
+        np.minimum(q, upper, out=q)
+        free.fill(1.0)
+        holding = False
+        self._multipliers_previous.fill(0.0)
         history: list[float] = []
         message = "iteration limit"
         converged = infeasible = False
         iteration = 0
+        position_error = angle_error = math.nan
         while iteration < self.max_iterations:
             iteration += 1
             self._evaluate()
             self._multipliers_previous[:] = self._multipliers
-            position_error = self._position_error[0]
-            angle_error = self._angle_error[0]
-            if not (np.isfinite(position_error) and np.isfinite(angle_error)
-                    and np.all(np.isfinite(dq))):
+            position_error = float(self._position_error[0])
+            angle_error = float(self._angle_error[0])
+            longest = float(np.abs(dq).max())
+            if not (math.isfinite(position_error) and math.isfinite(angle_error)
+                    and math.isfinite(longest)):
                 message = "non-finite values"
                 break
-            held = free == 0.0
-            if held.any():
-                release = held & (((q <= lower) & (test < 0.0)) | ((q >= upper) & (test > 0.0)))
+            if holding:
+                release = (free == 0.0) & (((q <= lower) & (test < 0.0))
+                                           | ((q >= upper) & (test > 0.0)))
                 if release.any():
                     free[release] = 1.0
+                    holding = bool((free == 0.0).any())
                     continue
             met = position_error < CONVERGENCE_TOLERANCE and angle_error < CONVERGENCE_TOLERANCE
-            longest = float(np.max(np.abs(dq)))
             if met and longest < STATIONARY_STEP:
                 converged, message = True, "converged"
                 break
@@ -142,18 +151,20 @@ class GaussNewtonSolver:
             q += dq
             outside = (q < lower) | (q > upper)
             if outside.any():
-                np.clip(q, lower, upper, out=q)
+                np.maximum(q, lower, out=q)
+                np.minimum(q, upper, out=q)
                 free[outside] = 0.0
+                holding = True
         else:
-            # Out of iterations: the last iterate's errors are those of the previous
-            # evaluation; evaluate once more so the outcome describes ``q`` itself.
+            # Out of iterations: the errors at hand are those before the last step;
+            # evaluate once more so the outcome describes ``q`` itself.
             self._evaluate()
-            position_error = self._position_error[0]
-            angle_error = self._angle_error[0]
-            met = position_error < CONVERGENCE_TOLERANCE and angle_error < CONVERGENCE_TOLERANCE
-            converged = bool(met)
-        return SolveOutcome(q.copy(), converged, infeasible, iteration, float(position_error),
-                            float(angle_error), message)
+            position_error = float(self._position_error[0])
+            angle_error = float(self._angle_error[0])
+            converged = (position_error < CONVERGENCE_TOLERANCE
+                         and angle_error < CONVERGENCE_TOLERANCE)
+        return SolveOutcome(q.copy(), converged, infeasible, iteration, position_error,
+                            angle_error, message)
 
 
 #: Options that silence CasADi's NLP solvers, by plugin.

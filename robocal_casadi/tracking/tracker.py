@@ -108,7 +108,10 @@ class Tracker:
     none (one value or one per joint); ``p`` the geometric parameter vector (``ParameterRegistry`` order, SI; default
     the robot's own); ``weights`` (n) the weights of the smallest-move objective (default
     1); ``method`` the NLP solver: ``gauss_newton`` (real-time), ``sqpmethod`` or ``ipopt``
-    (references).
+    (references); ``qpsol`` the QP solver of ``sqpmethod`` (``qrqp`` or ``qpoases``);
+    ``compiled`` runs the per-cycle CasADi functions as machine code
+    (compiled once per robot structure and cached on disk, see ``codegen``); ``problem``
+    a ``TrackingProblem`` of the same robot structure to share.
 
     >>> tracker = Tracker(robot, camera_xyz=[0.05, 0, 0.02], standoff=0.3)
     >>> step = tracker.step(q_capture, [x, y, z, roll, pitch, yaw])
@@ -119,7 +122,8 @@ class Tracker:
                  up: Sequence[float] = (0.0, 0.0, 1.0),
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
-                 method: str = "gauss_newton", problem: TrackingProblem | None = None):
+                 method: str = "gauss_newton", qpsol: str = "qrqp", compiled: bool = True,
+                 problem: TrackingProblem | None = None):
         if robot.dof < 6:
             raise InputError(f"tracking needs at least 6 joints (three position and three "
                              f"orientation conditions); robot {robot.name!r} has {robot.dof}")
@@ -157,10 +161,11 @@ class Tracker:
                              where="weights")
         self.method = method
         if method == "gauss_newton":
-            self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights)
+            self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights,
+                                            compiled=compiled)
         else:
             self.solver = NlpsolSolver(self.problem, self.p, self.up, self.weights,
-                                       plugin=method)
+                                       plugin=method, qpsol=qpsol)
         self.lower = robot.lower_limits
         self.upper = robot.upper_limits
         self.revolute = np.array([j.revolute for j in robot.joints])
@@ -172,7 +177,7 @@ class Tracker:
         self._goal_in = [np.zeros(n), np.zeros(6), self.p.copy(), self.camera_xyz.copy(),
                          np.array([self.standoff]), self.up.copy()]
         self._goal_out = np.zeros(12)
-        self._goal_function = self.problem.goal
+        self._goal_function = self.problem.compiled_goal if compiled else self.problem.goal
         self._goal_buffer, self._goal_evaluate = self._goal_function.buffer()
         for k, array in enumerate(self._goal_in):
             self._goal_buffer.set_arg(k, memoryview(array))
@@ -210,7 +215,7 @@ class Tracker:
         self._goal_in[0][:] = q_capture
         self._goal_in[1][:] = observation
         self._goal_evaluate()
-        return self._goal_out.copy()
+        return self._goal_out
 
     def step(self, q_capture: Sequence[float], observation: Sequence[float]) -> TrackStep:
         """One cycle: joints facing the target from the standoff, level, closest to the
@@ -222,15 +227,16 @@ class Tracker:
         start = time.perf_counter()
         q_capture = _vector(q_capture, self.robot.dof, "q_capture")
         observation = _vector(observation, 6, "observation")
+        finite = bool(np.isfinite(q_capture).all() and np.isfinite(observation).all())
         if self._previous is None:
-            if not np.all(np.isfinite(q_capture)):
+            if not np.isfinite(q_capture).all():
                 raise InputError("the first capture joints must be finite", where="q_capture")
-            self._previous = np.clip(q_capture, self.lower, self.upper)
+            self._previous = np.minimum(np.maximum(q_capture, self.lower), self.upper)
         previous = self._previous
-        if not (np.all(np.isfinite(q_capture)) and np.all(np.isfinite(observation))):
+        if not finite:
             return self._refuse("failed", start)
         goal = self._goal_vector(q_capture, observation)
-        if np.linalg.norm(goal[0:3] - self._base_origin) > self.reach:
+        if math.dist(goal[0:3], self._base_origin) > self.reach:
             return self._refuse("unreachable", start)
         lower, upper = self.lower, self.upper
         if self.max_step is not None:
@@ -239,15 +245,16 @@ class Tracker:
         outcome = self.solver.solve(previous, goal, lower, upper)
         q = self._nearest_turn(outcome.q, previous, lower, upper)
         position_error, angle_error = outcome.position_error, outcome.angle_error
-        if not np.array_equal(q, outcome.q):
+        if q is not outcome.q:
             errors = self.problem.errors(q, goal, self.up, self.p)
             position_error, angle_error = float(errors[0]), float(errors[1])
         constraint_error = max(position_error, angle_error)
-        inside = bool(np.all(q >= lower - BOUND_TOLERANCE) and np.all(q <= upper + BOUND_TOLERANCE))
         verified = (position_error < POSITION_TOLERANCE and angle_error < ANGLE_TOLERANCE
-                    and inside and bool(np.all(np.isfinite(q))))
+                    and bool((q >= lower - BOUND_TOLERANCE).all())
+                    and bool((q <= upper + BOUND_TOLERANCE).all()))
         if verified:
-            q = np.clip(q, lower, upper)
+            np.maximum(q, lower, out=q)
+            np.minimum(q, upper, out=q)
             self._previous = q
             status = "ok"
         else:
@@ -257,7 +264,8 @@ class Tracker:
                          position_error, angle_error, outcome.iterations)
 
     def _refuse(self, status: str, start: float) -> TrackStep:
-        previous = self._previous if self._previous is not None else np.full(self.robot.dof, np.nan)
+        previous = self._previous if self._previous is not None else np.full(self.robot.dof,
+                                                                             np.nan)
         return TrackStep(previous.copy(), status, (time.perf_counter() - start) * 1e3,
                          math.nan)
 
@@ -265,6 +273,8 @@ class Tracker:
                       upper: np.ndarray) -> np.ndarray:
         """Each revolute joint moved by whole turns to the value nearest ``previous`` that
         stays within the bounds (the constraints are 2 pi periodic in it)."""
+        if float(np.abs(previous - q).max()) <= math.pi:
+            return q
         turns = np.where(self.revolute, np.round((previous - q) / (2 * math.pi)), 0.0)
         if not turns.any():
             return q
