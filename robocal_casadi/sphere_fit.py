@@ -277,8 +277,8 @@ def _ipopt_solver(count: int) -> ca.Function:
     residual = ca.sqrt(squared) - radius
     parameters = ca.vertcat(ca.vec(rotations), ca.vec(translations), ca.vec(distance), radius)
     nlp = {"x": x, "p": parameters, "f": 0.5 * ca.sumsqr(residual), "g": ca.dot(n, n) - 1.0}
-    options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-12,
-                                              "acceptable_tol": 1e-10, "max_iter": 200}}
+    options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
+                                              "acceptable_tol": 1e-8, "max_iter": 200}}
     return ca.nlpsol(f"sphere_laser_{count}", "ipopt", nlp, options)
 
 
