@@ -56,11 +56,22 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
         start += size
     position = kinematics.point(q + dq, p + dp, offset)
     inputs = [q, extras, p, theta, offset, payload_com]
-    point = ca.Function("row_point", inputs, [position])
+    names = ["q", "extras", "p", "theta", "offset", "payload_com"]
+    point = ca.Function("row_point", inputs, [position], names, ["p_world"])
     derivatives = ca.Function("row_point_jacobians", inputs,
                               [position, ca.jacobian(position, p), ca.jacobian(position, theta),
-                               ca.jacobian(position, offset)])
+                               ca.jacobian(position, offset)],
+                              names, ["p_world", "J_p", "J_theta", "J_offset"])
     return point, derivatives
+
+
+COMPILE_ROWS = 2000  # from this many rows on, the per-row derivatives are compiled to C
+
+
+def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the nonzeros of ``sparsity``, in CasADi's nonzero order."""
+    rows, columns = sparsity.get_triplet()
+    return np.asarray(rows, dtype=int), np.asarray(columns, dtype=int)
 
 
 class Problem:
@@ -204,26 +215,41 @@ class Problem:
             placement = ca.vertcat(*[x[int(i)] for i in self.placement_indices(model)]) \
                 if len(model.placement) else ca.MX(0, 1)
             r = model.residual(points, mounted, placement)
-            M = ca.MX.sym("M", 3 * rows, nx)
             entry = {"model": model, "uses_points": "offsets" in recorded}
-            if entry["uses_points"]:
-                offsets = recorded["offsets"]
-                entry["offsets"] = ca.Function("offsets", [x], [offsets,
-                                               ca.jacobian(ca.vec(offsets), x)])
-                entry["residual"] = ca.Function("residual", [P, x], [r])
-                entry["jacobian"] = ca.Function(
-                    "jacobian", [P, x, M], [ca.jacobian(r, x) + ca.jtimes(r, P, M)])
-            else:
+            if not entry["uses_points"]:
                 entry["residual"] = ca.Function("residual", [x], [r])
                 entry["jacobian"] = ca.Function("jacobian", [x], [ca.jacobian(r, x)])
+                out.append(entry)
+                continue
+            offsets = recorded["offsets"]
+            entry["offsets"] = ca.Function("offsets", [x], [offsets,
+                                           ca.jacobian(ca.vec(offsets), x)])
+            entry["residual"] = ca.Function("residual", [P, x], [r])
+            # Sparse Jacobians of g: nonzeros as outputs, their (row, column) fixed.
+            g_P, g_x = ca.jacobian(r, P), ca.jacobian(r, x)
+            entry["g"] = ca.Function("g_derivatives", [P, x], [g_P.nz[:], g_x.nz[:]])
+            entry["g_P_pattern"] = _pattern(g_P.sparsity())
+            entry["g_x_pattern"] = _pattern(g_x.sparsity())
             out.append(entry)
         return out
 
-    def _model_residual(self, entry: dict, x: np.ndarray, with_jacobian: bool):
+    @cached_property
+    def _row_batch(self):
+        from .codegen import BatchFunction
+
+        rows = max((m.dataset.rows for m in self.models), default=0)
+        return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
+                             compile=rows >= COMPILE_ROWS)
+
+    def _model_residual(self, entry: dict, x: np.ndarray, with_jacobian: bool,
+                        columns: np.ndarray | None = None):
+        """Residual of one model and, if asked, its Jacobian's ``columns`` (default all)."""
         model = entry["model"]
+        nx = len(self.unknowns)
+        columns = np.arange(nx) if columns is None else np.asarray(columns)
         if not entry["uses_points"]:
             r = np.asarray(entry["residual"](x)).ravel()
-            J = np.asarray(entry["jacobian"](x).full()) if with_jacobian else None
+            J = np.asarray(entry["jacobian"](x).full())[:, columns] if with_jacobian else None
             return r, J
         rows = model.dataset.rows
         offsets, d_offsets = entry["offsets"](x)
@@ -233,28 +259,39 @@ class Problem:
         if not with_jacobian:
             P = np.asarray(self._mapped(0, rows)(Q, extras, p, theta, offsets, payload_com))
             return np.asarray(entry["residual"](P.T.ravel(), x)).ravel(), None
-        P, J_p, J_theta, J_offset = (np.asarray(v) for v in self._mapped(1, rows)(
-            Q, extras, p, theta, offsets, payload_com))
-        nx = len(self.unknowns)
-
-        def stacked(block: np.ndarray, width: int) -> np.ndarray:
-            # map concatenates per-row 3 x width blocks side by side: 3 x (rows*width)
-            return block.reshape(3, rows, width).transpose(1, 0, 2)
-
-        M = np.zeros((rows, 3, nx))
-        M[:, :, self.slices["robot"]] = stacked(J_p, len(self.kinematics.registry))
-        n_theta = self.slices["effects"].stop - self.slices["effects"].start
-        if n_theta:
-            M[:, :, self.slices["effects"]] = stacked(J_theta, n_theta)
-        d_offsets = np.asarray(d_offsets.full())
+        per_row_offsets = np.broadcast_to(offsets.T, (rows, 3)) if offsets.shape[1] == 1 \
+            else offsets.T
+        P, J_p, J_theta, J_offset = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets,
+                                                    payload_com)
+        # M = dP/dx for the requested columns only (rows x 3 x k).
+        position = np.full(nx, -1)
+        position[columns] = np.arange(len(columns))
+        M = np.zeros((rows, 3, len(columns)))
+        for key, block in (("robot", J_p), ("effects", J_theta)):
+            index = np.arange(self.slices[key].start, self.slices[key].stop)
+            keep = position[index] >= 0
+            if keep.any():
+                M[:, :, position[index[keep]]] = block[:, :, keep]
+        d_offsets = np.asarray(d_offsets.full())[:, columns]
         if d_offsets.shape[0] == 3:  # one offset for every row
-            d_offsets = np.broadcast_to(d_offsets, (rows, 3, nx))
+            M += np.einsum("nij,jk->nik", J_offset, d_offsets)
         else:
-            d_offsets = d_offsets.reshape(rows, 3, nx)
-        M += np.einsum("nij,njk->nik", stacked(J_offset, 3), d_offsets)
-        P_flat = P.T.ravel()
+            M += np.einsum("nij,njk->nik", J_offset, d_offsets.reshape(rows, 3, len(columns)))
+        M = M.reshape(3 * rows, len(columns))
+        P_flat = P.ravel()
         r = np.asarray(entry["residual"](P_flat, x)).ravel()
-        J = np.asarray(entry["jacobian"](P_flat, x, M.reshape(3 * rows, nx)))
+        g_P, g_x = (np.array(v.nonzeros()) for v in entry["g"](P_flat, x))
+        J = np.zeros((len(r), len(columns)))
+        rows_x, cols_x = entry["g_x_pattern"]
+        wanted = position[cols_x] >= 0
+        np.add.at(J, (rows_x[wanted], position[cols_x[wanted]]), g_x[wanted])
+        rows_P, cols_P = entry["g_P_pattern"]
+        if len(g_P):
+            order = entry.setdefault("g_P_order", np.argsort(rows_P, kind="stable"))
+            sorted_rows = rows_P[order]
+            starts = np.flatnonzero(np.r_[True, sorted_rows[1:] != sorted_rows[:-1]])
+            contributions = g_P[order, None] * M[cols_P[order]]
+            J[sorted_rows[starts]] += np.add.reduceat(contributions, starts, axis=0)
         return r, J
 
     def residual(self, x: np.ndarray) -> np.ndarray:
@@ -262,14 +299,16 @@ class Problem:
         parts = [self._model_residual(e, np.asarray(x, float), False)[0] for e in self._compiled]
         return np.concatenate(parts) if parts else np.zeros(0)
 
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Dense Jacobian d residual / d x at ``x`` (exact, by the chain rule above)."""
-        parts = [self._model_residual(e, np.asarray(x, float), True)[1] for e in self._compiled]
-        return np.vstack(parts)
+    def jacobian(self, x: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
+        """Dense Jacobian d residual / d x at ``x`` (exact, by the chain rule above).
 
-    def residual_and_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        parts = [self._model_residual(e, np.asarray(x, float), True) for e in self._compiled]
-        return np.concatenate([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+        ``columns`` (indices or a boolean mask over ``x``) restricts it to those unknowns.
+        """
+        if columns is not None and np.asarray(columns).dtype == bool:
+            columns = np.flatnonzero(columns)
+        parts = [self._model_residual(e, np.asarray(x, float), True, columns)[1]
+                 for e in self._compiled]
+        return np.vstack(parts)
 
     def symbolic_residual(self, x: ca.MX) -> ca.MX:
         """The residual as one CasADi MX expression of ``x`` (for IPOPT)."""

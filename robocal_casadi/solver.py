@@ -99,7 +99,7 @@ def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, l
     status = "max_iterations"
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        J = problem.jacobian(x)[:, free]
+        J = problem.jacobian(x, free)
         w = np.sqrt(weights)
         Jw, rw = J * w[:, None], r * w
         scale = np.linalg.norm(Jw, axis=0)
@@ -142,7 +142,7 @@ def _finish(problem: Problem, x: np.ndarray, free: np.ndarray, loss: str):
     """Residual and covariance of the free unknowns at ``x``."""
     r = problem.residual(x)
     w = np.sqrt(_huber_weights(r)) if loss == "huber" else np.ones_like(r)
-    J = problem.jacobian(x)[:, free]
+    J = problem.jacobian(x, free)
     return r, _covariance(J * w[:, None], r * w)
 
 
@@ -163,7 +163,7 @@ def _ipopt(problem: Problem, x0: np.ndarray, free: np.ndarray, max_iterations: i
     x[free] = np.asarray(out["x"]).ravel()
     stats = solver.stats()
     r = problem.residual(x)
-    J = problem.jacobian(x)[:, free]
+    J = problem.jacobian(x, free)
     status = "converged" if stats.get("success") else str(stats.get("return_status"))
     return x, r, _covariance(J, r), 0.5 * float(r @ r), int(stats.get("iter_count", 0)), status
 
