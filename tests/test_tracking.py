@@ -197,6 +197,23 @@ def test_redundancy_goes_to_the_smallest_move_like_ipopt(trackers):
         assert a.q == pytest.approx(b.q, abs=1e-6)
 
 
+def test_looking_straight_down_every_turn_is_level_and_the_smallest_move_wins(trackers):
+    # Joints 2 and 3 cancel and joint 5 is at 90 deg: the end z axis points straight down,
+    # so every turn about it is level. The goal moves joint 1 by 0.05 rad and turns the
+    # wrist by 0.3 rad; the turn is free, so the smallest move leaves joint 6 alone.
+    problem = trackers["industrial_6r"]
+    robot = problem.robot
+    q0 = np.array([0.2, -0.3, 0.3, 0.0, math.pi / 2, 0.0])
+    assert nominal_pose(robot, q0)[:3, 2] == pytest.approx([0, 0, -1], abs=1e-12)
+    goal = nominal_pose(robot, q0 + np.array([0.05, 0, 0, 0, 0, 0.3]))
+    tracker = Tracker(robot, CAMERA, STANDOFF, problem=problem)
+    tracker.reset(q0)
+    step = tracker.step(q0, observation_for(robot, q0, goal))
+    assert step.ok, step
+    assert step.constraint_error < 1e-9
+    assert step.q == pytest.approx(q0 + np.array([0.05, 0, 0, 0, 0, 0]), abs=1e-9)
+
+
 def test_joint_limits_hold_and_the_bound_is_used_optimally(trackers):
     robot = panda_7dof()
     q0 = START["panda_7dof"]

@@ -10,8 +10,14 @@ weights ``weights`` (n).
     subject to  p_world_end(q) - p_goal = 0            (3)  position, i.e. the target at
                                                             (0, 0, Z) in the end frame
                 x_goal . z_end(q) = 0,  y_goal . z_end(q) = 0   (2)  z axis on the goal's
-                up . x_end(q) = 0                      (1)  level: x axis perpendicular to up
+                u . x_end(q) = 0                       (1)  level: x axis perpendicular to up
                 lower <= q <= upper                         joint limits (and step bound)
+
+with ``u = up - (up . z_goal) z_goal``, the part of ``up`` across the goal's z axis. Where
+the z axis is met, ``u . x_end = up . x_end`` (``x_end`` is perpendicular to ``z_end``), so
+this is the level condition itself; written with ``u`` it stays well posed when the goal
+looks straight along ``up`` (camera looking down at the table): then every turn about z
+is level, the row vanishes, and the turn goes to the smallest-move objective.
 
 ``z_end = z_goal`` rather than ``-z_goal`` is checked by the angle error, not by the
 equations; starting from the previous joints the solver stays on the right side. A 6R
@@ -57,12 +63,13 @@ def constraint_expressions(T_world_end, goal, up):
     """The six equality constraints of ``T_world_end`` against ``goal`` (12-vector) and ``up``.
 
     Rows: position difference [m] (3), ``x_goal . z_end``, ``y_goal . z_end``,
-    ``up . x_end`` (dimensionless).
+    ``(up - (up . z_goal) z_goal) . x_end`` (dimensionless).
     """
     p_end, x_end, z_end = T_world_end[:3, 3], T_world_end[:3, 0], T_world_end[:3, 2]
-    p_goal, x_goal, y_goal = goal[0:3], goal[3:6], goal[6:9]
+    p_goal, x_goal, y_goal, z_goal = goal[0:3], goal[3:6], goal[6:9], goal[9:12]
+    across = up - ca.dot(up, z_goal) * z_goal
     return ca.vertcat(p_end - p_goal, ca.dot(x_goal, z_end), ca.dot(y_goal, z_end),
-                      ca.dot(up, x_end))
+                      ca.dot(across, x_end))
 
 
 def error_expressions(T_world_end, goal, up):
