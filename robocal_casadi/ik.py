@@ -267,7 +267,8 @@ class InverseKinematics:
         target = np.asarray(target, dtype=float)
         if self.mode == "point":
             if target.shape != (3,):
-                raise InputError(f"point IK target must be a position (3,), got shape {target.shape}")
+                raise InputError("point IK target must be a position (3,), got shape "
+                                 f"{target.shape}")
             if orientation is None:
                 return target, np.eye(3), 0.0, False
             return target, np.asarray(orientation, dtype=float).reshape(3, 3), float(
@@ -404,7 +405,8 @@ def _levenberg_marquardt(evaluate, q0, lower, upper, max_iterations: int,
     for iteration in range(1, max_iterations + 1):
         if math.sqrt(cost) <= stop:
             return q, iteration - 1, "converged"
-        if len(history) > STALL_WINDOW and cost > (1.0 - STALL_DECREASE) * history[-STALL_WINDOW - 1]:
+        earlier = history[-STALL_WINDOW - 1] if len(history) > STALL_WINDOW else math.inf
+        if cost > (1.0 - STALL_DECREASE) * earlier:
             return q, iteration - 1, "stalled in a local minimum"
         gradient = J.T @ r
         held = ((q <= lower) & (gradient > 0)) | ((q >= upper) & (gradient < 0))

@@ -248,7 +248,7 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
     return TrueEffects(compliance, cyclic, scale, thermal)  # type: ignore[arg-type]
 
 
-# ----------------------------------------------------------------------------- the true robot at work
+# ----------------------------------------------------------------------------- the true robot
 
 
 class TrueRobot:
@@ -286,7 +286,8 @@ class TrueRobot:
                 dq[:, j - 1] -= c * torques[:, j - 1]
         for j, (a1, b1, a2, b2) in e.cyclic.items():
             q = Q_read[:, j - 1]
-            dq[:, j - 1] += a1 * np.sin(q) + b1 * np.cos(q) + a2 * np.sin(2 * q) + b2 * np.cos(2 * q)
+            dq[:, j - 1] += (a1 * np.sin(q) + b1 * np.cos(q)
+                             + a2 * np.sin(2 * q) + b2 * np.cos(2 * q))
         for j, s in e.scale.items():
             dq[:, j - 1] += s * Q_read[:, j - 1]
         return dq
@@ -462,7 +463,8 @@ class _Setup:
         return lower + inset, upper - inset
 
     def within_limits(self, q: np.ndarray) -> bool:
-        return bool(np.all(q >= self.nominal.lower_limits) and np.all(q <= self.nominal.upper_limits))
+        robot = self.nominal
+        return bool(np.all(q >= robot.lower_limits) and np.all(q <= robot.upper_limits))
 
 
 @dataclass
