@@ -18,6 +18,8 @@ from robocal_casadi.identifiability import analyse
 
 from .rows import Block
 
+NEGLIGIBLE = 1e-7  # relative column norm counted as no effect
+
 
 
 class Information:
@@ -29,6 +31,11 @@ class Information:
         n_par = len(parameters)
         full = np.array([b.X.T @ b.X for b in blocks])  # C x n x n
         X = np.vstack([b.X for b in blocks])
+        # Touches reach their sockets to the IK tolerance (1e-9 m) only, so a column that
+        # the local socket unknowns absorb keeps a remainder of that order: treat columns
+        # below NEGLIGIBLE of the largest as changing nothing.
+        norms = np.linalg.norm(X[:, :n_par], axis=0)
+        X[:, :n_par][:, norms < NEGLIGIBLE * norms.max()] = 0.0
         shared_names = tuple(f"placement_{k}" for k in range(shared))
         judged = analyse(X, parameters + shared_names, range(n_par),
                          range(n_par, n_par + shared),
