@@ -38,7 +38,7 @@ from .errors import InputError, SolverError
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order
 FLANGE_AXES = np.vstack([np.eye(3), -np.eye(3)])  # fallback direction candidates
-RETRY_RATIO = 0.01  # start RMS / radius above which the flange axes are tried as well
+RETRY_RATIO = 0.01  # start RMS / radius above which the next round of starts is tried
 START_ITERATIONS = 6  # LM steps given to each start before the best one is kept
 IPOPT_ACCEPTED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
 
@@ -212,8 +212,13 @@ def _step(origin, direction, centre, delta):
 
 
 def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iterations: int,
-                         tolerance: float = 1e-10):
-    """Marquardt-scaled LM; returns ``(origin, direction, centre, iterations, status)``."""
+                         gradient_tolerance: float = 1e-8, step_tolerance: float = 1e-12):
+    """Marquardt-scaled LM; returns ``(origin, direction, centre, iterations, status)``.
+
+    Converged when every column of ``J`` is orthogonal to ``r`` within
+    ``gradient_tolerance`` (cosine, as MINPACK's ``gtol``), or when an accepted step
+    changes the residual by less than ``step_tolerance`` of its norm.
+    """
     damping = 1e-3
     r, J = scan.residual_and_jacobian(origin, direction, centre, tangent_basis(direction))
     cost = r @ r
@@ -223,7 +228,10 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
         A = J.T @ J
         g = J.T @ r
         diag = np.maximum(np.diag(A), 1e-300)
-        improved = small = flat = False
+        if np.max(np.abs(g) / np.sqrt(diag)) <= gradient_tolerance * np.sqrt(cost):
+            status, iteration = "converged", iteration - 1
+            break
+        improved = small = False
         for _ in range(30):
             try:
                 delta = np.linalg.solve(A + damping * np.diag(diag), -g)
@@ -235,17 +243,16 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
             cost_new = r_new @ r_new
             if np.isfinite(cost_new) and cost_new <= cost:
                 origin, direction, centre = trial
-                small = np.sqrt(diag) @ np.abs(delta) <= tolerance * (np.sqrt(cost) + tolerance)
-                flat = cost - cost_new <= 1e-14 * cost
+                small = np.sqrt(diag) @ np.abs(delta) <= step_tolerance * np.sqrt(cost)
                 r, J, cost = r_new, J_new, cost_new
                 damping = max(damping / 5.0, 1e-12)
                 improved = True
                 break
             damping *= 10.0
         if not improved:
-            status = "converged" if damping > 1e10 else "stalled"
+            status = "stalled"
             break
-        if small or flat:
+        if small:
             status = "converged"
             break
     return origin, direction, centre, iteration, status
@@ -351,18 +358,21 @@ def algebraic_start(scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def initial_values(scan: Scan, origin_guess=None, direction_guess=None, centre_guess=None):
     """A start ``(origin, direction, centre)`` without user help.
 
-    Starts: ``algebraic_start`` and, where the user gave guesses, the guesses (``p0`` at
-    the flange origin and the centre from ``sphere_centre`` where not given). Each gets
-    a few LM steps and the lowest cost wins. If that start still leaves an RMS above
-    ``RETRY_RATIO`` times the radius, the six flange axes are tried as directions too.
+    Starts, each given a few LM steps, tried in turn until one leaves an RMS below
+    ``RETRY_RATIO`` times the radius (the lowest cost is kept in any case):
+    ``algebraic_start``; the user's guesses where given (``p0`` at the flange origin and
+    the centre from ``sphere_centre`` where not given); the six flange axes as directions.
     """
-    starts = [algebraic_start(scan)]
-    if origin_guess is not None or direction_guess is not None or centre_guess is not None:
-        starts.append(_guessed(scan, origin_guess, direction_guess, centre_guess))
-    best = _best_start(scan, starts)
-    if np.sqrt(best[0] / len(scan)) > RETRY_RATIO * scan.radius:
-        best = min(best, _best_start(scan, [_guessed(scan, origin_guess, axis, centre_guess)
-                                            for axis in FLANGE_AXES]), key=lambda b: b[0])
+    guessed = origin_guess is not None or direction_guess is not None or centre_guess is not None
+    rounds = [lambda: [algebraic_start(scan)],
+              lambda: [_guessed(scan, origin_guess, direction_guess, centre_guess)] if guessed
+              else [],
+              lambda: [_guessed(scan, origin_guess, axis, centre_guess) for axis in FLANGE_AXES]]
+    best = (np.inf, None)
+    for starts in rounds:
+        best = min(best, _best_start(scan, starts()), key=lambda b: b[0])
+        if np.sqrt(best[0] / len(scan)) <= RETRY_RATIO * scan.radius:
+            break
     return best[1]
 
 
@@ -376,15 +386,16 @@ def _guessed(scan: Scan, origin_guess, direction_guess, centre_guess):
 
 
 def _best_start(scan: Scan, starts):
-    best = None
+    """``(cost, (origin, direction, centre))`` of the best start after a few LM steps."""
+    best = (np.inf, None)
     for origin, n, c in starts:
         if not (np.all(np.isfinite(origin)) and np.all(np.isfinite(c))):
             continue
         trial = _levenberg_marquardt(scan, origin, n, c, max_iterations=START_ITERATIONS)
         cost = float(np.sum(scan.residuals(*trial[:3]) ** 2))
-        if np.isfinite(cost) and (best is None or cost < best[0]):
+        if np.isfinite(cost) and cost < best[0]:
             best = (cost, trial[:3])
-    return best if best is not None else (np.inf, starts[0])
+    return best
 
 
 def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,

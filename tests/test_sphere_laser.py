@@ -275,6 +275,21 @@ def test_a_wrong_guess_does_not_mislead():
     np.testing.assert_allclose(fit.centre, c, atol=2e-5)
 
 
+def test_fallback_starts_recover_when_the_closed_form_start_is_useless(monkeypatch):
+    """Guesses, then the six flange axes, take over from a failed closed-form start."""
+    import robocal_casadi.sphere_fit as sphere_fit
+
+    useless = (np.full(3, 5.0), np.array([1.0, 0.0, 0.0]), np.full(3, -5.0))
+    monkeypatch.setattr(sphere_fit, "algebraic_start", lambda scan: useless)
+    rng = np.random.default_rng(8)
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(rng, 300, p0, n, c)
+    for guesses in ({}, {"direction_guess": [0.0, 0.1, 1.0], "origin_guess": [0.05, 0, 0.1]}):
+        fit = fit_sensor(poses, distance, RADIUS, **guesses)
+        np.testing.assert_allclose(fit.origin, p0, atol=4 * fit.origin_std.max())
+        np.testing.assert_allclose(fit.centre, c, atol=4 * fit.centre_std.max())
+
+
 # ----------------------------------------------------------------------------- identifiability
 
 
