@@ -482,3 +482,35 @@ def test_cli_refuses_a_bad_observation_cell(tmp_path, capsys):
     error = capsys.readouterr().err
     assert "observations.csv" in error and "line 3" in error and "yaw" in error
     assert not out.exists()
+
+
+def test_cli_row_out_of_reach_keeps_the_last_safe_joints(tmp_path):
+    path = lissajous_joints("industrial_6r", 6)
+    job, _ = write_job(tmp_path, industrial_6r(), path)
+    header, table = read_csv(tmp_path / "observations.csv")
+    table[3][header.index("z")] = "5000.0"  # 5 m in front of the camera
+    with open(tmp_path / "observations.csv", "w", newline="") as handle:
+        csv.writer(handle).writerows([header, *table])
+    out = tmp_path / "joints.csv"
+    assert main(["track", str(job), "--out", str(out)]) == 0
+    _, rows = read_csv(out)
+    assert [r[7] for r in rows] == ["ok", "ok", "ok", "unreachable", "ok", "ok"]
+    assert rows[3][1:7] == rows[2][1:7]
+
+
+def test_cli_max_step_in_job_units(tmp_path):
+    robot = industrial_6r()
+    start = START["industrial_6r"]
+    level = Tracker(robot, CAMERA, STANDOFF).step(
+        start, observation_for(robot, start, nominal_pose(robot, start))).q
+    path = level + 0.002 * np.arange(4)[:, None]
+    path[2:] -= 0.2  # a jump of 0.2 rad = 11.5 deg on every joint at row 2
+    job, _ = write_job(tmp_path, robot, path)
+    out = tmp_path / "joints.csv"
+    assert main(["track", str(job), "--out", str(out), "--max-step", "5"]) == 0
+    _, rows = read_csv(out)
+    assert [r[7] for r in rows][:3] == ["ok", "ok", "unreachable"]
+    assert rows[2][1:7] == rows[1][1:7]
+    assert main(["track", str(job), "--out", str(out), "--max-step", "30"]) == 0
+    _, rows = read_csv(out)
+    assert [r[7] for r in rows] == ["ok"] * 4

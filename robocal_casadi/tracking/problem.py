@@ -152,10 +152,10 @@ class TrackingProblem:
         """One Gauss-Newton SQP step with some joints held, in closed form.
 
         ``(q, q_previous, goal, up, p, weights, free, multipliers_previous) -> (dq,
-        multipliers, multiplier_test, position_error, angle_error)``. ``free`` is 1 for a joint that may move and 0 for
-        one held at a bound. With ``W = diag(weights)``, ``g = W (q - q_previous)``,
-        ``J = dc/dq`` and ``M = diag(free / weights)``, the equality QP
-        ``min 1/2 dq' W dq + g' dq  s.t.  J dq = -c, dq_held = 0`` has
+        multipliers, multiplier_test, position_error, angle_error)``. ``free`` is 1 for a
+        joint that may move and 0 for one held at a bound. With ``W = diag(weights)``,
+        ``g = W (q - q_previous)``, ``J = dc/dq`` and ``M = diag(free / weights)``, the
+        equality QP ``min 1/2 dq' W dq + g' dq  s.t.  J dq = -c, dq_held = 0`` has
 
             (J M J' + eps I) lambda = c - J M g + eps lambda_previous,
             dq = -M (g + J' lambda)
@@ -186,12 +186,14 @@ class TrackingProblem:
 
     @cached_property
     def compiled_step(self) -> ca.Function:
-        """``step`` as machine code (``codegen.compiled``; ``step`` itself without a compiler)."""
+        """``step`` as machine code (``codegen.compiled``; ``step`` itself without a
+        compiler)."""
         return compiled(self.step)
 
     @cached_property
     def compiled_goal(self) -> ca.Function:
-        """``goal`` as machine code (``codegen.compiled``; ``goal`` itself without a compiler)."""
+        """``goal`` as machine code (``codegen.compiled``; ``goal`` itself without a
+        compiler)."""
         return compiled(self.goal)
 
     @cached_property

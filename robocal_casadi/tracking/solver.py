@@ -64,9 +64,11 @@ class GaussNewtonSolver:
     Built once per (problem, robot parameters ``p``, ``up``, ``weights``); ``solve`` then
     allocates nothing in CasADi. ``compiled`` uses the step function as machine code
     (``codegen.compiled``: generated C, compiled once and cached on disk; the
-    interpreted function where no C compiler is found). Each iteration: one evaluation of the step function at
-    the current joints, the step shortened to ``LONGEST_STEP``, joints leaving their bounds
-    clipped and held, held joints with a wrong-signed multiplier let go.
+    interpreted function where no C compiler is found). Each iteration: one evaluation
+    of the step function at the current joints, the step shortened to ``LONGEST_STEP``,
+    joints leaving their bounds clipped and held, held joints with a wrong-signed
+    multiplier let go. The multipliers of one iteration are the proximal centre of the
+    next (``TrackingProblem.step``).
     """
 
     def __init__(self, problem: TrackingProblem, p: np.ndarray, up: np.ndarray,

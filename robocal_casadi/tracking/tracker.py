@@ -104,18 +104,23 @@ class Tracker:
     ``robot`` the arm (at least 6 joints); ``camera_xyz`` [m] the camera origin in the end
     frame (axes parallel to it); ``standoff`` Z [m] > 0, the target is held at
     ``(0, 0, Z)`` in the end frame; ``up`` the worktable normal in the world frame
-    (normalised here); ``max_step`` the largest joint move per cycle [rad or m], None for
-    none (one value or one per joint); ``p`` the geometric parameter vector (``ParameterRegistry`` order, SI; default
-    the robot's own); ``weights`` (n) the weights of the smallest-move objective (default
-    1); ``method`` the NLP solver: ``gauss_newton`` (real-time), ``sqpmethod`` or ``ipopt``
-    (references); ``qpsol`` the QP solver of ``sqpmethod`` (``qrqp`` or ``qpoases``);
-    ``compiled`` runs the per-cycle CasADi functions as machine code
-    (compiled once per robot structure and cached on disk, see ``codegen``); ``problem``
-    a ``TrackingProblem`` of the same robot structure to share.
+    (normalised here); ``max_step`` the largest joint move per cycle [rad or m], one value
+    or one per joint, None for none; ``p`` the geometric parameter vector
+    (``ParameterRegistry`` order, SI; default the robot's own); ``weights`` (n) the
+    weights of the smallest-move objective (default 1); ``method`` the NLP solver:
+    ``gauss_newton`` (real-time), ``sqpmethod`` or ``ipopt`` (references); ``qpsol`` the
+    QP solver of ``sqpmethod`` (``qrqp`` or ``qpoases``); ``compiled`` runs the per-cycle
+    CasADi functions as machine code (compiled once per robot structure and cached on
+    disk, see ``codegen``); ``problem`` a ``TrackingProblem`` of the same robot structure
+    to share.
 
-    >>> tracker = Tracker(robot, camera_xyz=[0.05, 0, 0.02], standoff=0.3)
-    >>> step = tracker.step(q_capture, [x, y, z, roll, pitch, yaw])
-    >>> if step.ok: command(step.q)
+    In a control loop::
+
+        tracker = Tracker(robot, camera_xyz=[0.05, 0, 0.02], standoff=0.3)
+        while running:
+            step = tracker.step(q_capture, [x, y, z, roll, pitch, yaw])
+            if step.ok:
+                command(step.q)
     """
 
     def __init__(self, robot: Robot, camera_xyz: Sequence[float], standoff: float,
