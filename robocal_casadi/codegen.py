@@ -43,7 +43,9 @@ class CompilationWarning(UserWarning):
 def cache_folder() -> Path:
     """Where compiled libraries live: ``$ROBOCAL_CACHE`` or ``~/.cache/robocal_casadi``."""
     configured = os.environ.get("ROBOCAL_CACHE")
-    return Path(configured).expanduser() if configured else Path.home() / ".cache" / "robocal_casadi"
+    if configured:
+        return Path(configured).expanduser()
+    return Path.home() / ".cache" / "robocal_casadi"
 
 
 def compiler() -> str | None:
@@ -129,7 +131,8 @@ def _short(error: BaseException) -> str:
 # ----------------------------------------------------------------------------- batches
 
 
-def hoisted_map(function: ca.Function, count: int, per_row: tuple[str, ...] = ("q",)) -> ca.Function:
+def hoisted_map(function: ca.Function, count: int,
+                per_row: tuple[str, ...] = ("q",)) -> ca.Function:
     """``function`` over ``count`` rows, its shared-only subexpressions computed once.
 
     Inputs named in ``per_row`` take ``count`` columns (one per row); the others are
@@ -192,7 +195,8 @@ class BatchFunction:
 
     def __call__(self, *inputs) -> tuple[np.ndarray, ...]:
         if len(inputs) != len(self.in_shapes):
-            raise ValueError(f"{self.name}: expected {len(self.in_shapes)} inputs, got {len(inputs)}")
+            raise ValueError(f"{self.name}: expected {len(self.in_shapes)} inputs, "
+                             f"got {len(inputs)}")
         arrays, count = [], None
         for value, (rows, columns), varying in zip(inputs, self.in_shapes, self.per_row):
             value = np.asarray(value, dtype=float)

@@ -4,7 +4,8 @@ Every DH link transform splits into a fixed part, the joint motion along or abou
 axis, and another fixed part (CONTRACT.md conventions)::
 
     standard DH   T(i-1,i) = Jz(q_i) . [Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)]
-    modified DH   T(i-1,i) = [Rx(alpha_{i-1}) Tx(a_{i-1})] . Jz(q_i) . [Rz(theta_i) Tz(d_i) Ry(beta_i)]
+    modified DH   T(i-1,i) = [Rx(alpha_{i-1}) Tx(a_{i-1})] . Jz(q_i)
+                             . [Rz(theta_i) Tz(d_i) Ry(beta_i)]
 
 with ``Jz`` a rotation about z (revolute, the reading adds to theta) or a translation
 along z (prismatic, the reading adds to d; ``Tz`` commutes with ``Rz``). Writing
@@ -170,8 +171,8 @@ def urdf_text(robot: Robot) -> str:
     (DH frame i, carrying the link's point mass at ``com``), ``tool``. Lengths [m],
     angles [rad]. URDF has no gravity: ``robot.gravity`` is not exported.
     """
-    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>", '  <link name="world"/>',
-             '  <link name="frame_0"/>',
+    lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
+             '  <link name="world"/>', '  <link name="frame_0"/>',
              '  <joint name="base_joint" type="fixed"><parent link="world"/><child link="frame_0"/>'
              f"{_origin(robot.base.matrix())}</joint>"]
     for i, (joint, (A, B)) in enumerate(zip(robot.joints, link_parts(robot)), start=1):

@@ -46,7 +46,9 @@ def casadi_joint_frames(kinematics: Kinematics, p: np.ndarray, q: np.ndarray) ->
 @pytest.mark.parametrize("perturb", [False, True], ids=["nominal", "perturbed"])
 def test_frames_agree_with_pinocchio(any_robot, samples, perturb):
     kinematics = Kinematics(any_robot)
-    p = perturbed_parameters(kinematics, np.random.default_rng(1)) if perturb else kinematics.nominal
+    p = kinematics.nominal
+    if perturb:
+        p = perturbed_parameters(kinematics, np.random.default_rng(1))
     Q = samples(any_robot)
     reference = pinocchio_frames(kinematics, p, Q)
     n = kinematics.dof
@@ -105,7 +107,8 @@ def test_point_jacobians_agree_with_finite_differences(any_robot, samples):
         return np.asarray(kinematics.point(q, p, o)).ravel()
 
     for q in samples(any_robot, count=6, seed=3):
-        position, J_p, J_q, J_offset = (np.asarray(v) for v in kinematics.point_jacobians(q, p, offset))
+        position, J_p, J_q, J_offset = (np.asarray(v)
+                                        for v in kinematics.point_jacobians(q, p, offset))
         np.testing.assert_allclose(position.ravel(), point(q, p, offset), rtol=0, atol=1e-15)
         np.testing.assert_allclose(J_p, central_difference(lambda x: point(q, x, offset), p),
                                    rtol=0, atol=FD_TOLERANCE)
@@ -115,7 +118,8 @@ def test_point_jacobians_agree_with_finite_differences(any_robot, samples):
                                    rtol=0, atol=FD_TOLERANCE)
 
 
-def rotation_rate(R_plus: np.ndarray, R_minus: np.ndarray, R: np.ndarray, step: float) -> np.ndarray:
+def rotation_rate(R_plus: np.ndarray, R_minus: np.ndarray, R: np.ndarray,
+                  step: float) -> np.ndarray:
     """World angular velocity from a central difference of a rotation: (dR/dq) R^T as a vector."""
     W = (R_plus - R_minus) / (2 * step) @ R.T
     return np.array([W[2, 1], W[0, 2], W[1, 0]])

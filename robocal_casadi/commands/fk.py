@@ -58,7 +58,7 @@ def calibrated_robot(folder: Path, nominal: Robot, nominal_path: Path) -> Robot:
 
 
 def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
-    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7) in the robot's file units for readings ``Q`` [SI]."""
+    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7), robot file units, for readings ``Q`` [SI]."""
     poses = Kinematics(robot).tool_poses(Q)
     rows = np.empty((len(Q), 7))
     rows[:, :3] = poses[:, :3, 3] / robot.units.length_scale
