@@ -40,7 +40,8 @@ PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknow
 FLANGE_AXES = np.vstack([np.eye(3), -np.eye(3)])  # fallback direction candidates
 RETRY_RATIO = 0.01  # start RMS / radius above which the next round of starts is tried
 START_ITERATIONS = 6  # LM steps given to each start before the best one is kept
-IPOPT_ACCEPTED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
+IPOPT_ACCEPTED = ("Solve_Succeeded", "Solved_To_Acceptable_Level",
+                  "Search_Direction_Becomes_Too_Small")  # the last: at the noise floor
 
 
 @dataclass(frozen=True)
@@ -356,7 +357,7 @@ def algebraic_start(scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def initial_values(scan: Scan, origin_guess=None, direction_guess=None, centre_guess=None):
-    """A start ``(origin, direction, centre)`` without user help.
+    """A start ``(origin, direction, centre)`` without user help, and the LM steps spent.
 
     Starts, each given a few LM steps, tried in turn until one leaves an RMS below
     ``RETRY_RATIO`` times the radius (the lowest cost is kept in any case):
@@ -368,12 +369,12 @@ def initial_values(scan: Scan, origin_guess=None, direction_guess=None, centre_g
               lambda: [_guessed(scan, origin_guess, direction_guess, centre_guess)] if guessed
               else [],
               lambda: [_guessed(scan, origin_guess, axis, centre_guess) for axis in FLANGE_AXES]]
-    best = (np.inf, None)
+    best: tuple = (np.inf, None, 0)
     for starts in rounds:
         best = min(best, _best_start(scan, starts()), key=lambda b: b[0])
         if np.sqrt(best[0] / len(scan)) <= RETRY_RATIO * scan.radius:
             break
-    return best[1]
+    return best[1], best[2]
 
 
 def _guessed(scan: Scan, origin_guess, direction_guess, centre_guess):
@@ -386,15 +387,15 @@ def _guessed(scan: Scan, origin_guess, direction_guess, centre_guess):
 
 
 def _best_start(scan: Scan, starts):
-    """``(cost, (origin, direction, centre))`` of the best start after a few LM steps."""
-    best = (np.inf, None)
+    """``(cost, (origin, direction, centre), steps)`` of the best start after a few LM steps."""
+    best: tuple = (np.inf, None, 0)
     for origin, n, c in starts:
         if not (np.all(np.isfinite(origin)) and np.all(np.isfinite(c))):
             continue
         trial = _levenberg_marquardt(scan, origin, n, c, max_iterations=START_ITERATIONS)
         cost = float(np.sum(scan.residuals(*trial[:3]) ** 2))
         if np.isfinite(cost) and cost < best[0]:
-            best = (cost, trial[:3])
+            best = (cost, trial[:3], trial[3])
     return best
 
 
@@ -408,7 +409,9 @@ def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
     the flange frame, ``centre_guess`` [m] in the base frame); without them the start is
     closed-form (``initial_values``).
     ``method`` is ``"lm"`` (closed-form Jacobian, fastest) or ``"ipopt"`` (CasADi, exact
-    derivatives, ``|n| = 1`` as a constraint).
+    derivatives, ``|n| = 1`` as a constraint); both continue from the same start, which
+    has already taken a few LM steps (``initial_values``). ``iterations`` counts the LM
+    steps from the start on, or IPOPT's own iterations.
 
     Raises ``InputError`` when the scan cannot separate ``p0`` from ``c`` (see
     ``check_identifiable``), ``SolverError`` when the solver fails.
@@ -416,10 +419,12 @@ def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
     scan = _check_inputs(flange_poses, distance, radius)
     if method not in ("lm", "ipopt"):
         raise InputError(f"method must be 'lm' or 'ipopt', got {method!r}")
-    origin, direction, centre = initial_values(scan, origin_guess, direction_guess, centre_guess)
+    (origin, direction, centre), steps = initial_values(scan, origin_guess, direction_guess,
+                                                        centre_guess)
     if method == "lm":
         origin, direction, centre, iterations, status = _levenberg_marquardt(
             scan, origin, direction, centre, max_iterations=max_iterations)
+        iterations += steps  # the start's steps belong to the same descent
     else:
         origin, direction, centre, iterations, status = _ipopt(scan, origin, direction, centre)
     return summarise(scan, origin, direction, centre, iterations=iterations, status=status,

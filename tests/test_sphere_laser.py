@@ -143,7 +143,7 @@ def patent_scan():
     return poses, distance, incidence
 
 
-# ----------------------------------------------------------------------------- residual and Jacobian
+# ---------------------------------------------------------------------- residual and Jacobian
 
 
 def test_residuals_match_a_plain_loop(patent_scan):
@@ -246,7 +246,7 @@ def test_sensor_fit_repr_reads_in_millimetres(patent_scan):
     assert "mm" in text and "residual_rms=" in text and "status=" in text
 
 
-# ----------------------------------------------------------------------------- any direction, no guess
+# ---------------------------------------------------------------------- any direction, no guess
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -487,9 +487,9 @@ def joint_scan(folder: Path, rng, count: int = 300):
     """A joint-reading sphere_laser dataset of ``industrial_6r`` from a perturbed truth.
 
     Returns the dataset path, the truth (robot parameters by name [SI], ``p0``, ``n``,
-    ``c``) and the cosines of incidence. Flange targets tilt up to 25 deg about a home pose and spin up to 60 deg about
-    the beam; the readings are the distances where the TRUE robot's beam meets the
-    sphere (ray-sphere intersection), plus noise.
+    ``c``) and the cosines of incidence. Flange targets tilt up to 25 deg about a home
+    pose and spin up to 60 deg about the beam; the readings are the distances where the
+    TRUE robot's beam meets the sphere (ray-sphere intersection), plus noise.
     """
     robot = examples.industrial_6r()
     names = ("theta", "d", "a", "alpha")
@@ -505,7 +505,8 @@ def joint_scan(folder: Path, rng, count: int = 300):
     centre = T[:3, :3] @ p0 + T[:3, 3] + RADIUS * beam
     Q, distance, incidence = np.empty((count, 6)), np.empty(count), np.empty(count)
     for i in range(count):
-        tilt = rodrigues(np.cross(beam, rng.normal(size=3)), math.radians(25) * math.sqrt(rng.uniform()))
+        tilt = rodrigues(np.cross(beam, rng.normal(size=3)),
+                         math.radians(25) * math.sqrt(rng.uniform()))
         R = tilt @ T[:3, :3] @ rodrigues(n, math.radians(rng.uniform(-60, 60)))
         d = R @ n
         while True:
