@@ -560,3 +560,31 @@ def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
     assert result.fit.rms_nominal > 10 * result.fit.rms_geometric
     floor = noise_floor(incidence, unknowns=result.solver["free_unknowns"])
     assert abs(result.fit.rms_geometric - floor) <= 0.1 * floor
+
+
+def test_joint_model_jacobian_through_the_problem_matches_finite_differences(tmp_path):
+    from robocal_casadi.identification import Problem, models_for
+    from robocal_casadi.kinematics import Kinematics
+
+    path, truth, p0, n, centre, _ = joint_scan(tmp_path, np.random.default_rng(9), count=30)
+    dataset = load_dataset(path)
+    problem = Problem(dataset.robot, models_for([dataset]))
+    x = problem.initial()
+    x[problem.unknowns.indices(["laser_nx", "laser_ny", "laser_nz"])] *= 1.3  # off the gauge
+    J = problem.jacobian(x)
+    h = 1e-7
+    numeric = np.column_stack([(problem.residual(x + h * e) - problem.residual(x - h * e))
+                               / (2 * h) for e in np.eye(len(x))])
+    np.testing.assert_allclose(J, numeric, rtol=1e-5, atol=1e-7)
+    assert problem.residual(x)[-1] == pytest.approx(0.3, abs=1e-12)  # the |v| = 1 row
+
+    # consistent data: the beam of every reading ends on the sphere for these unknowns
+    model = problem.models[0]
+    mounted = x[problem.mounted_indices(model)]
+    placement = x[problem.placement_indices(model)]
+    kinematics = Kinematics(dataset.robot)
+    consistent = model.consistent_dataset(kinematics, kinematics.nominal, mounted, placement)
+    poses = kinematics.flange_poses(dataset.joints)
+    origin, direction = mounted[:3], mounted[3:] / np.linalg.norm(mounted[3:])
+    residual = surface_residuals(poses, consistent.distance, RADIUS, origin, direction, placement)
+    assert np.max(np.abs(residual)) < 1e-12
