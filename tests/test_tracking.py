@@ -355,6 +355,8 @@ def test_track_step_is_frozen_and_readable(trackers):
     step = tracker.step(q0, observation_for(problem.robot, q0, nominal_pose(problem.robot, q0)))
     with pytest.raises(dataclasses.FrozenInstanceError):
         step.status = "failed"  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        step.q[0] = 1.0  # the answer cannot be changed behind the tracker's back
     assert "status='ok'" in repr(step) and "solve_ms" in repr(step)
 
 

@@ -36,8 +36,8 @@ METHODS = ("gauss_newton", "sqpmethod", "ipopt")
 class TrackStep:
     """One cycle's answer.
 
-    ``q`` (n) the joints to command [rad or m], SI; the last safe joints when ``status``
-    is not ``ok``. ``status`` is ``ok``, ``unreachable`` (no solution within the joint
+    ``q`` (n, read-only) the joints to command [rad or m], SI; the last safe joints when
+    ``status`` is not ``ok``. ``status`` is ``ok``, ``unreachable`` (no solution within the joint
     limits and the step bound near the previous joints) or ``failed`` (the solver gave no
     verified answer, or the observation was not finite). ``solve_ms`` [ms] is the whole
     cycle (goal, solve, verification). ``constraint_error`` is the larger of
@@ -203,7 +203,11 @@ class Tracker:
 
     def reset(self, q: Sequence[float] | None = None) -> None:
         """Forget the history; the next step starts from ``q`` (default: its capture joints)."""
-        self._previous = None if q is None else _vector(q, self.robot.dof, "q").copy()
+        if q is None:
+            self._previous = None
+            return
+        self._previous = _vector(q, self.robot.dof, "q").copy()
+        self._previous.setflags(write=False)
 
     # ------------------------------------------------------------------ one cycle
 
@@ -237,6 +241,7 @@ class Tracker:
             if not np.isfinite(q_capture).all():
                 raise InputError("the first capture joints must be finite", where="q_capture")
             self._previous = np.minimum(np.maximum(q_capture, self.lower), self.upper)
+            self._previous.setflags(write=False)
         previous = self._previous
         if not finite:
             return self._refuse("failed", start)
@@ -260,18 +265,18 @@ class Tracker:
         if verified:
             np.maximum(q, lower, out=q)
             np.minimum(q, upper, out=q)
+            q.setflags(write=False)  # shared by the answer and the tracker's memory
             self._previous = q
             status = "ok"
         else:
             status = "unreachable" if outcome.infeasible else "failed"
-            q = previous.copy()
+            q = previous
         return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
                          position_error, angle_error, outcome.iterations)
 
     def _refuse(self, status: str, start: float) -> TrackStep:
-        previous = self._previous if self._previous is not None else np.full(self.robot.dof,
-                                                                             np.nan)
-        return TrackStep(previous.copy(), status, (time.perf_counter() - start) * 1e3,
+        assert self._previous is not None  # set by ``step`` before any refusal
+        return TrackStep(self._previous, status, (time.perf_counter() - start) * 1e3,
                          math.nan)
 
     def _nearest_turn(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
