@@ -39,6 +39,7 @@ DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which 
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order
 FLANGE_AXES = np.vstack([np.eye(3), -np.eye(3)])  # fallback direction candidates
 RETRY_RATIO = 0.01  # start RMS / radius above which the next round of starts is tried
+EXACT_FIT = 1e-13  # [m] RMS residual at rounding level: the data are fitted exactly
 START_ITERATIONS = 6  # LM steps given to each start before the best one is kept
 IPOPT_ACCEPTED = ("Solve_Succeeded", "Solved_To_Acceptable_Level",
                   "Search_Direction_Becomes_Too_Small")  # the last: at the noise floor
@@ -217,8 +218,9 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
     """Marquardt-scaled LM; returns ``(origin, direction, centre, iterations, status)``.
 
     Converged when every column of ``J`` is orthogonal to ``r`` within
-    ``gradient_tolerance`` (cosine, as MINPACK's ``gtol``), or when an accepted step
-    changes the residual by less than ``step_tolerance`` of its norm.
+    ``gradient_tolerance`` (cosine, as MINPACK's ``gtol``), when the RMS residual is below
+    ``EXACT_FIT`` (noise-free data), or when an accepted step changes the residual by less
+    than ``step_tolerance`` of its norm.
     """
     damping = 1e-3
     r, J = scan.residual_and_jacobian(origin, direction, centre, tangent_basis(direction))
@@ -229,7 +231,8 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
         A = J.T @ J
         g = J.T @ r
         diag = np.maximum(np.diag(A), 1e-300)
-        if np.max(np.abs(g) / np.sqrt(diag)) <= gradient_tolerance * np.sqrt(cost):
+        if (np.max(np.abs(g) / np.sqrt(diag)) <= gradient_tolerance * np.sqrt(cost)
+                or cost <= len(r) * EXACT_FIT ** 2):
             status, iteration = "converged", iteration - 1
             break
         improved = small = False

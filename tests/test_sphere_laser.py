@@ -215,6 +215,17 @@ def test_patent_case_recovered_within_three_std(patent_scan, method):
                           "Search_Direction_Becomes_Too_Small")
 
 
+def test_noise_free_readings_converge_exactly():
+    """Planned (noise-free) readings: an exact fit ends at once, not at max_iterations."""
+    p0, n, c = patent_truth()
+    poses, distance, _ = tilting_scan(np.random.default_rng(0), 60, p0, n, c, noise=0.0)
+    fit = fit_sensor(poses, distance, RADIUS)
+    assert fit.status == "converged" and fit.iterations < 20
+    assert fit.residual_rms < 1e-13
+    np.testing.assert_allclose(np.concatenate([fit.origin, fit.direction, fit.centre]),
+                               np.concatenate([p0, n, c]), atol=1e-12)
+
+
 def test_lm_and_ipopt_reach_the_same_minimum(patent_scan):
     poses, distance, _ = patent_scan
     lm = fit_sensor(poses, distance, RADIUS, method="lm")
