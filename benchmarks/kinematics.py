@@ -61,8 +61,8 @@ def per_configuration(run, count: int) -> float:
 # ------------------------------------------------------------------ plain numpy DH
 
 
-def numpy_point(kinematics: Kinematics, Q: np.ndarray, p: np.ndarray, offset: np.ndarray):
-    """World position (N x 3) [m] of a flange point, vectorised over configurations."""
+def numpy_flange_pose(kinematics: Kinematics, Q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """World flange poses (N x 4 x 4) [m], vectorised over configurations."""
     robot, registry = kinematics.robot, kinematics.registry
     N = len(Q)
 
@@ -112,23 +112,21 @@ def numpy_point(kinematics: Kinematics, Q: np.ndarray, p: np.ndarray, offset: np
             L[:, 2, 2] = sa * st * sb + ca_ * cb
             L[:, 2, 3] = ca_ * d
         T = T @ L
+    return T
+
+
+def numpy_point(kinematics: Kinematics, Q: np.ndarray, p: np.ndarray, offset: np.ndarray):
+    """World position (N x 3) [m] of a flange point ``offset`` [m]."""
+    T = numpy_flange_pose(kinematics, Q, p)
     return T[:, :3, :3] @ offset + T[:, :3, 3]
 
 
 def numpy_tool_pose(kinematics: Kinematics, Q: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Tool poses (N x 4 x 4) from the numpy chain: the tool axes as three offset points."""
+    """World tool poses (N x 4 x 4) [m]: the flange poses times the tool transform."""
     registry = kinematics.registry
-    # The tool frame's origin and the tips of its unit axes, as flange points, give the pose.
     T_flange_tool = pose_from_xyz_rpy([p[registry.index(f"tool_{k}")] for k in "xyz"],
                                       [p[registry.index(f"tool_r{k}")] for k in "xyz"])
-    origin = numpy_point(kinematics, Q, p, T_flange_tool[:3, 3])
-    out = np.zeros((len(Q), 4, 4))
-    out[:, 3, 3] = 1.0
-    out[:, :3, 3] = origin
-    for k in range(3):
-        tip = numpy_point(kinematics, Q, p, T_flange_tool[:3, 3] + T_flange_tool[:3, k])
-        out[:, :3, k] = tip - origin
-    return out
+    return numpy_flange_pose(kinematics, Q, p) @ T_flange_tool
 
 
 def numpy_parameter_jacobian(kinematics, Q, p, offset) -> np.ndarray:
