@@ -210,7 +210,7 @@ def body_rows(page: _Page, table: str) -> dict[str, list[str]]:
 def full_report(tmp_path_factory) -> tuple[CalibrationResult, Path]:
     result = synthetic_result(sphere=True, bar=True)
     path = tmp_path_factory.mktemp("report") / "report.html"
-    assert write_report(result, path, pdf=True) == path
+    assert write_report(result, path) == path
     return result, path
 
 
@@ -244,8 +244,8 @@ def test_every_section_is_present(full_report):
 def test_every_image_is_a_png_with_content(full_report):
     _, path = full_report
     images = [attrs for tag, attrs in read_page(path).tags if tag == "img"]
-    # singular values, distribution, joints + order per dataset (3 fit, 1 validation), 2 effects
-    assert len(images) == 1 + 1 + 2 * 4 + 2
+    # singular values, distribution, joints + order for fit and for validation, 2 effects
+    assert len(images) == 1 + 1 + 2 * 2 + 2
     for attrs in images:
         data = base64.b64decode(attrs["src"].split(",", 1)[1], validate=True)
         assert data[:8] == b"\x89PNG\r\n\x1a\n"
@@ -365,12 +365,15 @@ def test_report_in_metres_and_radians_without_validation_or_effects(tmp_path):
     assert "sphere" not in ids
 
 
-def test_pdf_beside_the_page(full_report):
-    _, path = full_report
+def test_pdf_beside_the_page(tmp_path):
+    result = synthetic_result(validation=False, effects=False)
+    path = write_report(result, tmp_path / "report.html", pdf=True)
     pdf = path.with_suffix(".pdf").read_bytes()
     assert pdf.startswith(b"%PDF") and pdf.rstrip().endswith(b"%%EOF")
     pages = len(re.findall(rb"/Type\s*/Page\b", pdf))
-    assert pages >= 12 + 2  # every plot on its own page, and the text
+    plots = len(re.findall(r"<img\b", path.read_text(encoding="utf-8")))
+    assert plots == 4 and pages >= plots + 2  # every plot on its own page, and the text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.html", "report.pdf"]
 
 
 def test_nothing_written_when_rendering_fails(tmp_path, monkeypatch):
@@ -390,3 +393,63 @@ def test_bad_arguments(tmp_path):
         write_report(synthetic_result(), tmp_path)
     with pytest.raises(TypeError, match="CalibrationResult"):
         write_report({"fit": 1}, tmp_path / "report.html")
+
+
+# ----------------------------------------------------------------------------- with the engine
+
+
+def _engine():
+    identification = pytest.importorskip("robocal_casadi.identification")
+    simulate = pytest.importorskip("robocal_casadi.simulate")
+    return identification.calibrate, simulate.simulate
+
+
+def test_report_of_a_simulated_tracker_calibration(tmp_path):
+    """The engine on a simulated truth (6R arm, compliance on joints 2 and 3, tracker noise
+    10 um per coordinate): the report's fit RMS after calibration is the noise floor
+    sqrt(3) x 10 um, and the effect found is shown with its plot."""
+    calibrate, simulate = _engine()
+    robot = examples.industrial_6r()
+    noise = 1e-5
+    common = dict(noise=noise, geometric_errors=(3e-4, 3e-4), progress=False,
+                  effects={"joint_compliance": {2: 2e-6, 3: 2e-6}})
+    fit = simulate(robot, "tracker_points", out_dir=tmp_path / "fit", rows=150, seed=1, **common)
+    result = calibrate([fit.load()])
+    path = write_report(result, tmp_path / "report.html")
+    page = read_page(path)
+    final_fit = float(body_rows(page, "headline")["fit"][3])  # mm
+    assert final_fit == pytest.approx(np.sqrt(3) * noise * 1e3, rel=0.15)
+    assert float(body_rows(page, "headline")["fit"][1]) > 20 * final_fit
+    assert [e.name for e in result.effects] == ["joint_compliance"]
+    compliance = body_rows(page, "effect-joint_compliance")
+    for j in (2, 3):
+        assert float(compliance[f"c{j}"][1]) == pytest.approx(2e-6, rel=0.1)
+    figures = {attrs.get("id") for tag, attrs in page.tags if tag == "figure"}
+    assert {"figure-effect-joint_compliance", "figure-singular-values",
+            "figure-joints-fit"} <= figures
+
+
+def test_report_of_a_simulated_sphere_laser_calibration(tmp_path):
+    """Sphere and laser: the section shows the engine's fitted laser and sphere centre in
+    the file's units, and the distance to the sphere after calibration is at the
+    simulated laser noise (10 um)."""
+    calibrate, simulate = _engine()
+    robot = examples.industrial_6r()
+    data = simulate(robot, "sphere_laser", out_dir=tmp_path / "sphere", rows=120, seed=3,
+                    noise=1e-5, geometric_errors=(3e-4, 3e-4), progress=False)
+    result = calibrate([data.load()], diagnose=False)
+    path = write_report(result, tmp_path / "report.html")
+    page = read_page(path)
+    assert "sphere" in {attrs.get("id") for tag, attrs in page.tags if tag == "section"}
+    laser = body_rows(page, "laser")
+    for name, (value, _) in result.mounted.items():
+        scale = 1.0 if name.startswith("laser_n") else 1e-3
+        assert float(laser[name][1]) == pytest.approx(value / scale, abs=1e-4)
+    centre = next(rows for name, rows in page.tables.items() if name.startswith("sphere-"))
+    shown = {row[0]: float(row[1]) for row in centre[1:]}
+    assert shown == pytest.approx({k: v * 1e3 for k, v in result.placement.items()}, abs=1e-4)
+    # the truth's sphere centre, from the simulator, is where the report says (within 1 mm)
+    truth = np.asarray(data.truth.placement["sphere_centre"]) * 1e3
+    np.testing.assert_allclose(sorted(shown.values()), sorted(truth), atol=1.0)
+    final = float(body_rows(page, "headline")["fit"][3])
+    assert 0.5e-2 < final < 1.2e-2  # mm: the laser noise, less what the fit absorbs

@@ -22,12 +22,16 @@ pytestmark = pytest.mark.skipif(find_chromium() is None,
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     path = tmp_path_factory.mktemp("browser") / "report.html"
-    return write_report(synthetic_result(sphere=True), path)
+    return write_report(synthetic_result(validation=False, effects=False), path)
 
 
-def test_page_loads_with_every_image_decoded(report):
+@pytest.fixture(scope="module")
+def state(report):
+    return page_state(report)
+
+
+def test_page_loads_with_every_image_decoded(report, state):
     images_in_file = len(re.findall(r"<img\b", report.read_text(encoding="utf-8")))
-    state = page_state(report)
     assert images_in_file > 0
     assert state.get("report-ready") == "true", state
     assert int(state["images-total"]) == images_in_file
@@ -50,7 +54,7 @@ def test_screenshot_is_a_non_blank_png(report, tmp_path):
     assert accent.sum() > 500
 
 
-def test_full_page_screenshot_is_as_tall_as_the_page(report, tmp_path):
-    height = int(page_state(report)["page-height"])
+def test_full_page_screenshot_is_as_tall_as_the_page(report, state, tmp_path):
+    height = int(state["page-height"])
     png = screenshot_report(report, tmp_path / "full.png")
     assert matplotlib.image.imread(png).shape[:2] == (min(height, 30000), 1280)

@@ -45,8 +45,9 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
                           "check.")
 
     if result.effects:
-        names = ", ".join(f"{e.name} (joints {', '.join(map(str, e.joints))})" if e.joints
-                          else e.name for e in result.effects)
+        names = ", ".join(f"{e.name} (joint{'s' if len(e.joints) > 1 else ''} "
+                          f"{', '.join(map(str, e.joints))})" if e.joints else e.name
+                          for e in result.effects)
         paragraphs.append(f"The geometric calibration alone reached {length(summary.rms_geometric)}"
                           f" RMS; diagnosis then added {names}, which brought it to "
                           f"{length(summary.rms_final)}.")

@@ -172,66 +172,97 @@ def error_distribution(groups: Sequence[tuple[str, tuple[DatasetResiduals, ...]]
     return figure
 
 
-def error_against_joints(residuals: DatasetResiduals, robot: Robot, units: Units) -> Figure:
-    """Geometric and final errors against each joint reading, one panel per joint."""
-    mapped = _mapped(residuals)
-    joints = np.asarray(residuals.joints)
-    rows = np.asarray(residuals.rows)[mapped]
+def _models(residuals: tuple[DatasetResiduals, ...], wanted: Sequence[str]) -> list[str]:
+    """``wanted`` models, without ``geometric`` when it equals ``final`` (no effect added)."""
+    same = all(np.array_equal(errors_of(r, "geometric"), errors_of(r, "final")) for r in residuals)
+    return [m for m in wanted if not (same and m == "geometric")]
+
+
+def _label(model: str, models: list[str]) -> str:
+    if model == "final" and "geometric" not in models:
+        return "calibrated (no effect added)"
+    return MODEL_TITLES[model]
+
+
+def _with_rows(residuals: tuple[DatasetResiduals, ...]) -> list[DatasetResiduals]:
+    return [r for r in residuals if _mapped(r).size]
+
+
+def error_against_joints(residuals: tuple[DatasetResiduals, ...], robot: Robot, units: Units,
+                         title: str) -> Figure:
+    """Calibrated errors against each joint reading, one panel per joint, datasets pooled.
+
+    Errors that belong to no single row (e.g. a bar length) are left out.
+    """
+    residuals = tuple(r for r in _with_rows(residuals) if r.joints is not None)
+    models = _models(residuals, ("geometric", "final"))
+    x = np.concatenate([np.asarray(r.joints)[np.asarray(r.rows)[_mapped(r)]] for r in residuals])
+    errors = {m: np.concatenate([errors_of(r, m)[_mapped(r)] for r in residuals])
+              / units.length_scale for m in models}
     columns = 3 if robot.dof > 4 else robot.dof
     lines = math.ceil(robot.dof / columns)
-    scale = units.length_scale
+    keep = _thin(len(x))
     with report_style():
         figure = new_figure(2.1 * lines + 0.4)
         panels = figure.subplots(lines, columns, squeeze=False, sharey=True).ravel()
-        keep = _thin(mapped.size)
         for j, axes in enumerate(panels):
             if j >= robot.dof:
                 axes.set_visible(False)
                 continue
             reading_scale, reading_unit = joint_reading_unit(robot, j, units)
-            x = joints[rows, j] / reading_scale
-            for model in ("geometric", "final"):
-                errors = errors_of(residuals, model)[mapped] / scale
-                axes.scatter(x[keep], errors[keep], s=5, alpha=ALPHA[model], color=COLOURS[model],
-                             linewidths=0, rasterized=True, label=MODEL_TITLES[model])
+            for model in models:
+                axes.scatter(x[keep, j] / reading_scale, errors[model][keep], s=5,
+                             alpha=ALPHA[model], color=COLOURS[model], linewidths=0,
+                             rasterized=True, label=_label(model, models))
             axes.set_xlabel(f"q{j + 1} [{reading_unit}]")
             if j % columns == 0:
                 axes.set_ylabel(f"error [{units.length}]")
-        panels[0].legend(loc="best", markerscale=4)
-        figure.suptitle(f"{residuals.label}: error against each joint reading")
+        panels[0].legend(loc="best", markerscale=3)
+        figure.suptitle(f"{title}: error against each joint reading")
     return figure
 
 
-def error_over_rows(residuals: DatasetResiduals, units: Units) -> Figure:
-    """``|error|`` of every model against temperature when the data has it, else data order."""
-    mapped = _mapped(residuals)
-    rows = np.asarray(residuals.rows)[mapped]
-    temperature = residuals.extras.get("temperature")
-    if temperature is not None:
-        x = np.asarray(temperature, dtype=float)[rows]
-        label = "temperature [C]"
-    else:
-        x = rows.astype(float)
-        label = "data row (measurement order)"
-    scale = units.length_scale
-    keep = _thin(mapped.size)
+def error_over_rows(residuals: tuple[DatasetResiduals, ...], units: Units, title: str) -> Figure:
+    """``|error|`` of every model against measurement order (datasets one after another,
+    boundaries marked) and, where the data has a ``temperature`` column, against it."""
+    residuals = tuple(_with_rows(residuals))
+    models = _models(residuals, ("nominal", "geometric", "final"))
+    starts = np.cumsum([0] + [int(np.asarray(r.rows).max()) + 1 for r in residuals])
+    order = np.concatenate([start + np.asarray(r.rows)[_mapped(r)]
+                            for start, r in zip(starts, residuals)]).astype(float)
+    magnitude = {m: np.abs(np.concatenate([errors_of(r, m)[_mapped(r)] for r in residuals]))
+                 / units.length_scale for m in models}
+    with_temperature = [r for r in residuals if "temperature" in r.extras]
+    keep = _thin(order.size)
+    floor = min(_positive_floor(v) for v in magnitude.values()) * 0.5
     with report_style():
         figure = new_figure(3.0)
-        axes = figure.add_subplot()
-        floor = None
-        for model in ("nominal", "geometric", "final"):
-            errors = np.abs(errors_of(residuals, model)[mapped]) / scale
-            floor = _positive_floor(errors) if floor is None else min(floor, _positive_floor(errors))
-            axes.scatter(x[keep], np.maximum(errors[keep], 1e-300), s=5, alpha=ALPHA[model],
-                         linewidths=0,
-                         color=COLOURS[model], rasterized=True, label=MODEL_TITLES[model])
-        if mapped.size:
-            axes.set_yscale("log")
-            axes.set_ylim(bottom=floor * 0.5)
-        axes.set_xlabel(label)
-        axes.set_ylabel(f"|error| [{units.length}]")
-        axes.set_title(f"{residuals.label}: error against {label.split(' [')[0]}")
-        axes.legend(loc="best", markerscale=4)
+        panels = figure.subplots(1, 2 if with_temperature else 1, squeeze=False, sharey=True)[0]
+        for model in models:
+            panels[0].scatter(order[keep], np.maximum(magnitude[model][keep], floor), s=5,
+                              alpha=ALPHA[model], linewidths=0, color=COLOURS[model],
+                              rasterized=True, label=_label(model, models))
+        if len(residuals) > 1:
+            for start in starts[1:-1]:
+                panels[0].axvline(start - 0.5, color="#555555", linewidth=0.6, alpha=0.6)
+        panels[0].set_xlabel("data row, datasets in turn (measurement order)")
+        panels[0].set_ylabel(f"|error| [{units.length}]")
+        panels[0].set_yscale("log")
+        panels[0].set_ylim(bottom=floor)
+        panels[0].legend(loc="best", markerscale=3)
+        if with_temperature:
+            temperature = np.concatenate([np.asarray(r.extras["temperature"], dtype=float)
+                                          [np.asarray(r.rows)[_mapped(r)]]
+                                          for r in with_temperature])
+            keep_t = _thin(temperature.size)
+            for model in models:
+                values = np.concatenate([np.abs(errors_of(r, model)[_mapped(r)])
+                                         for r in with_temperature]) / units.length_scale
+                panels[1].scatter(temperature[keep_t], np.maximum(values[keep_t], floor), s=5,
+                                  alpha=ALPHA[model], linewidths=0, color=COLOURS[model],
+                                  rasterized=True)
+            panels[1].set_xlabel("temperature [C]")
+        figure.suptitle(f"{title}: error magnitude over the measurements")
     return figure
 
 
@@ -302,7 +333,7 @@ def effect_evidence(effect: EffectFinding, residuals: tuple[DatasetResiduals, ..
             if p % columns == 0:
                 axes.set_ylabel(f"error [{units.length}]")
         panels[0].legend(loc="best")
-        joints_text = f" on joints {', '.join(str(j) for j in effect.joints)}" \
-            if effect.joints else ""
+        joints_text = (f" on joint{'s' if len(effect.joints) > 1 else ''} "
+                       f"{', '.join(str(j) for j in effect.joints)}") if effect.joints else ""
         figure.suptitle(f"{effect.name}{joints_text}: error before and after the effect")
     return figure

@@ -184,18 +184,21 @@ def errors_section(result: CalibrationResult) -> Section:
                            "magnitude (log scale): the further left, the better",
                            partial(figures.error_distribution, plot_groups, units)))
     for role, residuals in groups:
-        for r in residuals:
-            if r.joints is not None and (np.asarray(r.rows) >= 0).any():
-                blocks.append(Plot(f"joints-{r.label}", f"{r.label} ({role}): error against "
-                                   f"each joint reading; structure left in the final error is "
-                                   f"what the model still lacks",
-                                   partial(figures.error_against_joints, r,
-                                           result.robot_nominal, units)))
-            if (np.asarray(r.rows) >= 0).any():
-                against = "temperature" if "temperature" in r.extras else "measurement order"
-                blocks.append(Plot(f"order-{r.label}", f"{r.label} ({role}): error magnitude "
-                                   f"against {against}",
-                                   partial(figures.error_over_rows, r, units)))
+        mapped = [r for r in residuals if (np.asarray(r.rows) >= 0).any()]
+        names = mapped[0].label if len(mapped) == 1 else f"{role} data"
+        if any(r.joints is not None for r in mapped):
+            blocks.append(Plot(f"joints-{role}", f"{names} ({role}): error against each joint "
+                               f"reading; structure left in the calibrated error is what the "
+                               f"model still lacks",
+                               partial(figures.error_against_joints, tuple(mapped),
+                                       result.robot_nominal, units, names)))
+        if mapped:
+            against = " and against temperature" if any("temperature" in r.extras
+                                                        for r in mapped) else ""
+            blocks.append(Plot(f"order-{role}", f"{names} ({role}): error magnitude over the "
+                               f"measurements in the order taken{against}; a drift or a step "
+                               f"between datasets shows here",
+                               partial(figures.error_over_rows, tuple(mapped), units, names)))
     return Section("errors", "Error before and after", tuple(blocks))
 
 
@@ -220,7 +223,8 @@ def effects_section(result: CalibrationResult) -> Section:
         if effect.evidence:
             blocks.append(Table(f"evidence-{effect.name}", f"{effect.name}: evidence",
                                 ("measure", "value"),
-                                tuple((k, format_number(v, 4)) for k, v in effect.evidence.items()),
+                                tuple(_evidence_row(k, v, result.units)
+                                      for k, v in effect.evidence.items()),
                                 numeric=(False, True)))
         if residuals and any((np.asarray(r.rows) >= 0).any() for r in residuals):
             variable, _ = figures.effect_variable(effect, residuals)
@@ -231,19 +235,31 @@ def effects_section(result: CalibrationResult) -> Section:
                                partial(figures.effect_evidence, effect, residuals,
                                        result.robot_nominal, result.units)))
     if result.diagnosis:
-        blocks.append(diagnosis_table(result.diagnosis))
+        blocks.append(diagnosis_table(result.diagnosis, result.units))
     return Section("effects", "Effects found", tuple(blocks))
 
 
-def diagnosis_table(diagnosis: tuple[dict, ...]) -> Table:
-    """Every candidate effect diagnosis tested, with the scalar numbers it recorded."""
+def diagnosis_table(diagnosis: tuple[dict, ...], units: Units) -> Table:
+    """Every candidate effect diagnosis tested, with the numbers it recorded.
+
+    RMS values (keys holding ``rms`` that are not a relative ``drop``) are lengths [m]
+    and are shown in the file's length unit.
+    """
     keys: list[str] = []
     for entry in diagnosis:
         for k, v in entry.items():
             if k not in keys and isinstance(v, (int, float, str, bool, list, tuple)):
                 keys.append(k)
-    rows = tuple(tuple(_scalar_text(entry.get(k, "")) for k in keys) for entry in diagnosis)
-    return Table("diagnosis", "Candidates tested by diagnosis", tuple(keys), rows)
+    lengths = {k for k in keys if "rms" in k and "drop" not in k}
+
+    def cell(key: str, value) -> str:
+        if key in lengths and isinstance(value, (int, float)) and not isinstance(value, bool):
+            return format_number(value / units.length_scale, 4)
+        return _scalar_text(value)
+
+    rows = tuple(tuple(cell(k, entry.get(k, "")) for k in keys) for entry in diagnosis)
+    header = tuple(f"{k} [{units.length}]" if k in lengths else k for k in keys)
+    return Table("diagnosis", "Candidates tested by diagnosis", header, rows)
 
 
 def sphere_section(result: CalibrationResult) -> Section | None:
@@ -262,7 +278,7 @@ def sphere_section(result: CalibrationResult) -> Section | None:
     blocks.append(_values_table("laser", "Laser on the flange (fitted)",
                                 [(k, v, sd) for k, (v, sd) in laser.items()], units))
     for r in spheres:
-        centre = [(k, v, None) for k, v in result.placement.items() if k.startswith(r.label)]
+        centre = [(k, v, None) for k, v in result.placement.items() if _belongs(k, r.label)]
         if centre:
             blocks.append(_values_table(f"sphere-{r.label}", f"Sphere centre, {r.label} (fitted)",
                                         centre, units))
@@ -315,9 +331,21 @@ def _values_table(name: str, caption: str, entries: list[tuple[str, float, float
                  numeric=(False, True, True, False))
 
 
+def _evidence_row(key: str, value: float, units: Units) -> tuple[str, str]:
+    """An evidence entry; RMS values (not relative drops) are lengths [m], shown in file units."""
+    if "rms" in key and "drop" not in key:
+        return f"{key} [{units.length}]", format_number(value / units.length_scale, 4)
+    return key, format_number(value, 4)
+
+
+def _belongs(name: str, label: str) -> bool:
+    """True when placement unknown ``name`` is dataset ``label``'s (``label`` + separator)."""
+    return name.startswith(label) and len(name) > len(label) and name[len(label)] in "/.:_"
+
+
 def _scalar_text(value) -> str:
     if isinstance(value, float):
-        return format_number(value, 6) if math.isfinite(value) else str(value)
+        return format_number(value, 6) if math.isfinite(value) else "-"
     if isinstance(value, (list, tuple)):
         return ", ".join(_scalar_text(v) for v in value)
     return str(value)
