@@ -223,6 +223,10 @@ def embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
     return out
 
 
+def _residual_and_jacobian(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return problem.residual(x), problem.jacobian(x)
+
+
 def _mask_of(problem: Problem, names) -> np.ndarray:
     mask = np.zeros(len(problem.unknowns), dtype=bool)
     mask[problem.unknowns.indices(list(names))] = True
@@ -350,7 +354,8 @@ class _Screening:
         A = J[:, self.free_index]
         norms = np.linalg.norm(A, axis=0)
         norms[norms == 0] = 1.0
-        self.Q, _ = np.linalg.qr(A / norms)
+        self.A = A / norms
+        self.gram_A = self.A.T @ self.A
         self.candidates = list(candidates)
         names = sorted({n for c in candidates for n in c.names},
                        key=problem.unknowns.index)
@@ -360,10 +365,18 @@ class _Screening:
         E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
         self.E = E / E_norms
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
-        Z = np.column_stack([A / norms, self.E, r])
+        Z = np.column_stack([self.A, self.E, r])
         self.grams = _FoldGrams(Z, fold)
         self.cv_before = self._cv(range(len(self.free_index)))
-        self.r_perp = r - self.Q @ (self.Q.T @ r)
+        self.r_perp = self.project(r)
+
+    def project(self, columns: np.ndarray) -> np.ndarray:
+        """``columns`` minus their least-squares fit by the free columns (normal equations
+        of the unit-scaled, well-conditioned identifiable set)."""
+        if not self.A.shape[1]:
+            return columns.copy()
+        coefficients = np.linalg.solve(self.gram_A, self.A.T @ columns)
+        return columns - self.A @ coefficients
 
     def _cv(self, columns) -> float:
         sse = self.grams.held_out_sse(list(columns))
@@ -380,7 +393,7 @@ class _Screening:
             return _Screen(candidate, (), names, 0.0, 0.0, 0.0, nan, "no effect on these data")
         columns = np.column_stack([self.E[:, self.column_of[n] - len(self.free_index)]
                                    for n in names])
-        projected = columns - self.Q @ (self.Q.T @ columns)
+        projected = self.project(columns)
         visible = [k for k, m in enumerate(moves) if m >= INVISIBLE]
         chosen, remaining = _pivoted(projected[:, visible], ABSORBED)
         kept = tuple(names[visible[k]] for k in chosen)
@@ -440,7 +453,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
     fold = fold_of_entries(big, folds, seed)
     remaining = list(candidates)
-    r, J = big.residual_and_jacobian(x)
+    r, J = _residual_and_jacobian(big, x)
     rounds = 0
     with Progress("diagnosis", total=max_rounds, force=False) as bar:
         for rounds in range(1, max_rounds + 1):
@@ -458,7 +471,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
             for s in passing:
                 trial_free = free | _mask_of(big, s.kept)
                 solution = solve(big, x, trial_free, method=method, loss=loss)
-                r_new, J_new = big.residual_and_jacobian(solution.x)
+                r_new, J_new = _residual_and_jacobian(big, solution.x)
                 rss_new = float(r_new @ r_new)
                 bic = screening.bic_drop(rss_new, len(s.kept))
                 after = _Screening(big, r_new, J_new, trial_free, [], fold, n_errors).cv_before

@@ -1,0 +1,83 @@
+"""Diagnosis time against one geometric calibration, side by side in one process.
+
+Tracker data of the example 6R arm (simulated by ``robocal_casadi.simulate``: geometric
+errors, 0.01 mm noise per coordinate, a payload column) at 1,000 and 10,000 rows, once
+with compliance on joints 2 and 3 (which diagnosis should find) and once clean (where it
+should add nothing). For each: the seconds of the geometric calibration
+(``calibrate(diagnose=False)``), of the whole job with diagnosis, their ratio, and what
+diagnosis found. Prints JSON.
+
+    python benchmarks/diagnosis.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from robocal_casadi.examples import industrial_6r
+from robocal_casadi.identification import calibrate
+from robocal_casadi.simulate import simulate
+
+NOISE = 1e-5  # [m]
+COMPLIANCE = {2: 1.5e-6, 3: 2.5e-6}  # [rad/Nm]
+
+
+def geometric_errors(robot, seed: int = 0) -> dict[str, float]:
+    rng = np.random.default_rng(seed)
+    return {f"{stem}{i}": float(rng.normal(0.0, 5e-4))
+            for i in range(1, robot.dof + 1) for stem in ("theta", "d", "a", "alpha")}
+
+
+def run_case(rows: int, effects: dict | None, folder: Path) -> dict:
+    robot = industrial_6r()
+    data = simulate(robot, "tracker_points", out_dir=folder, rows=rows, noise=NOISE,
+                    geometric_errors=geometric_errors(robot), effects=effects,
+                    payload=(0.0, 10.0), seed=1, progress=False).load()
+    start = time.perf_counter()
+    geometric = calibrate([data], diagnose=False)
+    calibration_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    full = calibrate([data], diagnose=True)
+    full_seconds = time.perf_counter() - start
+    return {
+        "rows": rows,
+        "truth": {"joint_compliance": {str(j): c for j, c in (effects or {}).get(
+            "joint_compliance", {}).items()}},
+        "seconds_calibration": calibration_seconds,
+        "seconds_with_diagnosis": full_seconds,
+        "seconds_diagnosis": full_seconds - calibration_seconds,
+        "ratio_diagnosis_to_calibration": (full_seconds - calibration_seconds)
+        / calibration_seconds,
+        "candidates_tested": len(full.diagnosis),
+        "found": [{"name": e.name, "joints": list(e.joints), "parameters": e.parameters}
+                  for e in full.effects],
+        "rms_mm": {"geometric": geometric.fit.rms_geometric * 1e3,
+                   "final": full.fit.rms_final * 1e3,
+                   "noise_floor": NOISE * np.sqrt(3) * 1e3},
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="1,000 rows only")
+    args = parser.parse_args()
+    sizes = (1000,) if args.quick else (1000, 10000)
+    cases = []
+    with tempfile.TemporaryDirectory() as folder:
+        for rows in sizes:
+            for label, effects in (("compliance", {"joint_compliance": COMPLIANCE}),
+                                   ("clean", None)):
+                case = run_case(rows, effects, Path(folder) / f"{label}_{rows}")
+                case["case"] = label
+                cases.append(case)
+    print(json.dumps({"benchmark": "diagnosis", "cases": cases}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
