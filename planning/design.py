@@ -96,8 +96,15 @@ def pool_size_for(count: int, kind: str) -> int:
 
 
 def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int = 0,
-                pool: int | None = None, refine: bool = True, quiet: bool = False) -> Plan:
-    """Design ``count`` placements (touch kinds) or readings for ``dataset``'s set-up."""
+                pool: int | None = None, refine: bool = True, refine_rounds: int = REFINE_ROUNDS,
+                quiet: bool = False) -> Plan:
+    """Design ``count`` placements (touch kinds) or readings for ``dataset``'s set-up.
+
+    ``index``: ``cond`` (= ``O2``) or ``O1`` ... ``O5``; ``seed`` fixes the random search;
+    ``pool`` the number of feasible candidates drawn (default ``pool_size_for``);
+    ``refine`` runs up to ``refine_rounds`` continuous refinements; ``quiet`` silences
+    the progress line.
+    """
     index = canonical(index)
     if count < 1:
         raise InputError(f"--count must be at least 1, got {count}")
@@ -132,7 +139,7 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     if refine:
         from .refine import refine_plan
 
-        for _ in range(REFINE_ROUNDS):
+        for _ in range(refine_rounds):
             better = refine_plan(setup, workspace, row_model, info, chosen_candidates, index)
             if better is None:
                 break

@@ -1,0 +1,285 @@
+"""Experiment design: indices against closed forms, plans that the robot can run, designed
+plans better than random ones, the engine's own judgement of a plan, and clear refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_casadi.cli import main
+from robocal_casadi.datasets import load_dataset
+from robocal_casadi.errors import InputError
+from robocal_casadi.examples import industrial_6r, panda_7dof
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.robot import save_robot
+from robocal_casadi.table import read_table
+
+from planning import (design_plan, engine_identifiability, index_of_jacobian, index_value,
+                      write_plan)
+from planning.indices import better, canonical, maximise, scale_columns
+
+# ----------------------------------------------------------------------------- indices
+
+
+def _matrix_with_singular_values(s, rows=7, seed=0):
+    rng = np.random.default_rng(seed)
+    U, _ = np.linalg.qr(rng.normal(size=(rows, rows)))
+    V, _ = np.linalg.qr(rng.normal(size=(len(s), len(s))))
+    return U[:, :len(s)] @ np.diag(s) @ V.T
+
+
+def test_indices_match_closed_forms_on_a_hand_made_matrix():
+    s = np.array([4.0, 2.0, 1.0, 0.5])
+    J = _matrix_with_singular_values(s)
+    expected = {
+        "O1": (4 * 2 * 1 * 0.5) ** (1 / 4),  # geometric mean, exponent 1/m
+        "O2": 4.0 / 0.5,  # of J, not J^T J (which would give 64)
+        "O3": 0.5,
+        "O4": 0.5**2 / 4.0,
+        "O5": 1.0 / (1 / 4 + 1 / 2 + 1 / 1 + 1 / 0.5),
+    }
+    for name, value in expected.items():
+        assert index_of_jacobian(name, J, scaled=False) == pytest.approx(value, rel=1e-12)
+    assert index_of_jacobian("cond", J, scaled=False) == pytest.approx(8.0, rel=1e-12)
+
+
+def test_index_directions_and_rank_deficiency():
+    assert canonical("cond") == "O2"
+    assert not maximise("cond") and all(maximise(k) for k in ("O1", "O3", "O4", "O5"))
+    assert better("O2", 10.0, 20.0) and better("O3", 2.0, 1.0)
+    assert index_value("O2", [1.0, 0.0]) == np.inf
+    assert index_value("O1", [1.0, 0.0]) == 0.0
+    with pytest.raises(ValueError, match="O5"):
+        canonical("O6")
+
+
+def test_column_scaling_removes_units():
+    J = _matrix_with_singular_values(np.array([3.0, 1.0, 0.2]))
+    units = np.diag([1e3, 1.0, 1e-3])  # e.g. mm, m and km columns
+    assert index_of_jacobian("O2", J @ units) == pytest.approx(index_of_jacobian("O2", J),
+                                                               rel=1e-9)
+    assert np.allclose(np.linalg.norm(scale_columns(J @ units), axis=0), 1.0)
+
+
+# ----------------------------------------------------------------------------- set-ups
+
+
+@pytest.fixture(scope="module")
+def setups(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plan")
+    save_robot(industrial_6r(), folder / "r6.yaml")
+    save_robot(panda_7dof(), folder / "p7.yaml")
+    files = {
+        "tracker_6r": dict(kind="tracker_points", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+                           target=dict(xyz=[0, 0, 100]), instrument=dict(xyz=[2500, 0, 800])),
+        "tracker_7": dict(kind="tracker_points", robot="p7.yaml", units=dict(length="m", angle="rad"),
+                          target=dict(xyz=[0, 0, 0.1]), instrument=dict(xyz=[2.0, 0.5, 0.6])),
+        "bar_6r": dict(kind="cross_bar", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+                       bar=dict(length=400), probe=dict(xyz=[0, 0, 150])),
+        "bar_7": dict(kind="cross_bar", robot="p7.yaml", units=dict(length="m", angle="rad"),
+                      bar=dict(length=0.3), probe=dict(xyz=[0, 0, 0.1])),
+        "sphere_6r": dict(kind="sphere_laser", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+                          sphere=dict(radius=25, centre_guess=[900, 100, 300]),
+                          laser=dict(origin_guess=[60, -15, 140], direction_guess=[0, 0, 1])),
+        "artifact_7": dict(kind="artifact_touches", robot="p7.yaml", units=dict(length="m", angle="rad"),
+                           probe=dict(xyz=[0, 0, 0.1335]),
+                           artifact=dict(distances=[["hole_0", "hole_1", 0.05]]),
+                           planning=dict(touches_per_socket=3)),
+        "long_bar": dict(kind="cross_bar", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+                         bar=dict(length=6000), probe=dict(xyz=[0, 0, 150])),
+    }
+    paths = {}
+    for name, content in files.items():
+        content["data"] = f"{name}.csv"  # the table does not exist yet
+        paths[name] = folder / f"{name}.yaml"
+        paths[name].write_text(yaml.safe_dump(content))
+    return paths
+
+
+PLANS: dict = {}
+POOL = {"tracker_6r": 150, "tracker_7": 150, "bar_6r": 60, "bar_7": 60, "sphere_6r": 150,
+        "artifact_7": 40}
+COUNT = {"tracker_6r": 30, "tracker_7": 30, "bar_6r": 12, "bar_7": 12, "sphere_6r": 30,
+         "artifact_7": 8}
+
+
+def _plan(setups, name):
+    """The designed plan of set-up ``name`` (made once per test session)."""
+    if name not in PLANS:
+        dataset = load_dataset(setups[name], require_data=False)
+        PLANS[name] = (dataset, design_plan(dataset, COUNT[name], "cond", seed=1,
+                                            pool=POOL[name], refine=False, quiet=True))
+    return PLANS[name]
+
+
+def _table(setups, name, tmp_path):
+    """The plan written as a table and read back, with its dataset."""
+    dataset, plan = _plan(setups, name)
+    write_plan(plan, tmp_path / "plan.csv")
+    return dataset, read_table(tmp_path / "plan.csv")
+
+
+def _plan_via_cli(path, count, out, *extra):
+    assert main(["plan", str(path), "--count", str(count), "--out", str(out), "--no-refine",
+                 *extra]) == 0
+    return read_table(out)
+
+
+def _joints(table, dataset):
+    scales = np.array([dataset.units.angle_scale if j.revolute else dataset.units.length_scale
+                       for j in dataset.robot.joints])
+    return np.column_stack([table.numbers(f"q{i}") for i in range(1, dataset.robot.dof + 1)]) * scales
+
+
+def _above_table_and_within_limits(dataset, Q, points):
+    robot = dataset.robot
+    assert np.all(Q >= robot.lower_limits) and np.all(Q <= robot.upper_limits)
+    kin = Kinematics(robot)
+    for q in Q:
+        frames = kin.joint_frames(q, kin.nominal)
+        assert all(float(frames[i][2, 3]) > robot.base.xyz[2] for i in range(1, robot.dof + 1))
+    assert np.all(points[:, 2] > robot.base.xyz[2])
+
+
+# ----------------------------------------------------------------------------- tracker
+
+
+@pytest.mark.parametrize("name", ["tracker_6r", "tracker_7"])
+def test_tracker_plan_is_runnable_and_visible(setups, tmp_path, name):
+    dataset, table = _table(setups, name, tmp_path)
+    assert table.columns == tuple(f"q{i}" for i in range(1, dataset.robot.dof + 1)) + ("x", "y", "z")
+    assert len(table) == 30 and all(c == "" for c in table.text("x"))
+    Q = _joints(table, dataset)
+    kin = Kinematics(dataset.robot)
+    poses = kin.flange_poses(Q)
+    targets = poses[:, :3, :3] @ dataset.target + poses[:, :3, 3]
+    _above_table_and_within_limits(dataset, Q, targets)
+    towards = dataset.instrument - targets
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    angle = np.degrees(np.arccos(np.einsum("ni,ni->n", poses[:, :3, 2], towards)))
+    assert np.all(angle < 60.0)
+
+
+def test_plan_command_writes_the_table_and_a_summary(setups, tmp_path, capsys):
+    table = _plan_via_cli(setups["tracker_6r"], 20, tmp_path / "plan.csv", "--index", "O3",
+                          "--seed", "4")
+    assert len(table) == 20 and table.columns[-3:] == ("x", "y", "z")
+    out = capsys.readouterr().out
+    assert "O3 (smallest singular value)" in out and "median" in out and "wrote" in out
+
+
+# ----------------------------------------------------------------------------- bars
+
+
+@pytest.mark.parametrize("name", ["bar_6r", "bar_7"])
+def test_bar_plan_puts_the_probe_on_the_planned_sockets(setups, tmp_path, name):
+    dataset, table = _table(setups, name, tmp_path)
+    assert table.columns[:2] == ("pose", "point") and table.columns[-3:] == (
+        "socket_x", "socket_y", "socket_z")
+    poses = table.numbers("pose").astype(int)
+    points = table.text("point")
+    assert sorted(set(poses)) == list(range(1, COUNT[name] + 1))
+    for pose in set(poses):
+        assert sorted(points[i] for i in np.flatnonzero(poses == pose)) == ["A", "B", "C", "D"]
+    Q = _joints(table, dataset)
+    sockets = np.column_stack([table.numbers(f"socket_{k}") for k in "xyz"]) * dataset.units.length_scale
+    probe = Kinematics(dataset.robot).points(Q, dataset.probe)
+    assert np.max(np.linalg.norm(probe - sockets, axis=1)) < 1e-6
+    _above_table_and_within_limits(dataset, Q, sockets)
+    # the sockets of each placement form the cross: |AC| = |BD| = L, AC perpendicular to BD
+    L = dataset.distances[0][2]
+    for pose in set(poses):
+        s = {points[i]: sockets[i] for i in np.flatnonzero(poses == pose)}
+        assert np.linalg.norm(s["C"] - s["A"]) == pytest.approx(L, abs=1e-9)
+        assert np.linalg.norm(s["D"] - s["B"]) == pytest.approx(L, abs=1e-9)
+        assert abs(np.dot(s["C"] - s["A"], s["D"] - s["B"])) < 1e-12
+
+
+def test_unreachable_bar_is_refused_with_a_clear_message(setups, tmp_path, capsys):
+    out = tmp_path / "plan.csv"
+    assert main(["plan", str(setups["long_bar"]), "--count", "10", "--out", str(out)]) == 2
+    message = capsys.readouterr().err
+    assert "bar.length" in message and "reach" in message and "long_bar.yaml" in message
+    assert not out.exists()
+
+
+def test_too_few_readings_are_refused(setups):
+    dataset = load_dataset(setups["tracker_6r"], require_data=False)
+    with pytest.raises(InputError, match="too few"):
+        design_plan(dataset, 4, refine=False, quiet=True)
+
+
+# ----------------------------------------------------------------------------- quality
+
+
+@pytest.mark.parametrize("name", ["tracker_6r", "bar_6r", "tracker_7", "bar_7", "artifact_7"])
+def test_designed_plan_beats_random_plans_and_matches_the_engine(setups, name):
+    dataset, plan = _plan(setups, name)
+    assert plan.value < plan.random_median
+    # the calibration engine, from the plan as a dataset, sees the same Jacobian
+    judged = engine_identifiability(dataset, plan.candidates, plan.identifiable)
+    assert judged.identifiable == plan.identifiable
+    assert np.allclose(judged.singular_values, plan.singular_values, rtol=1e-8, atol=1e-9)
+    assert judged.condition_number == pytest.approx(plan.value, rel=1e-6)
+
+
+def test_each_index_is_improved_by_its_own_design(setups):
+    dataset = load_dataset(setups["tracker_6r"], require_data=False)
+    for index in ("O1", "O3", "O4", "O5"):
+        plan = design_plan(dataset, 25, index, seed=2, pool=100, refine=False, quiet=True)
+        assert plan.index == index
+        assert better(index, plan.value, plan.random_median)
+
+
+def test_refinement_keeps_the_plan_runnable_and_does_not_worsen_it(setups):
+    dataset = load_dataset(setups["bar_6r"], require_data=False)
+    plain = design_plan(dataset, 10, seed=3, pool=40, refine=False, quiet=True)
+    refined = design_plan(dataset, 10, seed=3, pool=40, refine=True, refine_rounds=1, quiet=True)
+    assert refined.value <= plain.value
+    probe = Kinematics(dataset.robot).points(refined.joints, dataset.probe)
+    sockets = np.array([c.sockets[p] for c in refined.candidates for p in c.points])
+    assert np.max(np.linalg.norm(probe - sockets, axis=1)) < 1e-6
+
+
+# ----------------------------------------------------------------------------- sphere, artifact
+
+
+def test_sphere_plan_beams_hit_the_sphere_within_range(setups, tmp_path):
+    dataset, table = _table(setups, "sphere_6r", tmp_path)
+    assert table.columns[-1] == "distance" and all(c == "" for c in table.text("distance"))
+    Q = _joints(table, dataset)
+    poses = Kinematics(dataset.robot).flange_poses(Q)
+    o = poses[:, :3, :3] @ dataset.origin_guess + poses[:, :3, 3]
+    d = poses[:, :3, :3] @ dataset.direction_guess
+    v = o - dataset.centre_guess
+    b = np.einsum("ni,ni->n", d, v)
+    disc = b**2 - (np.einsum("ni,ni->n", v, v) - dataset.radius**2)
+    assert np.all(disc > 0)  # the beam line meets the sphere
+    reading = -b - np.sqrt(disc)
+    assert np.all((reading >= 0.05 - 1e-9) & (reading <= 0.30 + 1e-9))
+    _above_table_and_within_limits(dataset, Q, o)
+    plan = _plan(setups, "sphere_6r")[1]
+    assert plan.value < plan.random_median
+    # the engine's model (beam as a 3-vector with a unit-length row) sees the same conditioning
+    judged = engine_identifiability(dataset, plan.candidates)
+    assert len(judged.identifiable) == len(plan.identifiable) + 1
+    assert judged.condition_number == pytest.approx(plan.value, rel=1e-6)
+
+
+def test_artifact_plan_touches_each_socket_in_several_configurations(setups, tmp_path):
+    dataset, table = _table(setups, "artifact_7", tmp_path)
+    poses, points = table.numbers("pose").astype(int), table.text("point")
+    assert len(table) == 8 * 2 * 3
+    Q = _joints(table, dataset)
+    sockets = np.column_stack([table.numbers(f"socket_{k}") for k in "xyz"])
+    probe = Kinematics(dataset.robot).points(Q, dataset.probe)
+    assert np.max(np.linalg.norm(probe - sockets, axis=1)) < 1e-6
+    for pose in set(poses):
+        rows = np.flatnonzero(poses == pose)
+        by_socket = {points[i]: sockets[i] for i in rows}
+        assert np.linalg.norm(by_socket["hole_0"] - by_socket["hole_1"]) == pytest.approx(0.05, abs=1e-9)
+        for socket in ("hole_0", "hole_1"):
+            configurations = Q[[i for i in rows if points[i] == socket]]
+            assert len(configurations) == 3
+            assert np.min(np.ptp(configurations, axis=0).max()) > 1e-3  # really different
