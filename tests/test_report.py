@@ -453,3 +453,16 @@ def test_report_of_a_simulated_sphere_laser_calibration(tmp_path):
     np.testing.assert_allclose(sorted(shown.values()), sorted(truth), atol=1.0)
     final = float(body_rows(page, "headline")["fit"][3])
     assert 0.5e-2 < final < 1.2e-2  # mm: the laser noise, less what the fit absorbs
+
+
+def test_pendant_sphere_data_without_joint_readings(tmp_path):
+    """Sphere readings taken from pendant poses carry no joint readings: no joint plot,
+    the rest of the report as usual."""
+    result = synthetic_result(validation=False, effects=False, sphere=True)
+    residuals = tuple(replace(r, joints=None) if r.kind == "sphere_laser" else r
+                      for r in result.residuals[1:])
+    result = replace(result, residuals=residuals, datasets=("sphere.yaml",))
+    page = read_page(write_report(result, tmp_path / "report.html"))
+    figures = {attrs.get("id") for tag, attrs in page.tags if tag == "figure"}
+    assert "figure-joints-fit" not in figures and "figure-order-fit" in figures
+    assert body_rows(page, "datasets")["sphere.yaml"][3] == "120"

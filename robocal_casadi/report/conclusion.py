@@ -58,7 +58,8 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     ident = result.identifiability
     held = len(ident.candidates) - len(ident.identifiable)
     text = (f"{len(ident.identifiable)} of {len(ident.candidates)} candidate parameters were "
-            f"identifiable from this data (condition number {format_number(ident.condition_number, 3)})")
+            f"identifiable from this data (condition number "
+            f"{format_number(ident.condition_number, 3)})")
     text += f"; {held} were held at nominal (see Identifiability)." if held else "."
     changes = _largest_changes(result)
     if changes:

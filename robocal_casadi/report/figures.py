@@ -1,8 +1,9 @@
 """The report's plots: matplotlib figures in one style, axes labelled with units.
 
-Every function returns a fresh ``matplotlib.figure.Figure`` (no pyplot, no global
-state, Agg canvas), with errors in the robot file's length unit and joint readings in
-its angle unit (length unit for prismatic joints). ``png_bytes`` renders one.
+Every function returns a fresh ``matplotlib.figure.Figure`` on an Agg canvas (no pyplot,
+so the caller's matplotlib backend and state are left alone), with errors in the robot
+file's length unit and joint readings in its angle unit (length unit for prismatic
+joints). ``png_bytes`` renders one.
 """
 
 from __future__ import annotations
@@ -13,18 +14,15 @@ from contextlib import contextmanager
 from typing import Iterator, Sequence
 
 import matplotlib
+import matplotlib.ticker as ticker
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")  # a report never needs a display
-
-import matplotlib.ticker as ticker  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from ..results import DatasetResiduals, EffectFinding, Identifiability  # noqa: E402
-from ..robot import Robot  # noqa: E402
-from ..units import Units  # noqa: E402
-from .numbers import MODEL_TITLES, errors_of, joint_reading_unit  # noqa: E402
+from ..results import DatasetResiduals, EffectFinding, Identifiability
+from ..robot import Robot
+from ..units import Units
+from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
 
 COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
 ALPHA = {"nominal": 0.35, "geometric": 0.45, "final": 0.6}
@@ -86,7 +84,8 @@ def _mapped(residuals: DatasetResiduals) -> np.ndarray:
     return np.flatnonzero(np.asarray(residuals.rows) >= 0)
 
 
-def _binned_rms(x: np.ndarray, errors: np.ndarray, bins: int = BINS) -> tuple[np.ndarray, np.ndarray]:
+def _binned_rms(x: np.ndarray, errors: np.ndarray,
+                bins: int = BINS) -> tuple[np.ndarray, np.ndarray]:
     """Centres and RMS of ``errors`` in ``bins`` equal-width bins of ``x`` (empty bins dropped)."""
     if x.size == 0 or not np.isfinite(x).any():
         return np.zeros(0), np.zeros(0)

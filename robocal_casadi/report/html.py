@@ -157,7 +157,8 @@ def _table(table: Table) -> str:
                    for h, n in zip(table.header, table.numeric))
     rows = []
     for row, muted in zip(table.rows, table.muted):
-        cells = "".join(f"<td{_number_class(n)}>{_text(c)}</td>" for c, n in zip(row, table.numeric))
+        cells = "".join(f"<td{_number_class(n)}>{_text(c)}</td>"
+                        for c, n in zip(row, table.numeric))
         opening = '<tr class="muted">' if muted else "<tr>"
         rows.append(f"{opening}{cells}</tr>")
     return (f'<div class="table-wrap"><table class="{_attr(table.name)}">'

@@ -37,7 +37,8 @@ def build_document(result: CalibrationResult, title: str | None = None) -> Docum
     """The whole report of ``result`` as a ``Document``."""
     robot = result.robot_nominal
     title = title or f"Calibration report: {robot.name}"
-    subtitle = (f"{robot.dof}-axis robot, {CONVENTION_TITLES.get(robot.convention, robot.convention)}"
+    convention = CONVENTION_TITLES.get(robot.convention, robot.convention)
+    subtitle = (f"{robot.dof}-axis robot, {convention}"
                 f"; data: {', '.join(result.datasets)}; units: {result.units.length}, "
                 f"{result.units.angle}")
     candidates = (conclusion_section(result), robot_and_data_section(result),
@@ -94,7 +95,8 @@ def robot_and_data_section(result: CalibrationResult) -> Section:
     for role, residuals in (("fit", result.residuals), ("validation", result.validation_residuals)):
         for r in residuals:
             extras = ", ".join(sorted(r.extras)) or "-"
-            rows.append((r.label, role, r.kind, str(row_count(r)), str(len(r.errors_final)), extras))
+            rows.append((r.label, role, r.kind, str(row_count(r)), str(len(r.errors_final)),
+                         extras))
     data_table = Table("datasets", "Datasets", ("dataset", "role", "kind", "data rows",
                                                 "errors", "extra columns"), tuple(rows),
                        numeric=(False, False, False, True, True, False))
@@ -139,7 +141,8 @@ def parameters_section(result: CalibrationResult) -> Section:
         change_text = format_fixed(change, decimals)
         if change_text not in ("0",) and not change_text.startswith("-"):
             change_text = "+" + change_text
-        status = "identified" if p.identifiable else f"held at nominal: {p.reason or 'not identifiable'}"
+        status = "identified" if p.identifiable else \
+            f"held at nominal: {p.reason or 'not identifiable'}"
         rows.append((p.name, units.unit_name(p.quantity) or "-",
                      format_fixed(p.nominal / scale, decimals),
                      format_fixed(p.estimate / scale, decimals), change_text,
