@@ -28,7 +28,7 @@ RANK_TOLERANCE = 1e-7
 PREFERENCE_BAND = 0.5  # a preferred column may be picked if it has half the best remaining norm  # relative residual norm of a unit column below which it is dependent
 
 
-def preference(name: str) -> tuple[int, str]:
+def preference(name: str) -> tuple:
     """Order in which equally informative parameters are kept.
 
     The mounted instrument first (its offset is the least known and belongs to the set-up,
@@ -36,14 +36,21 @@ def preference(name: str) -> tuple[int, str]:
     base, then the Hayati ``beta`` (kept only where DH alone is degenerate).
     """
     if name.startswith(("probe_", "target_", "laser_")):
-        return (0, name)
-    if name.startswith("beta"):
-        return (4, name)
+        return (0, 0, 0, name)
     if name.startswith("base_"):
-        return (3, name)
+        return (3, 0, 0, name)
     if name.startswith("tool_"):
-        return (2, name)
-    return (1, name)
+        return (2, 0, 0, name)
+    stem = name.rstrip("0123456789")
+    joint = int(name[len(stem):]) if name[len(stem):] else 0
+    if stem == "beta":
+        return (4, joint, 0, name)
+    if stem in DH_STEMS:
+        return (1, joint, DH_STEMS.index(stem), name)
+    return (5, 0, 0, name)
+
+
+DH_STEMS = ("theta", "d", "a", "alpha")
 
 
 def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],

@@ -179,8 +179,9 @@ class Problem:
                 x[self.unknowns.index(name)] = value
         for model in self.models:
             mounted = x[self.mounted_indices(model)]
-            x[self.placement_indices(model)] = model.initial_placement(
-                self.points_numeric(model, x), mounted)
+            # Pendant-pose data carry their own flange poses: no robot points to offer.
+            points = self.points_numeric(model, x) if model.uses_robot else None
+            x[self.placement_indices(model)] = model.initial_placement(points, mounted)
         return x
 
     def initial(self) -> np.ndarray:
@@ -268,6 +269,7 @@ class Problem:
         position[columns] = np.arange(len(columns))
         M = np.zeros((rows, 3, len(columns)))
         for key, block in (("robot", J_p), ("effects", J_theta)):
+            block = block.reshape(rows, 3, -1)  # a one-column block comes back as rows x 3
             index = np.arange(self.slices[key].start, self.slices[key].stop)
             keep = position[index] >= 0
             if keep.any():

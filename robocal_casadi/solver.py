@@ -208,7 +208,7 @@ def _two_stage(problem: Problem, x0, free, loss, max_iterations, tolerance):
     x = x0.copy()
     total = 0
     status = "max_iterations"
-    for _ in range(max(1, max_iterations // 10)):
+    for _ in range(max(1, max_iterations)):
         previous = x.copy()
         for stage in (angles | others, lengths | others):
             x, *_, it, _ = _levenberg_marquardt(problem, x, stage, loss=loss,
