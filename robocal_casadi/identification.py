@@ -225,6 +225,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         residuals=tuple(residuals),
         validation_residuals=tuple(validation_residuals),
         mounted=mounted,
+        mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
         placement=placement,
         solver={"method": method, "loss": loss, "iterations": final.iterations,
                 "status": final.status, "seconds": geometric.seconds + nominal.seconds,

@@ -134,6 +134,7 @@ class CalibrationResult:
     residuals: tuple[DatasetResiduals, ...]
     validation_residuals: tuple[DatasetResiduals, ...] = ()
     mounted: dict[str, tuple[float, float | None]] = field(default_factory=dict)
+    mounted_quantities: dict[str, str] = field(default_factory=dict)  # name -> length | none
     placement: dict[str, float] = field(default_factory=dict)
     solver: dict[str, Any] = field(default_factory=dict)
     effect_models: tuple = ()  # the Effect objects, with ``effect_values`` (SI)
@@ -164,8 +165,13 @@ class CalibrationResult:
         if self.validation is not None:
             out["validation"] = self.validation.to_json(units)
         s = units.length_scale
-        out["mounted"] = {k: {"estimate": v / s, "std": None if sd is None else sd / s,
-                              "unit": units.length} for k, (v, sd) in self.mounted.items()}
+        out["mounted"] = {}
+        for name, (value, std) in self.mounted.items():
+            quantity = self.mounted_quantities.get(name, "length")
+            scale = units.scale(quantity)
+            out["mounted"][name] = {"estimate": value / scale,
+                                    "std": None if std is None else std / scale,
+                                    "unit": units.unit_name(quantity)}
         out["identifiability"] = {
             "identifiable": list(self.identifiability.identifiable),
             "not_identifiable": dict(self.identifiability.unidentifiable),
