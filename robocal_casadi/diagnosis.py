@@ -502,7 +502,9 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         return Diagnosis((), tuple(tested), problem, geometric, rounds,
                          time.perf_counter() - start)
     final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
-    findings = _findings(final, solution, steps)
+    groups = _groups(steps)
+    evidence = _evidence(final, solution, groups, fold, n_errors, method, loss)
+    findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)
 
@@ -529,36 +531,72 @@ def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,
 # ----------------------------------------------------------------------------- findings
 
 
-def _findings(problem: Problem, solution: Solution, steps: list[_Step]) -> list[EffectFinding]:
+def _groups(steps: list[_Step]) -> dict[tuple[str, str | None], list[_Step]]:
+    """The steps of each effect type (thermal: per column), in the order first found."""
     groups: dict[tuple[str, str | None], list[_Step]] = {}
     for step in steps:
         groups.setdefault((step.candidate.effect, step.candidate.column), []).append(step)
+    return groups
+
+
+def _evidence(final: Problem, solution: Solution, groups: dict, fold: np.ndarray,
+              n_errors: int, method: str, loss: str) -> dict:
+    """Per effect type: what it adds to the final model with everything else in it.
+
+    With one type added this is its path from the geometric model (the steps' numbers).
+    With several, each is left out of the final model in turn (its parameters zero, the
+    rest re-identified), so one effect is not credited with what another one found.
+    """
+    out = {}
+    if len(groups) == 1:
+        (key, group), = groups.items()
+        first, last = group[0], group[-1]
+        return {key: {"rms_drop": 1.0 - last.rms_after / first.rms_before,
+                      "bic_drop": float(sum(s.bic_drop for s in group)),
+                      "cv_rms_before": first.cv_before, "cv_rms_after": last.cv_after}}
+    r = solution.residual
+    cv_final = _Screening(final, r, final.jacobian(solution.x), solution.free, [], fold,
+                          n_errors).cv_before
+    rms_final, rss_final = final.rms(solution.x), float(r @ r)
+    for key, group in groups.items():
+        kept = _mask_of(final, [n for s in group for n in s.kept])
+        x = solution.x.copy()
+        x[kept] = 0.0
+        without = solve(final, x, solution.free & ~kept, method=method, loss=loss)
+        cv_without = _Screening(final, without.residual, final.jacobian(without.x),
+                                without.free, [], fold, n_errors).cv_before
+        rss_without = float(without.residual @ without.residual)
+        n = len(r)
+        out[key] = {"rms_drop": 1.0 - rms_final / final.rms(without.x),
+                    "bic_drop": n * math.log(rss_without / max(rss_final, 1e-300))
+                    - int(kept.sum()) * math.log(n),
+                    "cv_rms_before": cv_without, "cv_rms_after": cv_final}
+    return out
+
+
+def _findings(problem: Problem, solution: Solution, groups: dict,
+              evidence: dict) -> list[EffectFinding]:
     units = problem.robot.units
     std = solution.std
     findings = []
-    for (name, _), group in groups.items():
+    for key, group in groups.items():
+        name = key[0]
         joints = tuple(sorted(j for s in group for j in s.candidate.joints))
         kept = [n for s in group for n in s.kept]
         held = [n for s in group for n in s.held]
         values = {n: float(solution.x[problem.unknowns.index(n)]) for n in kept}
         errors = {n: float(std[problem.unknowns.index(n)]) for n in kept}
-        first, last = group[0], group[-1]
-        evidence = {
-            "rms_drop": 1.0 - last.rms_after / first.rms_before,
-            "bic_drop": float(sum(s.bic_drop for s in group)),
-            "cv_rms_before": first.cv_before,
-            "cv_rms_after": last.cv_after,
-        }
         effect = next(e for e in problem.effects if e.name == name
                       and set(kept) <= set(e.parameter_names()))
         text = _describe(name, effect, joints, values, units)
         scale = units.length_scale
+        numbers = evidence[key]
         held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
         summary = (f"{text}{held_text}; adding it lowers the held-out RMS from "
-                   f"{first.cv_before / scale:.3g} {units.length} to "
-                   f"{last.cv_after / scale:.3g} {units.length}")
+                   f"{numbers['cv_rms_before'] / scale:.3g} {units.length} to "
+                   f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")
         findings.append(EffectFinding(name=name, joints=joints, parameters=values,
-                                      unit=effect.unit, evidence=evidence, std=errors,
+                                      unit=effect.unit, evidence=dict(numbers), std=errors,
                                       summary=summary))
     return findings
 

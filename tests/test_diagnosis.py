@@ -212,3 +212,21 @@ def test_candidate_rows_read_as_mappings_and_diagnosis_is_frozen(tmp_path):
     # tracker residuals fold by data row
     groups = diagnosis.residual_groups(problem.models[0])
     np.testing.assert_array_equal(groups, np.repeat(np.arange(fit.rows), 3))
+
+
+def test_two_effects_each_credited_with_its_own_share(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    fit, validation = tracker_pair(
+        tmp_path, robot, payload=(0.0, 10.0),
+        effects={"joint_compliance": {2: 1.5e-6}, "joint_scale": {4: 4e-4}})
+    result = calibrate([fit], [validation])
+    found = {e.name: e for e in result.effects}
+    assert set(found) == {"joint_compliance", "joint_scale"}
+    assert found["joint_compliance"].joints == (2,) and found["joint_scale"].joints == (4,)
+    for finding in found.values():
+        # each left out of the final model in turn: the final model is the same "after"
+        assert finding.evidence["cv_rms_after"] < finding.evidence["cv_rms_before"]
+        assert finding.evidence["bic_drop"] > 10
+    after = {f.evidence["cv_rms_after"] for f in found.values()}
+    assert len(after) == 1
+    check_close_to_noise(result)
