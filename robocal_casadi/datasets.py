@@ -154,8 +154,12 @@ def _length3(content: dict, key: str, sub: str, units: Units, path: Path) -> np.
                            where=f"{key}.{sub}")) * units.length_scale
 
 
-def _joints(table: Table, robot: Robot, units: Units, used: set[str]) -> np.ndarray:
-    """Joint columns ``q1..qn`` in SI, checked against the robot's limits."""
+def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> np.ndarray:
+    """Joint columns ``q1..qn`` in SI, checked against the robot's limits.
+
+    Names added to ``used``; a reading outside the limits is an ``InputError`` that says
+    when it looks like a unit mix-up (degrees in a file that declares rad, ...).
+    """
     names = [f"q{i}" for i in range(1, robot.dof + 1)]
     missing = [n for n in names if not table.has(n)]
     if missing:
@@ -211,7 +215,7 @@ def _extras(table: Table, used: set[str]) -> dict[str, np.ndarray]:
 def _with_table(common: dict, table: Table | None, robot: Robot, used: set[str]) -> dict:
     if table is None:
         return common
-    return dict(common, joints=_joints(table, robot, common["units"], used))
+    return dict(common, joints=joint_readings(table, robot, common["units"], used))
 
 
 def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...]]:

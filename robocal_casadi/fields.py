@@ -7,12 +7,15 @@ the same way everywhere: the file, the key path, what was expected and what was 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from .errors import InputError
+
+_FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
 def load_yaml(path: str | Path, *, what: str = "file") -> dict:
@@ -34,6 +37,9 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
 
 def number(value: Any, *, file: str | Path | None, where: str) -> float:
     """A finite float; booleans, strings, NaN and infinities are refused."""
+    if isinstance(value, str) and _FLOAT_TEXT.fullmatch(value.strip()):
+        # YAML 1.1 reads 1e-3 (no dot) as text; people write it, so accept it.
+        value = float(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"expected a number, got {value!r}", file=file, where=where)
     value = float(value)

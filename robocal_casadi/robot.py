@@ -235,6 +235,22 @@ def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
 # ----------------------------------------------------------------------------- writing
 
 
+def to_file_units(value: float, scale: float) -> float:
+    """``value / scale`` as the shortest decimal that converts back to exactly ``value``.
+
+    A file written in mm or deg then reads back to the same SI floats, and a value the
+    user typed (``7.25``) is written as typed, not as ``7.250000000000001``.
+    """
+    if scale == 1.0:
+        return float(value)
+    plain = value / scale
+    for digits in range(1, 18):
+        candidate = float(f"{plain:.{digits}g}")
+        if candidate * scale == value:
+            return candidate
+    return plain
+
+
 def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
     """The robot file mapping in ``units`` (default: the robot's own file units)."""
     units = units or robot.units
@@ -242,19 +258,19 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
     joints = []
     for joint in robot.joints:
         entry: dict[str, Any] = {"type": joint.type}
-        entry["theta"] = joint.theta / A
-        entry["d"] = joint.d / L
-        entry["a"] = joint.a / L
-        entry["alpha"] = joint.alpha / A
+        entry["theta"] = to_file_units(joint.theta, A)
+        entry["d"] = to_file_units(joint.d, L)
+        entry["a"] = to_file_units(joint.a, L)
+        entry["alpha"] = to_file_units(joint.alpha, A)
         if joint.has_beta or joint.beta != 0.0:
-            entry["beta"] = joint.beta / A
+            entry["beta"] = to_file_units(joint.beta, A)
         if joint.limits is not None:
             scale = A if joint.revolute else L
-            entry["limits"] = [joint.limits[0] / scale, joint.limits[1] / scale]
+            entry["limits"] = [to_file_units(limit, scale) for limit in joint.limits]
         if joint.mass is not None:
             entry["mass"] = joint.mass
         if joint.com is not None:
-            entry["com"] = [c / L for c in joint.com]
+            entry["com"] = [to_file_units(c, L) for c in joint.com]
         joints.append(entry)
     content: dict[str, Any] = {
         "name": robot.name,
@@ -265,7 +281,8 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
     for key, frame, present in (("base", robot.base, robot.has_base),
                                 ("tool", robot.tool, robot.has_tool)):
         if present or any(frame.xyz) or any(frame.rpy):
-            content[key] = {"xyz": [v / L for v in frame.xyz], "rpy": [v / A for v in frame.rpy]}
+            content[key] = {"xyz": [to_file_units(v, L) for v in frame.xyz],
+                            "rpy": [to_file_units(v, A) for v in frame.rpy]}
     if robot.has_gravity or tuple(robot.gravity) != (0.0, 0.0, -9.81):
         content["gravity"] = list(robot.gravity)
     return content

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets import _joints as checked_joint_readings
+from ..datasets import joint_readings as checked_joint_readings
 from ..errors import InputError
 from ..kinematics import Kinematics
 from ..output import atomic_file

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets import _joints as checked_joint_readings
+from ..datasets import joint_readings as checked_joint_readings
 from ..errors import InputError
 from ..fields import load_yaml, number, require, vector
 from ..robot import Robot, load_robot
