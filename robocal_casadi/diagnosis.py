@@ -23,7 +23,14 @@ The candidate with the largest BIC drop among those with a BIC drop above 10 and
 lower held-out RMS is then added and everything is re-identified jointly with the
 nonlinear solver; it is kept if the refitted model still passes both tests. This repeats
 until no candidate is supported. All effects of one type found over the rounds form one
-finding (e.g. ``joint_compliance`` on joints 2 and 3).
+finding (e.g. ``joint_compliance`` on joints 2 and 3). Its evidence (``rms_drop``
+relative, ``bic_drop``, ``cv_rms_before``/``cv_rms_after`` [m]) is what it adds to the
+final model: with several types found, each is left out of the final model in turn and
+the rest re-identified, so no effect is credited with what another one explains.
+
+The screening is unweighted least squares even when the refits use ``loss='huber'``.
+Data that carry their own flange poses (pendant readings) see no joint effect and are
+not diagnosed.
 
 Residual RMS values are over the contract's per-measurement errors [m] (for tracker data
 the 3-D point error), as ``Problem.rms``.
@@ -444,7 +451,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     candidates, candidate_effects = _candidates(problem, extras)
     tested: list[CandidateTest] = []
     steps: list[_Step] = []
-    if not candidates:
+    if not candidates or not any(model.uses_robot for model in problem.models):
         return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
 
     big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
