@@ -226,7 +226,8 @@ def test_cyclic_matches_its_definition():
         for k, j in enumerate((1, 4)):
             a1, b1, a2, b2 = theta[4 * k:4 * k + 4]
             x = q[j - 1]
-            expected[j - 1] = a1 * np.sin(x) + b1 * np.cos(x) + a2 * np.sin(2 * x) + b2 * np.cos(2 * x)
+            expected[j - 1] = (a1 * np.sin(x) + b1 * np.cos(x)
+                               + a2 * np.sin(2 * x) + b2 * np.cos(2 * x))
         np.testing.assert_allclose(dq, expected, atol=1e-18)
         assert not dp.any()
 

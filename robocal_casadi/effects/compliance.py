@@ -131,7 +131,8 @@ class JointCompliance(Effect):
         self.terms: dict[int, tuple[int, ...]] = {}
         if self.lumped:
             check_joints(self, robot)
-            self.terms = {j: independent_terms(robot, j) for j in self.joints}  # type: ignore[arg-type]
+            assert robot is not None  # for the type checker: lumped implies a robot
+            self.terms = {j: independent_terms(robot, j) for j in self.joints}
 
     def __repr__(self) -> str:
         form = ", lumped" if self.lumped else ""

@@ -33,5 +33,6 @@ class JointCyclic(Effect):
         for k, j in enumerate(self.joints):
             q = row.q[j - 1]
             a1, b1, a2, b2 = (theta[4 * k + i] for i in range(4))
-            entries[j - 1] = a1 * ca.sin(q) + b1 * ca.cos(q) + a2 * ca.sin(2 * q) + b2 * ca.cos(2 * q)
+            entries[j - 1] = (a1 * ca.sin(q) + b1 * ca.cos(q)
+                              + a2 * ca.sin(2 * q) + b2 * ca.cos(2 * q))
         return column(entries, row.robot.dof), None
