@@ -3,16 +3,23 @@
 The public API is re-exported here; see the README for a worked example.
 """
 
+from .compensation import compensate
 from .datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
 from .errors import InputError, RobocalError, SolverError
+from .identification import calibrate
+from .ik import inverse_kinematics
 from .kinematics import Kinematics
 from .parameters import ParameterRegistry
+from .results import CalibrationResult
 from .robot import Frame, Joint, Robot, load_robot, save_robot
+from .simulate import simulate
+from .tracking import Tracker, TrackStep
 from .units import Units
 
 __all__ = [
-    "ArtifactTouches", "Frame", "InputError", "Joint", "Kinematics", "ParameterRegistry",
-    "Robot", "RobocalError", "SolverError", "SphereLaser", "TrackerPoints", "Units",
-    "load_dataset", "load_robot", "save_robot",
+    "ArtifactTouches", "CalibrationResult", "Frame", "InputError", "Joint", "Kinematics",
+    "ParameterRegistry", "Robot", "RobocalError", "SolverError", "SphereLaser", "TrackStep",
+    "Tracker", "TrackerPoints", "Units", "calibrate", "compensate", "inverse_kinematics",
+    "load_dataset", "load_robot", "save_robot", "simulate",
 ]
 __version__ = "0.1.0"

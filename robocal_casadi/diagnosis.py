@@ -614,14 +614,18 @@ def _joint_list(joints: Sequence[int]) -> str:
     return "joints " + ", ".join(str(j) for j in joints[:-1]) + f" and {joints[-1]}"
 
 
+def _verb(joints) -> str:
+    return "deflects" if len(tuple(joints)) == 1 else "deflect"
+
+
 def _describe(name: str, effect: Effect, joints, values: dict, units) -> str:
     """One sentence of what the parameters say, in the robot file's units."""
     if name == "joint_compliance":
         if getattr(effect, "lumped", False):
-            return (f"{_joint_list(joints)} deflect under gravity (lumped link masses: "
+            return (f"{_joint_list(joints)} {_verb(joints)} under gravity (lumped link masses: "
                     f"{len(values)} terms)")
         parts = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
-        return f"{_joint_list(joints)} deflect under gravity ({parts} {effect.unit})"
+        return f"{_joint_list(joints)} {_verb(joints)} under gravity ({parts} {effect.unit})"
     if name == "joint_cyclic":
         parts = []
         for j in joints:

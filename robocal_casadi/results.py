@@ -75,10 +75,14 @@ class EffectFinding:
     std: dict[str, float] = field(default_factory=dict)
     summary: str = ""
 
-    def to_json(self) -> dict:
+    def to_json(self, units: Units | None = None) -> dict:
+        """Contract entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
+        scale = units.length_scale if units is not None else 1.0
+        evidence = {k: float(v) / (scale if k.startswith("cv_rms") else 1.0)
+                    for k, v in self.evidence.items()}
         return {"name": self.name, "joints": list(self.joints),
                 "parameters": {k: float(v) for k, v in self.parameters.items()},
-                "unit": self.unit, "evidence": {k: float(v) for k, v in self.evidence.items()}}
+                "unit": self.unit, "evidence": evidence}
 
 
 @dataclass(frozen=True)
@@ -159,7 +163,7 @@ class CalibrationResult:
             "convention": self.robot_nominal.convention,
             "parameters": [p.to_json(units) for p in self.parameters],
             "condition_number": float(self.condition_number),
-            "effects": [e.to_json() for e in self.effects],
+            "effects": [e.to_json(units) for e in self.effects],
             "fit": self.fit.to_json(units),
         }
         if self.validation is not None:

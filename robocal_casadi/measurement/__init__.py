@@ -4,20 +4,15 @@ from __future__ import annotations
 
 from .artifact import ArtifactModel, CrossBarModel
 from .base import MeasurementModel
+from .sphere_laser import SphereLaserModel
 from .tracker import TrackerModel
 
 MODELS: dict[str, type[MeasurementModel]] = {
     "cross_bar": CrossBarModel,
     "artifact_touches": ArtifactModel,
+    "sphere_laser": SphereLaserModel,
     "tracker_points": TrackerModel,
 }
-
-try:  # the sphere-and-laser model lives in its own module
-    from .sphere_laser import SphereLaserModel
-
-    MODELS["sphere_laser"] = SphereLaserModel
-except ImportError:  # pragma: no cover - only while that module is absent
-    pass
 
 
 def model_for(dataset, label: str) -> MeasurementModel:
@@ -30,5 +25,5 @@ def model_for(dataset, label: str) -> MeasurementModel:
     return MODELS[dataset.kind](dataset, label)
 
 
-__all__ = ["ArtifactModel", "CrossBarModel", "MODELS", "MeasurementModel",
+__all__ = ["ArtifactModel", "CrossBarModel", "MODELS", "MeasurementModel", "SphereLaserModel",
            "TrackerModel", "model_for"]
