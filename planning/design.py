@@ -3,8 +3,9 @@
 1. draw a pool of feasible candidates (``candidates``),
 2. compute each candidate's Jacobian rows at the nominal robot (``rows``),
 3. find the identifiable parameters on the whole pool (``information``),
-4. choose ``count`` candidates: greedy start, then exchanges for the chosen index
-   (``selection``), optionally refine the chosen joints continuously (``refine``),
+4. choose ``count`` candidates: exchanges for the chosen index from a greedy start and
+   from random starts, the best kept (``selection``), then refine the chosen joints
+   continuously (``refine``),
 5. report the index of the plan beside the median of random feasible plans of the
    same size drawn from the same pool.
 """
@@ -22,7 +23,7 @@ from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.progress import Progress
 
 from .candidates import Candidate, generate
-from .indices import DESCRIPTIONS, canonical, index_value
+from .indices import DESCRIPTIONS, canonical, index_value, scaling, score
 from .information import Information
 from .reach import Workspace
 from .rows import RowModel
@@ -30,6 +31,7 @@ from .selection import exchange, greedy, random_designs
 from .setup import PlanSetup, setup_from_dataset
 
 RANDOM_PLANS = 20
+STARTS = 4  # exchange searches: one from the greedy design, the others from random ones
 REFINE_ROUNDS = 3  # each round moves joints at most refine.STEP
 
 
@@ -40,7 +42,8 @@ class Plan:
     ``candidates`` the chosen placements or readings; ``index`` (canonical name, e.g.
     ``O2``) and its ``value`` for the plan; ``random_values`` the same index for random
     feasible plans of the same size; ``singular_values`` of the plan's column-scaled
-    identification Jacobian; ``identifiable`` the parameters it is computed over.
+    identification Jacobian (scaled as the index asks, see ``indices``);
+    ``identifiable`` the parameters it is computed over.
     """
 
     setup: PlanSetup
@@ -128,13 +131,22 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
             f"{needed} {what} of this kind", file=setup.path)
-    chosen = greedy(info, count, rng)
+    best = None
     with Progress("plan: exchange", total=None, stream=stream) as progress:
-        chosen, swaps = exchange(info, chosen, index, progress=progress)
+        for start in range(STARTS):  # a greedy start, then random ones: keep the best
+            if start == 0:
+                initial = greedy(info, count, rng)
+            else:
+                initial = list(rng.choice(len(candidates), size=count, replace=False))
+            chosen, swaps = exchange(info, initial, index, progress=progress)
+            value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
+            if best is None or value > best[0]:
+                best = (value, chosen, swaps)
+    _, chosen, swaps = best
     if stream is not None:
         stream.close()
     chosen_candidates = tuple(candidates[i] for i in chosen)
-    spectrum = info.spectrum(chosen)
+    spectrum = info.spectrum(chosen, scaling(index))
     refined = False
     if refine:
         from .refine import refine_plan
@@ -149,7 +161,7 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     if not np.isfinite(value) or spectrum[-1] <= 1e-10 * spectrum[0]:
         raise InputError(f"no plan of {count} found that identifies all {info.m} parameters; "
                          f"ask for more (--count)", file=setup.path)
-    random_values = np.array([index_value(index, info.spectrum(d))
+    random_values = np.array([index_value(index, info.spectrum(d, scaling(index)))
                               for d in random_designs(info, count, RANDOM_PLANS, rng)])
     return Plan(setup, chosen_candidates, index, value, random_values, spectrum,
                 info.identifiable_names, len(candidates), swaps, refined)

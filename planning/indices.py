@@ -2,8 +2,17 @@
 
 All indices are functions of the singular values ``s_1 >= ... >= s_m`` of the
 column-scaled identification Jacobian ``J`` (rows: residuals [m], columns: the ``m``
-identifiable parameters, each column divided by its norm, placement unknowns projected
-out). They are singular values of ``J`` itself, not eigenvalues of ``J^T J``.
+identifiable parameters, placement unknowns projected out). They are singular values of
+``J`` itself, not eigenvalues of ``J^T J``.
+
+Column scaling (``scaling``): the condition number is scale-free only up to the
+columns' units, so ``O2`` divides each column by its own norm in the design (the
+engine's identifiability does the same, so the numbers agree). ``O1, O3, O4, O5``
+measure size as well as shape; with each design's columns normalised they would only
+reward balance (the sum of ``s_i^2`` is then always ``m``). They divide each column by
+a fixed reference instead: its RMS norm per candidate over the pool of feasible
+candidates, so a typical candidate has unit columns and more informative poses score
+higher.
 
 * ``O1`` geometric mean ``(prod s_i)^(1/m)`` (maximise; Borm and Menq)
 * ``O2`` condition number ``s_max / s_min`` (minimise; Driels and Pathre); alias ``cond``
@@ -27,6 +36,11 @@ DESCRIPTIONS = {
     "O5": "inverse sum of inverse singular values",
 }
 MAXIMISE = {"O1": True, "O2": False, "O3": True, "O4": True, "O5": True}
+
+
+def scaling(name: str) -> str:
+    """``'design'`` (columns normalised per design) for ``O2``, else ``'reference'``."""
+    return "design" if canonical(name) == "O2" else "reference"
 
 
 def canonical(name: str) -> str:

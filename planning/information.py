@@ -48,6 +48,9 @@ class Information:
         self.blocks = [b.X[:, keep] for b in blocks]
         self.matrices = full[:, keep][:, :, keep]
         self.m = len(self.identifiable)
+        pool = _schur(self.matrices.sum(axis=0)[None], self.m, shared)[0]
+        self.reference = np.sqrt(np.clip(np.diag(pool), 1e-300, None) / len(blocks))
+        """Fixed column scales: RMS column norm per candidate over the pool."""
 
     def __repr__(self) -> str:
         return (f"Information({len(self.blocks)} candidates, {self.m} identifiable of "
@@ -60,28 +63,37 @@ class Information:
     def rows_per_candidate(self) -> float:
         return float(np.mean([len(b) for b in self.blocks]))
 
-    def spectra(self, matrices: np.ndarray) -> np.ndarray:
-        """Singular values (B x m, largest first) of designs with information ``matrices``."""
+    def spectra(self, matrices: np.ndarray, scaling: str = "design") -> np.ndarray:
+        """Singular values (B x m, largest first) of designs with information ``matrices``.
+
+        ``scaling``: ``'design'`` normalises each design's columns, ``'reference'``
+        divides them by the fixed ``reference`` (see ``indices``).
+        """
         M = _schur(matrices, self.m, self.shared)
-        d = np.sqrt(np.clip(np.einsum("bii->bi", M), 1e-300, None))
+        if scaling == "design":
+            d = np.sqrt(np.clip(np.einsum("bii->bi", M), 1e-300, None))
+        else:
+            d = np.broadcast_to(self.reference, M.shape[:2])
         M = M / d[:, :, None] / d[:, None, :]
         lam = np.linalg.eigvalsh(M)[:, ::-1]
         return np.sqrt(np.clip(lam, 0.0, None))
 
-    def spectrum(self, chosen) -> np.ndarray:
+    def spectrum(self, chosen, scaling: str = "design") -> np.ndarray:
         """Exact singular values (largest first) of the design made of candidates ``chosen``."""
-        return self.spectrum_of([self.blocks[i] for i in chosen])
+        return self.spectrum_of([self.blocks[i] for i in chosen], scaling)
 
     def restrict(self, block: Block) -> np.ndarray:
         """A new candidate's rows on this design's columns (identifiable, then shared)."""
         return block.X[:, self.columns]
 
-    def spectrum_of(self, rows: list[np.ndarray]) -> np.ndarray:
+    def spectrum_of(self, rows: list[np.ndarray], scaling: str = "design") -> np.ndarray:
         """Exact singular values of the design whose (restricted) row blocks are ``rows``."""
         X = np.vstack(rows)
         J = _project_shared(X[:, :self.m], X[:, self.m:])
-        norms = np.linalg.norm(J, axis=0)
-        return np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
+        if scaling == "design":
+            norms = np.linalg.norm(J, axis=0)
+            return np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
+        return np.linalg.svd(J / self.reference, compute_uv=False)
 
     def jacobian(self, chosen) -> np.ndarray:
         """The design's identification Jacobian rows (identifiable then shared columns)."""

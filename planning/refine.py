@@ -2,7 +2,7 @@
 
 The joint readings of the chosen candidates become the variables; the objective is
 ``-log det`` of the plan's scaled information (Schur complement of the shared placement
-unknowns, columns scaled to unit norm), a smooth surrogate of every index; the
+unknowns, columns scaled as the index asks), a smooth surrogate of every index; the
 constraints keep each reading runnable:
 
 * all kinds: joint limits, every joint frame origin and the measured point above the
@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from .candidates import Candidate, visible
-from .indices import better, index_value
+from .indices import better, index_value, scaling
 from .information import Information
 from .reach import Workspace
 from .rows import RowModel
@@ -37,10 +37,11 @@ ANGLE_MARGIN = 1e-4  # [rad] kept inside the visibility cone and incidence limit
 def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Information,
                 candidates: tuple[Candidate, ...], index: str, max_iterations: int = 60):
     """``(refined candidates, spectrum)`` or None when refinement does not help."""
+    mode = scaling(index)
     before = index_value(index, info.spectrum_of([info.restrict(b)
-                                                  for b in row_model.blocks(list(candidates))]))
+                                                  for b in row_model.blocks(list(candidates))], mode))
     try:
-        Q_new = _solve(setup, workspace, row_model, info, candidates, max_iterations)
+        Q_new = _solve(setup, workspace, row_model, info, candidates, max_iterations, mode)
     except RuntimeError:
         return None
     if Q_new is None:
@@ -48,13 +49,13 @@ def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Informat
     refined = _rebuild(setup, workspace, candidates, Q_new)
     if refined is None:
         return None
-    spectrum = info.spectrum_of([info.restrict(b) for b in row_model.blocks(refined)])
+    spectrum = info.spectrum_of([info.restrict(b) for b in row_model.blocks(refined)], mode)
     if not better(index, index_value(index, spectrum), before):
         return None
     return tuple(refined), spectrum
 
 
-def _solve(setup, workspace, row_model, info, candidates, max_iterations):
+def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
     kin = workspace.kinematics
     p = row_model.p
     dof = kin.dof
@@ -129,7 +130,7 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations):
     M = A[:m, :m]
     if shared:
         M = M - A[:m, m:] @ ca.solve(A[m:, m:], A[m:, :m])
-    d = ca.sqrt(ca.diag(M))
+    d = ca.sqrt(ca.diag(M)) if mode == "design" else ca.DM(info.reference)
     Ms = M / (d @ d.T)
     objective = -ca.log(ca.det(Ms))
     x = ca.vertcat(*variables)

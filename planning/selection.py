@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .indices import index_value, score
+from .indices import index_value, scaling, score
 from .information import Information
 
 GREEDY_RIDGE = 1e-6
@@ -40,7 +40,7 @@ def greedy(info: Information, count: int, rng: np.random.Generator) -> list[int]
 
 def values(info: Information, index: str, matrices: np.ndarray) -> np.ndarray:
     """Index ``index`` of each design whose information is in ``matrices``."""
-    return np.array([index_value(index, s) for s in info.spectra(matrices)])
+    return np.array([index_value(index, s) for s in info.spectra(matrices, scaling(index))])
 
 
 def exchange(info: Information, chosen: list[int], index: str, *, max_passes: int = 20,

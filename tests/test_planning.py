@@ -283,3 +283,25 @@ def test_artifact_plan_touches_each_socket_in_several_configurations(setups, tmp
             configurations = Q[[i for i in rows if points[i] == socket]]
             assert len(configurations) == 3
             assert np.min(np.ptp(configurations, axis=0).max()) > 1e-3  # really different
+
+
+def test_reference_scaling_keeps_size_and_design_scaling_does_not(setups):
+    """O2 normalises each design's columns (scale-free, as the engine does); the other
+    indices use fixed reference scales, so a design repeated twice scores higher."""
+    from planning.information import Information
+    from planning.rows import RowModel
+
+    dataset, plan = _plan(setups, "tracker_6r")
+    kinematics = Kinematics(dataset.robot)
+    rows = RowModel(plan.setup, kinematics)
+    info = Information(rows.blocks(list(plan.candidates)), rows.parameters, rows.shared)
+    once = list(range(len(plan.candidates)))
+    twice = once + once
+    for_design = [info.spectrum(d, "design") for d in (once, twice)]
+    for_reference = [info.spectrum(d, "reference") for d in (once, twice)]
+    assert np.allclose(for_design[0], for_design[1])  # unit columns: repetition changes nothing
+    assert np.allclose(for_reference[1], np.sqrt(2) * for_reference[0])  # twice the information
+    # the batched eigenvalue route gives the same singular values as the SVD route
+    for mode in ("design", "reference"):
+        batched = info.spectra(info.matrices[once].sum(axis=0)[None], mode)[0]
+        assert np.allclose(batched, info.spectrum(once, mode), rtol=1e-6)
