@@ -141,11 +141,14 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: str = "lm", loss: str = "linear",
-              progress: bool = False) -> CalibrationResult:
+              select_growth: float | None = None, progress: bool = False) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
-    diagnosis add more. ``method`` and ``loss`` go to ``solver.solve``.
+    diagnosis add more. ``method`` and ``loss`` go to ``solver.solve``. With
+    ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
+    than that fraction are dropped first, as in the bar patent (``selection``); what was
+    dropped is in ``result.selection``.
     """
     datasets = list(datasets)
     if not datasets:
@@ -158,6 +161,18 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
 
     nominal = solve(problem, x0, problem.mask("placement"), method=method, loss=loss)
     identifiability = analyse_identifiability(problem, nominal.x)
+    selection = None
+    if select_growth is not None and identifiability.identifiable:
+        from .selection import select_by_condition
+
+        selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
+                                        growth=select_growth)
+        if any(selection.dropped.values()):
+            datasets = [m.subset(selection.kept[m.label]) for m in problem.models]
+            problem = Problem(robot, models_for(datasets), effects)
+            nominal = solve(problem, problem.initial(), problem.mask("placement"),
+                            method=method, loss=loss)
+            identifiability = analyse_identifiability(problem, nominal.x)
     if not identifiability.identifiable:
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
@@ -240,6 +255,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         effect_models=tuple(final_problem.effects),
         effect_values=final.x[final_problem.slices["effects"]].copy(),
         diagnosis=tuple(tested),
+        selection={} if selection is None else {k: v for k, v in selection.dropped.items()},
     )
 
 

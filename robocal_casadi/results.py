@@ -144,6 +144,7 @@ class CalibrationResult:
     effect_models: tuple = ()  # the Effect objects, with ``effect_values`` (SI)
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
+    selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
 
     @property
     def units(self) -> Units:
@@ -184,6 +185,8 @@ class CalibrationResult:
         }
         out["solver"] = {k: v for k, v in self.solver.items()
                          if isinstance(v, (int, float, str, bool))}
+        if self.selection:
+            out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
         return out
 
     def __repr__(self) -> str:

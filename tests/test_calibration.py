@@ -44,23 +44,25 @@ def identifiable_truth(robot, kind, tmp_path, seed):
             for n in names}
 
 
-CASES = [("tracker_points", industrial_6r), ("tracker_points", panda_7dof),
-         ("cross_bar", industrial_6r),
-         pytest.param("cross_bar", panda_7dof, marks=pytest.mark.slow),
-         pytest.param("artifact_touches", industrial_6r, marks=pytest.mark.slow),
-         pytest.param("artifact_touches", panda_7dof, marks=pytest.mark.slow)]
+# (kind, robot, rows): a 7-DOF arm has more parameters, so more bar placements keep the
+# held-out error within 10% of the noise floor (80 placements give about 16% above it).
+CASES = [("tracker_points", industrial_6r, 150), ("tracker_points", panda_7dof, 150),
+         ("cross_bar", industrial_6r, 80),
+         pytest.param("cross_bar", panda_7dof, 160, marks=pytest.mark.slow),
+         pytest.param("artifact_touches", industrial_6r, 24, marks=pytest.mark.slow),
+         pytest.param("artifact_touches", panda_7dof, 24, marks=pytest.mark.slow)]
 
 
 def _case_id(case) -> str:
-    kind, make_robot = case.values if hasattr(case, "values") else case
+    kind, make_robot, rows = case.values if hasattr(case, "values") else case
     return f"{kind}-{make_robot.__name__}"
 
 
-@pytest.mark.parametrize("kind,make_robot", CASES, ids=[_case_id(c) for c in CASES])
-def test_recovers_truth_within_three_standard_errors(kind, make_robot, tmp_path):
+@pytest.mark.parametrize("kind,make_robot,rows", CASES, ids=[_case_id(c) for c in CASES])
+def test_recovers_truth_within_three_standard_errors(kind, make_robot, rows, tmp_path):
     robot = make_robot()
     errors = identifiable_truth(robot, kind, tmp_path, seed=3)
-    fit = simulate(robot, kind, out_dir=tmp_path / "fit", rows=ROWS[kind], noise=NOISE,
+    fit = simulate(robot, kind, out_dir=tmp_path / "fit", rows=rows, noise=NOISE,
                    geometric_errors=errors, seed=4, mounted_error=0.0, progress=False)
     held_out = simulate(robot, kind, out_dir=tmp_path / "val", rows=ROWS[kind], noise=NOISE,
                         geometric_errors=errors, seed=5, mounted_error=0.0, progress=False)
@@ -164,3 +166,31 @@ def test_huber_resists_outliers(tmp_path):
                    if p.identifiable and p.name.startswith(("a", "d")))
 
     assert error(robust) < 0.5 * error(plain)
+
+
+def test_condition_number_selection_drops_what_hurts(tmp_path):
+    """A bar placement repeated many times adds no new direction: selection drops copies."""
+    from dataclasses import replace
+
+    from robocal_casadi.selection import select_by_condition
+    from robocal_casadi.identification import Problem, analyse_identifiability, models_for, solve
+
+    robot = industrial_6r()
+    data = simulate(robot, "cross_bar", out_dir=tmp_path / "bar", rows=40, noise=NOISE,
+                    geometric_errors=ERRORS, seed=41, progress=False).load()
+    # Append ten copies of placement 0 under new ids: they only sharpen one direction.
+    first = np.flatnonzero(data.pose == data.pose[0])
+    copies = np.concatenate([first] * 10)
+    new_ids = np.repeat(np.arange(10) + data.pose.max() + 1, len(first))
+    spoiled = replace(data, joints=np.vstack([data.joints, data.joints[copies]]),
+                      pose=np.concatenate([data.pose, new_ids]),
+                      point=data.point + tuple(data.point[i] for i in copies), extras={})
+    problem = Problem(robot, models_for([spoiled]))
+    x = solve(problem, problem.initial(), problem.mask("placement")).x
+    ident = analyse_identifiability(problem, x)
+    selection = select_by_condition(problem, x, ident.identifiable, growth=0.0)
+    dropped = set(next(iter(selection.dropped.values())))
+    assert len(dropped & set(new_ids)) >= 5
+    result = calibrate([spoiled], diagnose=False, select_growth=0.0)
+    assert sum(len(v) for v in result.selection.values()) == len(dropped)
+    assert result.to_json()["selection"]["dropped"]

@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "A dx = b; two_stage: angles then lengths")
     parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
                         help="huber down-weights outliers")
+    parser.add_argument("--select-growth", type=float, default=None, metavar="G",
+                        help="drop units of data (bar placements, readings) that grow the "
+                             "condition number by more than the fraction G, e.g. 0.05")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
 
@@ -81,6 +84,10 @@ def summary(result: CalibrationResult) -> str:
         v = result.validation
         lines.append(f"validation RMS [{units.length}]: nominal {v.rms_nominal / s:.4g}, geometric "
                      f"{v.rms_geometric / s:.4g}, final {v.rms_final / s:.4g}")
+    for label, dropped in result.selection.items():
+        if dropped:
+            lines.append(f"data selection dropped {len(dropped)} unit(s) of {label}: "
+                         f"{', '.join(map(str, dropped))}")
     if result.effects:
         for effect in result.effects:
             lines.append(f"effect: {effect.summary or effect.name}")
@@ -93,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
     datasets = [load_dataset(p) for p in args.datasets]
     validation = [load_dataset(p) for p in args.validate]
     result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
-                       loss=args.loss, progress=sys.stderr.isatty())
+                       loss=args.loss, select_growth=args.select_growth,
+                       progress=sys.stderr.isatty())
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"

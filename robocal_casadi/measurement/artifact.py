@@ -168,6 +168,22 @@ class ArtifactModel(MeasurementModel):
             sizes += [1] * n
         return np.array(rows, dtype=int), np.array(sizes, dtype=int)
 
+    def residual_groups(self) -> np.ndarray:
+        """The placement (pose id) of every residual entry."""
+        groups: list[int] = []
+        for socket in self.sockets:
+            if socket.unknown_index is not None:
+                groups += [socket.pose] * (3 * len(socket.rows))
+        for pose in self._poses():
+            groups += [pose] * (len(self._distances(pose)) + len(self._perpendiculars(pose)))
+        return np.array(groups, dtype=int)
+
+    def subset(self, groups: np.ndarray):
+        """The dataset with only the placements (pose ids) in ``groups``."""
+        from ..selection import dataset_rows
+
+        return dataset_rows(self.dataset, np.isin(self.dataset.pose, groups))
+
     def errors(self, residual: np.ndarray) -> np.ndarray:
         _, sizes = self._layout()
         residual = np.asarray(residual, float).ravel()

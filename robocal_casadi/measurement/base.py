@@ -81,6 +81,26 @@ class MeasurementModel(ABC):
     def residual_size(self) -> int:
         """Length of the residual column."""
 
+    def residual_groups(self) -> np.ndarray:
+        """For each residual entry, the unit of data it belongs to (-1: none).
+
+        A unit is what is kept or held out together: a data row here; a placement for
+        artifacts (their sockets are per placement). Used by data selection and by
+        cross-validation.
+        """
+        rows = max(self.dataset.rows, 1)
+        size = self.residual_size()
+        per_row = size // rows
+        groups = np.full(size, -1)
+        groups[:rows * per_row] = np.repeat(np.arange(rows), per_row)
+        return groups
+
+    def subset(self, groups: np.ndarray):
+        """A copy of the dataset with only the given units (see ``residual_groups``)."""
+        from ..selection import dataset_rows
+
+        return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
+
     def consistent_dataset(self, kinematics, p: np.ndarray, mounted: np.ndarray,
                            placement: np.ndarray):
         """A copy of the dataset whose readings the model fits exactly, or None.
