@@ -50,6 +50,7 @@ from robocal_casadi.transforms import pose_from_xyz_rpy  # noqa: E402
 
 NOISE = 10e-6  # [m]
 LENGTH_ERROR, ANGLE_ERROR = 0.5e-3, 1e-3  # [m], [rad] standard deviations of the truth
+INDICES = ("cond", "O1")  # designs compared: condition number and geometric mean
 TARGET = {"tracker_points": 0.010e-3, "cross_bar": 0.010e-3}  # [m] model error goal
 
 
@@ -90,7 +91,8 @@ class Simulator:
         setup = setup_from_dataset(dataset)
         # the true robot, limits widened by 2 deg: a plan at a limit stays reachable
         widened = replace(dataset.robot, joints=tuple(
-            replace(j, limits=None if j.limits is None else (j.limits[0] - 0.035, j.limits[1] + 0.035))
+            replace(j, limits=None if j.limits is None
+                    else (j.limits[0] - 0.035, j.limits[1] + 0.035))
             for j in dataset.robot.joints))
         self.true_workspace = Workspace(Kinematics(widened), p_true, table_height=-np.inf,
                                         tolerance=1e-8)
@@ -111,10 +113,12 @@ class Simulator:
             missing = np.flatnonzero(~solved.ok)
             if not missing.size:
                 break
-            seeds = planned.joints[missing] + self.rng.normal(0, 0.05, (missing.size, joints.shape[1]))
+            seeds = planned.joints[missing] + self.rng.normal(0, 0.05, joints[missing].shape)
             again = self.true_workspace.solve_points(sockets[missing], planned.probe, seeds)
             joints[missing[again.ok]] = again.joints[again.ok]
-            solved = replace(solved, ok=solved.ok | np.isin(np.arange(len(joints)), missing[again.ok]))
+            ok = solved.ok.copy()
+            ok[missing[again.ok]] = True
+            solved = replace(solved, ok=ok)
         if not solved.ok.all():
             raise RuntimeError("the true robot could not reach a planned socket")
         return replace(planned, joints=joints)
@@ -186,35 +190,40 @@ def case(path: Path, counts, repeats: int, seed: int = 0) -> dict:
     rest = pool[validation_size:]
     rows = []
     for count in counts:
-        started = time.perf_counter()
-        plan = design_plan(dataset, count, seed=seed + count, quiet=True)
-        design_seconds = time.perf_counter() - started
-        designed = evaluate(simulator, plan.candidates, validation, identifiable, p_true, Q_test)
+        row = {"count": count}
+        for index in INDICES:
+            started = time.perf_counter()
+            plan = design_plan(dataset, count, index, seed=seed + count, quiet=True)
+            seconds = time.perf_counter() - started
+            # the same plan measured several times: the median over noise realisations
+            designed = median_of([evaluate(simulator, plan.candidates, validation, identifiable,
+                                           p_true, Q_test) for _ in range(repeats)])
+            designed.update(index_value=plan.value, random_median_index_value=plan.random_median,
+                            refined=plan.refined, design_seconds=seconds)
+            row[f"designed_{index}"] = designed
         random = []
         for _ in range(repeats):
             chosen = rng.choice(len(rest), size=count, replace=False)
             random.append(evaluate(simulator, [rest[i] for i in chosen], validation,
                                    identifiable, p_true, Q_test))
-        random_median = median_of(random)
-        rows.append({
-            "count": count, "designed": designed, "random_median": random_median,
-            "condition_ratio": designed["condition_number"] / random_median["condition_number"],
-            "plan_refined": plan.refined, "design_seconds": design_seconds,
-        })
+        row["random_median"] = median_of(random)
+        row["condition_ratio"] = (row["designed_cond"]["condition_number"]
+                                  / row["random_median"]["condition_number"])
+        rows.append(row)
     target = TARGET[kind]
 
     def fewest(key):
         for row in rows:
-            value = row["designed"] if key == "designed" else row["random_median"]
-            if value["model_error_mm"] <= 1e3 * target:
+            if row[key]["model_error_mm"] <= 1e3 * target:
                 return row["count"]
         return None
 
     return {"kind": kind, "robot": dataset.robot.name, "identifiable": len(identifiable),
             "noise_mm": 1e3 * NOISE, "target_model_error_mm": 1e3 * target,
-            "poses_needed_designed": fewest("designed"),
-            "poses_needed_random_median": fewest("random"),
-            "random_plans_per_size": repeats, "sizes": rows}
+            **{f"poses_needed_designed_{i}": fewest(f"designed_{i}") for i in INDICES},
+            "poses_needed_random_median": fewest("random_median"),
+            "random_plans_per_size": repeats, "noise_realisations_per_design": repeats,
+            "sizes": rows}
 
 
 def main() -> None:

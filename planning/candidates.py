@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robocal_casadi.errors import InputError
-from robocal_casadi.transforms import rot_x, rot_y, rot_z
+from robocal_casadi.transforms import rot_x, rot_z
 
 from .reach import Workspace
 from .setup import PlanSetup

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import dataclass
 
@@ -69,7 +70,8 @@ class Plan:
     @property
     def poses(self) -> np.ndarray:
         """Placement id (1-based) of each row."""
-        return np.concatenate([np.full(len(c.joints), k + 1) for k, c in enumerate(self.candidates)])
+        return np.concatenate([np.full(len(c.joints), k + 1)
+                               for k, c in enumerate(self.candidates)])
 
     @property
     def points(self) -> tuple[str, ...]:
@@ -116,7 +118,7 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     workspace = Workspace(kinematics, table_height=setup.table_height)
     rng = np.random.default_rng(seed)
     size = pool or pool_size_for(count, setup.kind)
-    stream = None if not quiet else open("/dev/null", "w")  # noqa: SIM115
+    stream = io.StringIO() if quiet else None  # Progress stays silent on a non-terminal
     with Progress("plan: candidates", total=size, stream=stream) as progress:
         candidates = generate(setup, workspace, size, rng, progress)
     if len(candidates) < count:
@@ -143,8 +145,6 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
             if best is None or value > best[0]:
                 best = (value, chosen, swaps)
     _, chosen, swaps = best
-    if stream is not None:
-        stream.close()
     chosen_candidates = tuple(candidates[i] for i in chosen)
     spectrum = info.spectrum(chosen, scaling(index))
     refined = False

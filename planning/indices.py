@@ -65,7 +65,7 @@ def scale_columns(J: np.ndarray) -> np.ndarray:
 
 
 def index_value(name: str, s: np.ndarray) -> float:
-    """Index ``name`` of singular values ``s`` (any order); a zero ``s_min`` gives the worst value."""
+    """Index ``name`` of singular values ``s`` (any order); ``s_min = 0`` gives the worst value."""
     key = canonical(name)
     s = np.sort(np.asarray(s, dtype=float))[::-1]
     if s.size == 0:

@@ -162,7 +162,8 @@ class Workspace:
                 break  # the rest are stuck (unreachable from their seeds)
             previous = error
             JJt = J @ J.transpose(0, 2, 1) + damping * np.eye(J.shape[1])
-            step = np.einsum("nij,nj->ni", J.transpose(0, 2, 1), np.linalg.solve(JJt, e[..., None])[..., 0])
+            weights = np.linalg.solve(JJt, e[..., None])[..., 0]
+            step = np.einsum("nij,nj->ni", J.transpose(0, 2, 1), weights)
             largest = np.max(np.abs(step), axis=1, keepdims=True)
             step *= np.minimum(1.0, 0.5 / np.maximum(largest, 1e-300))
             Q = np.clip(Q + step, lo, hi)

@@ -38,8 +38,8 @@ def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Informat
                 candidates: tuple[Candidate, ...], index: str, max_iterations: int = 60):
     """``(refined candidates, spectrum)`` or None when refinement does not help."""
     mode = scaling(index)
-    before = index_value(index, info.spectrum_of([info.restrict(b)
-                                                  for b in row_model.blocks(list(candidates))], mode))
+    rows = [info.restrict(b) for b in row_model.blocks(list(candidates))]
+    before = index_value(index, info.spectrum_of(rows, mode))
     try:
         Q_new = _solve(setup, workspace, row_model, info, candidates, max_iterations, mode)
     except RuntimeError:
@@ -103,7 +103,8 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
             reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
             hit_normal = (o + reading * d - setup.centre) / setup.radius
             constraints += [disc, reading, -ca.dot(d, hit_normal), o[2]]
-            c_lower += [[1e-8], [setup.laser_range[0]], [np.cos(setup.max_incidence - ANGLE_MARGIN)],
+            c_lower += [[1e-8], [setup.laser_range[0]],
+                        [np.cos(setup.max_incidence - ANGLE_MARGIN)],
                         [workspace.table_height + MARGIN]]
             c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
             G, S = row_model._sphere(q, p, setup.offset, np.zeros(2), setup.centre, reading)

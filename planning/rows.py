@@ -143,7 +143,8 @@ class RowModel:
     def _touch_block(self, candidate: Candidate) -> Block:
         function = self._touch_function(candidate.points)
         repeated = sorted({n for n in candidate.points if candidate.points.count(n) > 1})
-        local = np.concatenate([candidate.sockets[n] for n in repeated]) if repeated else np.zeros(0)
+        local = (np.concatenate([candidate.sockets[n] for n in repeated]) if repeated
+                 else np.zeros(0))
         G, L = function(candidate.joints.T, self.p, self.setup.offset, local)
         G, L = np.asarray(G), np.asarray(L)
         return Block(_project_out(G, L.reshape(G.shape[0], -1)))

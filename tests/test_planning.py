@@ -70,23 +70,27 @@ def setups(tmp_path_factory):
     folder = tmp_path_factory.mktemp("plan")
     save_robot(industrial_6r(), folder / "r6.yaml")
     save_robot(panda_7dof(), folder / "p7.yaml")
+    mm, m = dict(length="mm", angle="deg"), dict(length="m", angle="rad")
     files = {
-        "tracker_6r": dict(kind="tracker_points", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+        "tracker_6r": dict(kind="tracker_points", robot="r6.yaml", units=mm,
                            target=dict(xyz=[0, 0, 100]), instrument=dict(xyz=[2500, 0, 800])),
-        "tracker_7": dict(kind="tracker_points", robot="p7.yaml", units=dict(length="m", angle="rad"),
+        "tracker_7": dict(kind="tracker_points", robot="p7.yaml", units=m,
                           target=dict(xyz=[0, 0, 0.1]), instrument=dict(xyz=[2.0, 0.5, 0.6])),
-        "bar_6r": dict(kind="cross_bar", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+        "bar_6r": dict(kind="cross_bar", robot="r6.yaml", units=mm,
                        bar=dict(length=400), probe=dict(xyz=[0, 0, 150])),
-        "bar_7": dict(kind="cross_bar", robot="p7.yaml", units=dict(length="m", angle="rad"),
+        "bar_7": dict(kind="cross_bar", robot="p7.yaml", units=m,
                       bar=dict(length=0.3), probe=dict(xyz=[0, 0, 0.1])),
-        "sphere_6r": dict(kind="sphere_laser", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+        "sphere_6r": dict(kind="sphere_laser", robot="r6.yaml", units=mm,
                           sphere=dict(radius=25, centre_guess=[900, 100, 300]),
                           laser=dict(origin_guess=[60, -15, 140], direction_guess=[0, 0, 1])),
-        "artifact_7": dict(kind="artifact_touches", robot="p7.yaml", units=dict(length="m", angle="rad"),
+        "artifact_7": dict(kind="artifact_touches", robot="p7.yaml", units=m,
                            probe=dict(xyz=[0, 0, 0.1335]),
                            artifact=dict(distances=[["hole_0", "hole_1", 0.05]]),
                            planning=dict(touches_per_socket=3)),
-        "long_bar": dict(kind="cross_bar", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+        "far_sphere": dict(kind="sphere_laser", robot="r6.yaml", units=mm,
+                           sphere=dict(radius=25, centre_guess=[9000, 0, 300]),
+                           laser=dict(origin_guess=[60, -15, 140], direction_guess=[0, 0, 1])),
+        "long_bar": dict(kind="cross_bar", robot="r6.yaml", units=mm,
                          bar=dict(length=6000), probe=dict(xyz=[0, 0, 150])),
     }
     paths = {}
@@ -129,7 +133,8 @@ def _plan_via_cli(path, count, out, *extra):
 def _joints(table, dataset):
     scales = np.array([dataset.units.angle_scale if j.revolute else dataset.units.length_scale
                        for j in dataset.robot.joints])
-    return np.column_stack([table.numbers(f"q{i}") for i in range(1, dataset.robot.dof + 1)]) * scales
+    names = [f"q{i}" for i in range(1, dataset.robot.dof + 1)]
+    return np.column_stack([table.numbers(n) for n in names]) * scales
 
 
 def _above_table_and_within_limits(dataset, Q, points):
@@ -148,7 +153,8 @@ def _above_table_and_within_limits(dataset, Q, points):
 @pytest.mark.parametrize("name", ["tracker_6r", "tracker_7"])
 def test_tracker_plan_is_runnable_and_visible(setups, tmp_path, name):
     dataset, table = _table(setups, name, tmp_path)
-    assert table.columns == tuple(f"q{i}" for i in range(1, dataset.robot.dof + 1)) + ("x", "y", "z")
+    joints = tuple(f"q{i}" for i in range(1, dataset.robot.dof + 1))
+    assert table.columns == joints + ("x", "y", "z")
     assert len(table) == 30 and all(c == "" for c in table.text("x"))
     Q = _joints(table, dataset)
     kin = Kinematics(dataset.robot)
@@ -183,7 +189,8 @@ def test_bar_plan_puts_the_probe_on_the_planned_sockets(setups, tmp_path, name):
     for pose in set(poses):
         assert sorted(points[i] for i in np.flatnonzero(poses == pose)) == ["A", "B", "C", "D"]
     Q = _joints(table, dataset)
-    sockets = np.column_stack([table.numbers(f"socket_{k}") for k in "xyz"]) * dataset.units.length_scale
+    sockets = np.column_stack([table.numbers(f"socket_{k}") for k in "xyz"])
+    sockets *= dataset.units.length_scale
     probe = Kinematics(dataset.robot).points(Q, dataset.probe)
     assert np.max(np.linalg.norm(probe - sockets, axis=1)) < 1e-6
     _above_table_and_within_limits(dataset, Q, sockets)
@@ -202,6 +209,13 @@ def test_unreachable_bar_is_refused_with_a_clear_message(setups, tmp_path, capsy
     message = capsys.readouterr().err
     assert "bar.length" in message and "reach" in message and "long_bar.yaml" in message
     assert not out.exists()
+
+
+def test_sphere_out_of_reach_is_refused(setups):
+    dataset = load_dataset(setups["far_sphere"], require_data=False)
+    with pytest.raises(InputError, match="out of reach") as error:
+        design_plan(dataset, 20, refine=False, quiet=True)
+    assert "sphere.centre_guess" in str(error.value)
 
 
 def test_too_few_readings_are_refused(setups):
@@ -278,7 +292,8 @@ def test_artifact_plan_touches_each_socket_in_several_configurations(setups, tmp
     for pose in set(poses):
         rows = np.flatnonzero(poses == pose)
         by_socket = {points[i]: sockets[i] for i in rows}
-        assert np.linalg.norm(by_socket["hole_0"] - by_socket["hole_1"]) == pytest.approx(0.05, abs=1e-9)
+        spacing = np.linalg.norm(by_socket["hole_0"] - by_socket["hole_1"])
+        assert spacing == pytest.approx(0.05, abs=1e-9)
         for socket in ("hole_0", "hole_1"):
             configurations = Q[[i for i in rows if points[i] == socket]]
             assert len(configurations) == 3
