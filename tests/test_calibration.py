@@ -33,9 +33,12 @@ def identifiable_truth(robot, kind, tmp_path, seed):
 
     A first calibration on a scratch dataset names them; the truth then perturbs only
     those, so it is exactly representable and each estimate can be compared with it.
+    The instrument sits at its nominal offset throughout: an offset exactly on the flange
+    axis makes some last-joint parameters dependent, one slightly off it does not.
     """
     scratch = simulate(robot, kind, out_dir=tmp_path / "scratch", rows=ROWS[kind], noise=NOISE,
-                       geometric_errors=ERRORS, seed=seed + 100, progress=False)
+                       geometric_errors=ERRORS, seed=seed + 100, mounted_error=0.0,
+                       progress=False)
     names = [n for n in calibrate([scratch.load()], diagnose=False).identifiability.identifiable
              if n in robot.parameters()]
     rng = np.random.default_rng(seed)
@@ -45,10 +48,11 @@ def identifiable_truth(robot, kind, tmp_path, seed):
 
 
 # (kind, robot, rows): a 7-DOF arm has more parameters, so more bar placements keep the
-# held-out error within 10% of the noise floor (80 placements give about 16% above it).
+# held-out error within 10% of the noise floor (80 placements give about 16% above it,
+# 160 about 10%).
 CASES = [("tracker_points", industrial_6r, 150), ("tracker_points", panda_7dof, 150),
          ("cross_bar", industrial_6r, 80),
-         pytest.param("cross_bar", panda_7dof, 160, marks=pytest.mark.slow),
+         pytest.param("cross_bar", panda_7dof, 240, marks=pytest.mark.slow),
          pytest.param("artifact_touches", industrial_6r, 24, marks=pytest.mark.slow),
          pytest.param("artifact_touches", panda_7dof, 24, marks=pytest.mark.slow)]
 
