@@ -235,6 +235,12 @@ class Problem:
         return out
 
     @cached_property
+    def _point_batch(self):
+        from .codegen import BatchFunction
+
+        return BatchFunction(self._row[0], per_row=("q", "extras", "offset"), chunk=256)
+
+    @cached_property
     def _row_batch(self):
         from .codegen import BatchFunction
 
@@ -257,11 +263,16 @@ class Problem:
         offsets = np.asarray(offsets)
         Q, extras, payload_com = self._data(model)
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
-        if not with_jacobian:
-            P = np.asarray(self._mapped(0, rows)(Q, extras, p, theta, offsets, payload_com))
-            return np.asarray(entry["residual"](P.T.ravel(), x)).ravel(), None
         per_row_offsets = np.broadcast_to(offsets.T, (rows, 3)) if offsets.shape[1] == 1 \
             else offsets.T
+        if not with_jacobian:
+            if rows >= COMPILE_ROWS:
+                (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com)
+                P_flat = P.ravel()
+            else:
+                P_flat = np.asarray(self._mapped(0, rows)(Q, extras, p, theta, offsets,
+                                                          payload_com)).T.ravel()
+            return np.asarray(entry["residual"](P_flat, x)).ravel(), None
         P, J_p, J_theta, J_offset = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets,
                                                     payload_com)
         # M = dP/dx for the requested columns only (rows x 3 x k).
