@@ -120,11 +120,7 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
         raise InputError(f"unknown kind {kind!r}; expected one of {list(KINDS)}", file=path,
                          where="kind")
     units = parse_units(require(content, "units", file=path), file=path)
-    robot_path = (path.parent / str(require(content, "robot", file=path))).resolve()
-    if robot is None:
-        if not robot_path.is_file():
-            raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
-        robot = load_robot(robot_path)
+    robot_path, robot = referenced_robot(content, path, robot)
     data_name = content.get("data")
     table = None
     data_path = None
@@ -144,6 +140,31 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     reader = {"cross_bar": _cross_bar, "artifact_touches": _artifact,
               "sphere_laser": _sphere_laser, "tracker_points": _tracker}[kind]
     return reader(content, table, common)
+
+
+def referenced_robot(content: dict, path: Path, robot: Robot | None = None
+                     ) -> tuple[Path, Robot]:
+    """The robot file a dataset or job names (relative to it), loaded unless given."""
+    robot_path = (path.parent / str(require(content, "robot", file=path))).resolve()
+    if robot is None:
+        if not robot_path.is_file():
+            raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
+        robot = load_robot(robot_path)
+    return robot_path, robot
+
+
+def _positive_length(content: dict, block: str, key: str, hint: str, units: Units,
+                     path: Path) -> tuple[dict, float]:
+    """``content[block][key]`` as a positive length [m], with the block mapping."""
+    mapping = require(content, block, file=path)
+    if not isinstance(mapping, dict):
+        raise InputError(f"expected a mapping {hint}", file=path, where=block)
+    value = number(require(mapping, key, file=path, where=block), file=path,
+                   where=f"{block}.{key}") * units.length_scale
+    if value <= 0:
+        raise InputError(f"{block} {key} must be positive, got {value / units.length_scale:g}",
+                         file=path, where=f"{block}.{key}")
+    return mapping, value
 
 
 def _length3(content: dict, key: str, sub: str, units: Units, path: Path) -> np.ndarray:
@@ -234,14 +255,7 @@ def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...
 
 def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouches:
     path, units = common["path"], common["units"]
-    bar = require(content, "bar", file=path)
-    if not isinstance(bar, dict):
-        raise InputError("expected a mapping {length: L}", file=path, where="bar")
-    length = number(require(bar, "length", file=path, where="bar"), file=path,
-                    where="bar.length") * units.length_scale
-    if length <= 0:
-        raise InputError(f"bar length must be positive, got {length / units.length_scale:g}",
-                         file=path, where="bar.length")
+    _, length = _positive_length(content, "bar", "length", "{length: L}", units, path)
     probe = _length3(content, "probe", "xyz", units, path)
     fields: dict[str, Any] = dict(probe=probe, distances=(("A", "C", length), ("B", "D", length)),
                                   perpendicular=(("A", "C", "B", "D"),))
@@ -311,13 +325,7 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
 
 def _sphere_laser(content: dict, table: Table | None, common: dict) -> SphereLaser:
     path, units = common["path"], common["units"]
-    sphere = require(content, "sphere", file=path)
-    if not isinstance(sphere, dict):
-        raise InputError("expected a mapping {radius: R}", file=path, where="sphere")
-    radius = number(require(sphere, "radius", file=path, where="sphere"), file=path,
-                    where="sphere.radius") * units.length_scale
-    if radius <= 0:
-        raise InputError("sphere radius must be positive", file=path, where="sphere.radius")
+    sphere, radius = _positive_length(content, "sphere", "radius", "{radius: R}", units, path)
     centre = None
     if "centre_guess" in sphere:
         centre = np.array(vector(sphere["centre_guess"], 3, file=path,

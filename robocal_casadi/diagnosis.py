@@ -247,25 +247,9 @@ def residual_groups(model) -> np.ndarray:
     """For each residual entry of ``model``, the unit cross-validation holds out together.
 
     Tracker and sphere data: the data row. Artifact and bar data: the placement (pose),
-    since socket positions are per placement.
+    since socket positions are per placement (``MeasurementModel.residual_groups``).
     """
-    if hasattr(model, "residual_groups"):
-        return np.asarray(model.residual_groups())
-    size = model.residual_size()
-    dataset = model.dataset
-    if hasattr(model, "sockets") and hasattr(model, "_poses"):
-        groups: list[int] = []
-        for socket in model.sockets:
-            if socket.unknown_index is not None:
-                groups += [socket.pose] * (3 * len(socket.rows))
-        for pose in model._poses():
-            groups += [pose] * (len(model._distances(pose)) + len(model._perpendiculars(pose)))
-        if len(groups) == size:
-            return np.array(groups)
-    rows = max(dataset.rows, 1)
-    if size % rows == 0:
-        return np.repeat(np.arange(rows), size // rows)
-    return np.arange(size) * 20 // max(size, 1)  # contiguous blocks
+    return np.asarray(model.residual_groups())
 
 
 def fold_of_entries(problem: Problem, folds: int, seed: int) -> np.ndarray:

@@ -169,7 +169,6 @@ class CalibrationResult:
         }
         if self.validation is not None:
             out["validation"] = self.validation.to_json(units)
-        s = units.length_scale
         out["mounted"] = {}
         for name, (value, std) in self.mounted.items():
             quantity = self.mounted_quantities.get(name, "length")

@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from ..datasets import joint_readings as checked_joint_readings
+from ..datasets import referenced_robot
 from ..errors import InputError
 from ..fields import load_yaml, number, require, vector
-from ..robot import Robot, load_robot
+from ..robot import Robot
 from ..table import read_table
 from ..units import Units, parse_units
 from .tracker import unit_up
@@ -79,11 +80,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
     if kind != "tracking":
         raise InputError(f"expected kind 'tracking', got {kind!r}", file=path, where="kind")
     units = parse_units(require(content, "units", file=path), file=path)
-    robot_path = (path.parent / str(require(content, "robot", file=path))).resolve()
-    if robot is None:
-        if not robot_path.is_file():
-            raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
-        robot = load_robot(robot_path)
+    robot_path, robot = referenced_robot(content, path, robot)
     if robot.dof < 6:
         raise InputError(f"tracking needs at least 6 joints; robot {robot.name!r} has "
                          f"{robot.dof}", file=path, where="robot")
