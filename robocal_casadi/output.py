@@ -20,6 +20,7 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it private; outputs are not
     try:
         yield staging
     except BaseException:
@@ -35,6 +36,12 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
         staging.rename(target)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_file(target: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; on success it is renamed to ``target``."""
@@ -48,4 +55,6 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     except BaseException:
         staging.unlink(missing_ok=True)
         raise
+    if staging.exists():
+        os.chmod(staging, 0o666 & ~_umask())
     os.replace(staging, target)
