@@ -141,11 +141,13 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: str = "lm", loss: str = "linear",
-              select_growth: float | None = None, progress: bool = False) -> CalibrationResult:
+              select_growth: float | None = None, max_iterations: int = 200,
+              progress: bool = False) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
-    diagnosis add more. ``method`` and ``loss`` go to ``solver.solve``. With
+    diagnosis add more. ``method``, ``loss`` and ``max_iterations`` go to ``solver.solve``;
+    a geometric fit that has not converged within ``max_iterations`` is a ``SolverError``. With
     ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
     than that fraction are dropped first, as in the bar patent (``selection``); what was
     dropped is in ``result.selection``.
@@ -181,7 +183,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     if problem.size <= rows_needed:
         raise InputError(f"{problem.size} residuals cannot identify {rows_needed} unknowns; "
                          f"add data", file=datasets[0].path)
-    geometric = solve(problem, nominal.x, free, method=method, loss=loss)
+    geometric = solve(problem, nominal.x, free, method=method, loss=loss,
+                      max_iterations=max_iterations)
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
@@ -192,10 +195,16 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)
-        geometric = solve(problem, geometric.x, free, method=method, loss=loss)
-    if geometric.status not in ("converged", "max_iterations"):
-        raise SolverError(f"the geometric calibration did not converge ({geometric.status})",
-                          stats={"iterations": geometric.iterations})
+        geometric = solve(problem, geometric.x, free, method=method, loss=loss,
+                          max_iterations=max_iterations)
+    if geometric.status != "converged":
+        rms = float(np.sqrt(np.mean(geometric.residual**2)))
+        raise SolverError(
+            f"{datasets[0].path.name}: the geometric calibration ({method}) did not converge: "
+            f"{geometric.status} after {geometric.iterations} iterations, residual RMS "
+            f"{rms:.4g} m; check the data for outliers (--loss huber) or allow more "
+            f"iterations (--max-iterations)",
+            stats={"iterations": geometric.iterations, "status": geometric.status})
 
     final_problem, final, findings, tested = problem, geometric, (), ()
     if diagnose:

@@ -230,3 +230,39 @@ def test_two_effects_each_credited_with_its_own_share(tmp_path):
     after = {f.evidence["cv_rms_after"] for f in found.values()}
     assert len(after) == 1
     check_close_to_noise(result)
+
+
+# ----------------------------------------------------------------------------- bar
+
+
+@pytest.mark.parametrize("effect,joint,truth", [
+    ("joint_cyclic", 3, {"a1_3": 4e-4, "b1_3": 2e-4, "a2_3": 1e-4, "b2_3": 5e-5}),
+    ("joint_scale", 2, {"s2": 1e-3}),
+])
+def test_undeclared_effect_in_cross_bar_data(tmp_path, effect, joint, truth):
+    """Bar data carry no absolute position, yet a joint error still shows in the lengths."""
+    from robocal_casadi.effects import make_effect
+    from robocal_casadi.identification import evaluate
+
+    robot = ROBOTS["industrial_6r"]()
+    values = tuple(truth.values())
+    spec = {joint: values if len(values) > 1 else values[0]}
+    common = dict(noise=NOISE, geometric_errors=geometric_errors(robot, 0),
+                  effects={effect: spec}, mounted_error=0.0, progress=False)
+    fit = simulate(robot, "cross_bar", out_dir=tmp_path / "fit", rows=60, seed=1, **common)
+    held_out = simulate(robot, "cross_bar", out_dir=tmp_path / "val", rows=60, seed=2, **common)
+    result = calibrate([fit.load()], [held_out.load()])
+    finding = only_finding(result)
+    assert finding.name == effect and finding.joints == (joint,)
+    for name, value in truth.items():
+        if abs(value) >= 1e-4:
+            assert finding.parameters[name] == pytest.approx(value, rel=0.1, abs=2e-5)
+    # The noise floor: the true robot with the true effect on the held-out data.
+    validation = held_out.load()
+    true_effect = make_effect(effect, (joint,), robot)
+    floor_problem, x = evaluate(held_out.truth.robot, [validation], (true_effect,),
+                                {**truth, "probe_x": 0.0, "probe_y": 0.0,
+                                 "probe_z": float(validation.probe[2])})
+    floor = floor_problem.rms(x)
+    assert result.validation.rms_final <= 1.10 * floor
+    assert result.validation.rms_geometric > 3 * floor

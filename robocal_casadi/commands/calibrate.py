@@ -41,6 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--select-growth", type=float, default=None, metavar="G",
                         help="drop units of data (bar placements, readings) that grow the "
                              "condition number by more than the fraction G, e.g. 0.05")
+    parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
+                        help="iterations allowed to the geometric fit (default 200)")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
 
@@ -101,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     validation = [load_dataset(p) for p in args.validate]
     result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
                        loss=args.loss, select_growth=args.select_growth,
+                       max_iterations=args.max_iterations,
                        progress=sys.stderr.isatty())
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
     print(summary(result))
