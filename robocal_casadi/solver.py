@@ -26,6 +26,7 @@ from .errors import SolverError
 from .problem import Problem
 
 METHODS = ("lm", "ipopt", "linearised", "two_stage")
+TWO_STAGE_TOLERANCE = 1e-6  # relative cost decrease of a round below which two_stage stops
 
 
 @dataclass(frozen=True)
@@ -214,15 +215,17 @@ def _two_stage(problem: Problem, x0, free, loss, max_iterations, tolerance):
     x = x0.copy()
     total = 0
     status = "max_iterations"
+    cost = 0.5 * float(np.sum(problem.residual(x) ** 2))
     for _ in range(max(1, max_iterations)):
-        previous = x.copy()
         for stage in (angles | others, lengths | others):
-            x, *_, it, _ = _levenberg_marquardt(problem, x, stage, loss=loss,
-                                                max_iterations=max_iterations, damping=False,
-                                                tolerance=tolerance)
+            x, _, _, stage_cost, it, _ = _levenberg_marquardt(
+                problem, x, stage, loss=loss, max_iterations=max_iterations, damping=False,
+                tolerance=tolerance)
             total += it
-        if np.max(np.abs(x - previous)) < 1e-9 * (1.0 + np.max(np.abs(x))):
+        # Alternating blocks converge linearly; stop when a round no longer pays.
+        if cost - stage_cost <= TWO_STAGE_TOLERANCE * cost:
             status = "converged"
             break
+        cost = stage_cost
     r, covariance = _finish(problem, x, free, loss)
     return x, r, covariance, 0.5 * float(r @ r), total, status
