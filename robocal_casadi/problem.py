@@ -248,12 +248,66 @@ class Problem:
         return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
                              compile=rows >= COMPILE_ROWS)
 
+    def _separable(self, model: MeasurementModel):
+        """Compiled row-by-row residual and Jacobian of a separable model, or None."""
+        key = ("separable", id(model))
+        if key in self._maps:
+            return self._maps[key]
+        if type(model).row_residual is MeasurementModel.row_residual:
+            self._maps[key] = None
+            return None
+        row = self._row[0]
+        q, extras, p, theta, _, payload_com = (row.sx_in(i) for i in range(6))
+        data = ca.SX.sym("data", model.row_data().shape[1])
+        mounted = ca.SX.sym("mounted", len(model.mounted))
+        placement = ca.SX.sym("placement", len(model.placement))
+        point = row(q, extras, p, theta, model.row_offset(data, mounted), payload_com)
+        r = model.row_residual(point, data, mounted, placement)
+        from .codegen import BatchFunction
+
+        unknowns = ca.vertcat(p, theta, mounted, placement)
+        inputs = [q, extras, data, p, theta, mounted, placement, payload_com]
+        names = ["q", "extras", "data", "p", "theta", "mounted", "placement", "payload_com"]
+        compile = model.dataset.rows >= COMPILE_ROWS
+        per_row = ("q", "extras", "data")
+        residual = ca.Function("row_residual", inputs, [r], names, ["r"])
+        jacobian = ca.Function("row_residual_jacobian", inputs, [r, ca.jacobian(r, unknowns)],
+                               names, ["r", "J"])
+        columns = np.concatenate([np.arange(self.slices["robot"].start, self.slices["robot"].stop),
+                                  np.arange(self.slices["effects"].start,
+                                            self.slices["effects"].stop),
+                                  self.mounted_indices(model), self.placement_indices(model)])
+        self._maps[key] = (BatchFunction(residual, per_row, compile=compile),
+                           BatchFunction(jacobian, per_row, compile=compile), columns)
+        return self._maps[key]
+
+    def _separable_residual(self, model, functions, x, with_jacobian, columns):
+        residual, jacobian, global_columns = functions
+        Q, extras, payload_com = self._data(model)
+        arguments = (Q.T, extras.T, model.row_data(), x[self.slices["robot"]],
+                     x[self.slices["effects"]], x[self.mounted_indices(model)],
+                     x[self.placement_indices(model)], payload_com)
+        if not with_jacobian:
+            (r,) = residual(*arguments)
+            return r.ravel(), None
+        r, J_rows = jacobian(*arguments)
+        J_rows = J_rows.reshape(r.size, -1)
+        position = np.full(len(self.unknowns), -1)
+        position[columns] = np.arange(len(columns))
+        keep = position[global_columns] >= 0
+        J = np.zeros((r.size, len(columns)))
+        J[:, position[global_columns[keep]]] = J_rows[:, keep]
+        return r.ravel(), J
+
     def _model_residual(self, entry: dict, x: np.ndarray, with_jacobian: bool,
                         columns: np.ndarray | None = None):
         """Residual of one model and, if asked, its Jacobian's ``columns`` (default all)."""
         model = entry["model"]
         nx = len(self.unknowns)
         columns = np.arange(nx) if columns is None else np.asarray(columns)
+        separable = self._separable(model) if entry["uses_points"] else None
+        if separable is not None:
+            return self._separable_residual(model, separable, x, with_jacobian, columns)
         if not entry["uses_points"]:
             r = np.asarray(entry["residual"](x)).ravel()
             J = np.asarray(entry["jacobian"](x).full())[:, columns] if with_jacobian else None

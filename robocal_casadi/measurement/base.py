@@ -101,6 +101,27 @@ class MeasurementModel(ABC):
 
         return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
 
+    # A model whose residual splits into the same few entries per data row (each row's
+    # entries depending on that row's point only) may say so; the engine then evaluates
+    # residual and Jacobian row by row in compiled code. ``row_residual`` returns None
+    # for models that are not separable.
+
+    def row_residual(self, point, data, mounted, placement):
+        """One row's residual entries from its world point ``point`` [m] (CasADi SX).
+
+        ``data`` are the row's own numbers (``row_data``), ``mounted`` and
+        ``placement`` this model's unknowns. None: the model is not separable.
+        """
+        return None
+
+    def row_data(self) -> np.ndarray:
+        """Per-row numbers the separable residual reads (N x k)."""
+        return np.zeros((self.dataset.rows, 0))
+
+    def row_offset(self, data, mounted):
+        """The flange-frame point measured in one row (CasADi SX) [m]."""
+        return mounted
+
     def consistent_dataset(self, kinematics, p: np.ndarray, mounted: np.ndarray,
                            placement: np.ndarray):
         """A copy of the dataset whose readings the model fits exactly, or None.
