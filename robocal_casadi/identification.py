@@ -64,7 +64,7 @@ def consistent_problem(problem: Problem, x: np.ndarray) -> tuple[Problem, np.nda
     return consistent, out
 
 
-RELEASE_TOLERANCE = 1e-3
+RELEASE_TOLERANCE = 1e-2
 
 
 def analyse_identifiability(problem: Problem, x: np.ndarray,
@@ -189,7 +189,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
     # Only clearly informative additions count here (a unique part of at least
-    # RELEASE_TOLERANCE of the column): a real target a few tenths of a millimetre off
+    # RELEASE_TOLERANCE of the column): a real probe or target a few tenths of a millimetre off
     # axis must not turn a structural dependency into a parameter fitted to noise.
     revised = analyse_identifiability(problem, geometric.x, tolerance=RELEASE_TOLERANCE)
     if set(revised.identifiable) > set(identifiability.identifiable):
