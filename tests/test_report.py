@@ -322,7 +322,9 @@ def test_effects_sphere_and_instrument_values(full_report):
     assert float(compliance["c2"][1]) == pytest.approx(1.1e-6)
     assert float(compliance["c3"][2]) == pytest.approx(9e-8)
     assert compliance["c2"][3] == "rad/Nm"
-    assert float(body_rows(page, "evidence-joint_compliance")["bic_drop"][1]) == 412.0
+    evidence = body_rows(page, "evidence-joint_compliance")
+    assert float(evidence["BIC drop (positive favours the effect)"][1]) == 412.0
+    assert evidence["fall of the RMS on the fit data"][1] == "31.0 %"
     laser = body_rows(page, "laser")
     assert float(laser["laser_x"][1]) == pytest.approx(61.236, abs=1e-4)
     assert float(laser["laser_nx"][1]) == pytest.approx(0.016) and laser["laser_nx"][3] == "-"
@@ -427,6 +429,27 @@ def test_report_of_a_simulated_tracker_calibration(tmp_path):
     figures = {attrs.get("id") for tag, attrs in page.tags if tag == "figure"}
     assert {"figure-effect-joint_compliance", "figure-singular-values",
             "figure-joints-fit"} <= figures
+    # the effect's plot: error against the gravity torque at each joint (pinocchio), with
+    # the fitted deflection from the effect model (CasADi) equal to -c tau
+    from robocal_casadi.pinocchio_model import gravity_torques
+    from robocal_casadi.report.effect_views import effect_view
+
+    view = effect_view(result, result.effects[0])
+    assert view.variable == "torque" and "gravity torque" in view.caption
+    residuals = result.residuals[0]
+    tau = gravity_torques(result.robot_calibrated, residuals.joints,
+                          payload_mass=residuals.extras.get("payload", 0.0))
+    for panel, j in zip(view.panels, (2, 3)):
+        assert panel.x_label == f"gravity torque at joint {j} [N m]"
+        np.testing.assert_allclose(panel.x, tau[residuals.rows, j - 1], rtol=1e-9, atol=1e-9)
+        c = result.effects[0].parameters[f"c{j}"]
+        np.testing.assert_allclose(np.deg2rad(panel.fitted), -c * panel.x, rtol=1e-7,
+                                   atol=1e-12)
+    # without compliance the error grows with the torque: largest at the extreme torques
+    panel = view.panels[0]
+    extreme = np.abs(panel.x) > np.percentile(np.abs(panel.x), 80)
+    assert _rms(panel.geometric[extreme]) > 1.5 * _rms(panel.geometric[~extreme])
+    assert _rms(panel.final[extreme]) < 0.2 * _rms(panel.geometric[extreme])
 
 
 def test_report_of_a_simulated_sphere_laser_calibration(tmp_path):
@@ -466,3 +489,163 @@ def test_pendant_sphere_data_without_joint_readings(tmp_path):
     figures = {attrs.get("id") for tag, attrs in page.tags if tag == "figure"}
     assert "figure-joints-fit" not in figures and "figure-order-fit" in figures
     assert body_rows(page, "datasets")["sphere.yaml"][3] == "120"
+
+
+# ----------------------------------------------------------------------------- effect plots
+
+
+def _with_effect_models(result: CalibrationResult, models: tuple, values) -> CalibrationResult:
+    findings = []
+    start = 0
+    for model in models:
+        size = len(model.parameter_names())
+        theta = dict(zip(model.parameter_names(), values[start:start + size]))
+        findings.append(EffectFinding(model.name, model.joints, theta, model.unit,
+                                      {"rms_drop": 0.2, "bic_drop": 50.0}))
+        start += size
+    return replace(result, effects=tuple(findings), effect_models=tuple(models),
+                   effect_values=np.asarray(values, dtype=float))
+
+
+def test_cyclic_effect_plot_overlays_the_fitted_harmonics():
+    """The periodic error is shown against the joint angle with the fitted harmonic
+    curve; the curve equals the formula evaluated here with numpy, in degrees."""
+    from robocal_casadi.effects.cyclic import JointCyclic
+    from robocal_casadi.report.effect_views import effect_view
+
+    theta = [1.5e-3, -2.4e-3, -8.9e-4, -3.8e-4]  # a1, b1, a2, b2 [rad]
+    result = _with_effect_models(synthetic_result(validation=False, effects=False),
+                                 (JointCyclic((2,)),), theta)
+    view = effect_view(result, result.effects[0])
+    assert view.variable == "joint" and len(view.panels) == 1
+    panel = view.panels[0]
+    assert panel.x_label == "q2 [deg]" and panel.fitted_is_curve
+    q = np.deg2rad(panel.x)
+    a1, b1, a2, b2 = theta
+    expected = np.rad2deg(a1 * np.sin(q) + b1 * np.cos(q) + a2 * np.sin(2 * q) + b2 * np.cos(2 * q))
+    np.testing.assert_allclose(panel.fitted, expected, atol=1e-12)
+    residuals = result.residuals[0]
+    np.testing.assert_allclose(panel.geometric, residuals.errors_geometric * 1e3)
+    assert "a1 sin q + b1 cos q" in view.caption
+
+
+def test_effect_parameters_in_the_file_angle_unit(tmp_path):
+    from robocal_casadi.effects.cyclic import JointCyclic
+
+    theta = [1.5e-3, -2.4e-3, -8.9e-4, -3.8e-4]
+    result = _with_effect_models(synthetic_result(validation=False, effects=False),
+                                 (JointCyclic((2,)),), theta)
+    page = read_page(write_report(result, tmp_path / "report.html"))
+    rows = body_rows(page, "effect-joint_cyclic")
+    assert list(rows) == ["a1_2", "b1_2", "a2_2", "b2_2"]  # the model's order
+    for name, value in zip(rows, theta):
+        assert rows[name][3] == "deg"
+        assert float(rows[name][1]) == pytest.approx(np.rad2deg(value), rel=1e-3)
+    assert "figure-effect-joint_cyclic" in {a.get("id") for t, a in page.tags if t == "figure"}
+
+
+def test_compliance_without_link_masses_is_shown_against_the_joint_angle():
+    """A robot file without masses has no gravity torque: the lumped compliance is
+    plotted against the joint angle, and the caption says why."""
+    from robocal_casadi.effects.compliance import JointCompliance
+    from robocal_casadi.report.effect_views import effect_view
+
+    result = synthetic_result(validation=False, effects=False)
+    bare = replace(result.robot_calibrated,
+                   joints=tuple(replace(j, mass=None, com=None)
+                                for j in result.robot_calibrated.joints))
+    model = JointCompliance((3,), bare)
+    values = np.full(len(model.parameter_names()), 2e-6)
+    result = _with_effect_models(replace(result, robot_calibrated=bare,
+                                         robot_nominal=replace(result.robot_nominal,
+                                                               joints=bare.joints)),
+                                 (model,), values)
+    view = effect_view(result, result.effects[0])
+    assert view.variable == "joint" and view.panels[0].x_label == "q3 [deg]"
+    assert "no link masses" in view.caption
+    panel = view.panels[0]
+    assert panel.fitted is not None and not panel.fitted_is_curve
+    assert np.ptp(panel.fitted) > 0
+
+
+def test_thermal_drift_is_shown_against_temperature_with_the_fitted_growth():
+    from robocal_casadi.effects.thermal import ThermalDrift
+    from robocal_casadi.report.effect_views import effect_view
+
+    result = synthetic_result(validation=False, effects=False)
+    model = ThermalDrift(column="temperature", reference_value=23.3)
+    result = _with_effect_models(result, (model,), [1.2e-5])
+    view = effect_view(result, result.effects[0])
+    panel = view.panels[0]
+    assert view.variable == "temperature" and panel.x_label == "temperature [C]"
+    np.testing.assert_allclose(panel.x, result.residuals[0].extras["temperature"])
+    np.testing.assert_allclose(panel.fitted, 1.2e-5 * (panel.x - 23.3) * 1e6)
+
+
+def _diagnosis(rounds: int = 3) -> tuple[dict, ...]:
+    """60 candidate tests as diagnosis records them; joint 2 compliance added in round 1."""
+    entries = []
+    rng = np.random.default_rng(4)
+    for r in range(1, rounds + 1):
+        for effect in ("joint_compliance", "joint_cyclic", "joint_scale"):
+            for j in range(1, 7):
+                added = (r, effect, j) == (1, "joint_compliance", 2)
+                entries.append({"round": r, "effect": effect, "joints": (j,),
+                                "parameters": 0 if j == 6 else 1, "held": ("c6",) if j == 6 else (),
+                                "remaining_norm": float(rng.uniform()),
+                                "rss_drop": float(rng.uniform(0, 0.3)),
+                                "bic_drop": 900.0 if added else float(rng.normal(20, 60)),
+                                "cv_rms_before": 4e-4, "cv_rms_after": 3.6e-4,
+                                "decision": "added" if added else "not supported"})
+        entries.append({"round": r, "effect": "thermal_drift", "joints": (), "parameters": 1,
+                        "held": (), "remaining_norm": 0.93, "rss_drop": 1e-4, "bic_drop": -7.1,
+                        "cv_rms_before": 4e-4, "cv_rms_after": 4.01e-4,
+                        "decision": "not supported"})
+        entries.append({"round": r, "effect": "joint_cyclic", "joints": (6,), "parameters": 1,
+                        "held": ("a1_6", "b1_6"), "remaining_norm": 0.002, "rss_drop": 1e-3,
+                        "bic_drop": float("nan"), "cv_rms_before": 4e-4,
+                        "cv_rms_after": float("nan"), "decision": "not supported"})
+    return tuple(entries)
+
+
+def test_diagnosis_shows_the_added_and_strongest_rejected_and_folds_the_rest(tmp_path):
+    diagnosis = _diagnosis()
+    assert len(diagnosis) == 60
+    result = replace(synthetic_result(validation=False), diagnosis=diagnosis)
+    path = write_report(result, tmp_path / "report.html")
+    page = read_page(path)
+    summary = page.tables["diagnosis-summary"][1:]
+    rejected = sorted((e for e in diagnosis if e["decision"] != "added" and e["parameters"] > 0
+                       and np.isfinite(e["bic_drop"])), key=lambda e: -e["bic_drop"])[:5]
+    assert len(summary) == 1 + 5
+    assert summary[0][1] == "joint compliance" and summary[0][-1] == "added"
+    assert [float(row[7]) for row in summary[1:]] == pytest.approx(
+        [round(e["bic_drop"], 1) for e in rejected], abs=0.051)
+    assert [row[6] for row in summary[:1]] == [f"{100 * diagnosis[1]['rss_drop']:.1f} %"]
+    # every candidate, in a folded block that opens for printing
+    assert len(page.tables["diagnosis"]) == 1 + 60
+    text = path.read_text(encoding="utf-8")
+    block = text[text.index('<details id="diagnosis-all">'):]
+    assert '<table class="diagnosis">' in block[:block.index("</details>")]
+    assert "<summary>All 60 candidates tested</summary>" in block
+    assert "details::details-content { content-visibility: visible" in text
+    assert 'addEventListener("beforeprint"' in text
+    # held-out RMS in mm, not metres; a NaN shows as a dash
+    header = page.tables["diagnosis"][0]
+    assert "held-out RMS before [mm]" in header
+    assert float(page.tables["diagnosis"][1][header.index("held-out RMS before [mm]")]) == 0.4
+    assert page.tables["diagnosis"][-1][header.index("BIC drop")] == "-"
+
+
+def test_pdf_prints_the_folded_diagnosis_table(tmp_path):
+    result = replace(synthetic_result(validation=False, effects=False), diagnosis=_diagnosis(1))
+    from robocal_casadi.report.pdf import write_pdf
+    from robocal_casadi.report.sections import build_document
+
+    document = build_document(result)
+    effects = next(s for s in document.sections if s.anchor == "effects")
+    details = [b for b in effects.blocks if type(b).__name__ == "Details"]
+    assert len(details) == 1 and details[0].blocks[0].name == "diagnosis"
+    assert len(details[0].blocks[0].rows) == 20
+    write_pdf(document, tmp_path / "report.pdf")
+    assert (tmp_path / "report.pdf").read_bytes().startswith(b"%PDF")

@@ -58,3 +58,34 @@ def test_full_page_screenshot_is_as_tall_as_the_page(report, state, tmp_path):
     height = int(state["page-height"])
     png = screenshot_report(report, tmp_path / "full.png")
     assert matplotlib.image.imread(png).shape[:2] == (min(height, 30000), 1280)
+
+
+def _pages(pdf: bytes) -> int:
+    return len(re.findall(rb"/Type\s*/Page\b", pdf))
+
+
+def test_printing_unfolds_the_full_diagnosis_table(tmp_path):
+    """The full candidate table is folded on screen; printed, it is all there: the page
+    prints to more pages than the same page with that block taken out, and as many as
+    with the block opened by hand."""
+    from dataclasses import replace
+
+    from test_report import _diagnosis
+
+    from robocal_casadi.report import print_pdf
+
+    result = replace(synthetic_result(validation=False, effects=False), diagnosis=_diagnosis())
+    page = write_report(result, tmp_path / "report.html").read_text(encoding="utf-8")
+    start = page.index('<details id="diagnosis-all">')
+    end = page.index("</details>", start) + len("</details>")
+    variants = {"folded": page, "removed": page[:start] + page[end:],
+                "opened": page.replace('<details id="diagnosis-all">',
+                                       '<details id="diagnosis-all" open>')}
+    pages = {}
+    for name, text in variants.items():
+        (tmp_path / f"{name}.html").write_text(text, encoding="utf-8")
+        pdf = print_pdf(tmp_path / f"{name}.html", tmp_path / f"{name}.pdf").read_bytes()
+        assert pdf.startswith(b"%PDF")
+        pages[name] = _pages(pdf)
+    assert pages["removed"] > 0
+    assert pages["folded"] == pages["opened"] > pages["removed"], pages

@@ -9,9 +9,9 @@ language summary), ``sections`` (what the report says), ``html`` and ``pdf`` (th
 renderers), ``browser`` (Chromium).
 """
 
-from .browser import BrowserError, find_chromium, page_state, screenshot_report
+from .browser import BrowserError, find_chromium, page_state, print_pdf, screenshot_report
 from .html import render_html, write_report
 from .sections import build_document
 
-__all__ = ["BrowserError", "build_document", "find_chromium", "page_state", "render_html",
+__all__ = ["BrowserError", "build_document", "find_chromium", "page_state", "print_pdf", "render_html",
            "screenshot_report", "write_report"]

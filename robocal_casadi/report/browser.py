@@ -3,7 +3,8 @@
 Chromium runs offline (no background networking, no component updates, a throw-away
 profile). ``page_state`` reads the ``data-*`` marks the report's script puts on
 ``<body>`` once the page has loaded (see ``report.html``); ``screenshot_report`` takes a
-PNG of the whole page, as tall as the page says it is.
+PNG of the whole page, as tall as the page says it is; ``print_pdf`` prints it to PDF as
+a reader's browser would (print style sheet, A4).
 """
 
 from __future__ import annotations
@@ -108,3 +109,21 @@ def screenshot_report(html_path: str | Path, png_path: str | Path, *, width: int
             shutil.copyfile(shot, staging)
             staging.chmod(0o644)
     return png_path
+
+
+def print_pdf(html_path: str | Path, pdf_path: str | Path, *,
+              chromium: str | None = None) -> Path:
+    """The report at ``html_path`` printed by Chromium to ``pdf_path`` (print media, the
+    page's ``@page`` size, no header or footer), written whole or not at all."""
+    html_path, pdf_path = Path(html_path), Path(pdf_path)
+    url = html_path.resolve().as_uri()
+    with tempfile.TemporaryDirectory(prefix="robocal-print-") as folder:
+        printed = Path(folder) / "printed.pdf"
+        _run([f"--virtual-time-budget={VIRTUAL_TIME_BUDGET}", "--no-pdf-header-footer",
+              f"--print-to-pdf={printed}", url], chromium)
+        if not printed.is_file() or not printed.read_bytes().startswith(b"%PDF"):
+            raise BrowserError(f"Chromium printed no PDF of {html_path}")
+        with atomic_file(pdf_path) as staging:
+            shutil.copyfile(printed, staging)
+            staging.chmod(0o644)
+    return pdf_path

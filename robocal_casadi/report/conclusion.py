@@ -10,6 +10,7 @@ that did not converge).
 from __future__ import annotations
 
 from ..results import CalibrationResult
+from .effect_views import effect_title
 from .numbers import ErrorStats, error_noun, format_number, pooled
 
 OVERFIT_RATIO = 2.0  # held-out RMS above this multiple of the fit RMS earns a warning
@@ -45,12 +46,11 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
                           "check.")
 
     if result.effects:
-        names = ", ".join(f"{e.name} (joint{'s' if len(e.joints) > 1 else ''} "
-                          f"{', '.join(map(str, e.joints))})" if e.joints else e.name
-                          for e in result.effects)
+        names = _and([_effect_words(e) for e in result.effects])
         paragraphs.append(f"The geometric calibration alone reached {length(summary.rms_geometric)}"
-                          f" RMS; diagnosis then added {names}, which brought it to "
-                          f"{length(summary.rms_final)}.")
+                          f" RMS; diagnosis then found {names} in what was left, and adding "
+                          f"{'them' if len(result.effects) > 1 else 'it'} brought the error to "
+                          f"{length(summary.rms_final)} (see Effects found).")
     else:
         paragraphs.append(f"The geometric calibration reached {length(summary.rms_geometric)} RMS;"
                           f" diagnosis found no further effect that the data supports.")
@@ -98,3 +98,17 @@ def _largest_changes(result: CalibrationResult, per_quantity: int = 2) -> list[s
             if change != 0:
                 moved.append(f"{p.name} {change:+.3g} {units.unit_name(quantity)}")
     return moved
+
+
+def _and(items: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + f" and {items[-1]}"
+
+
+def _effect_words(effect) -> str:
+    """``joint compliance on joint 2``, ``thermal drift``, in words."""
+    text = effect_title(effect.name).lower()
+    if effect.joints:
+        joints = [str(j) for j in effect.joints]
+        text += f" on joint{'s' if len(joints) > 1 else ''} {_and(joints)}"
+    return text

@@ -15,7 +15,8 @@ from matplotlib.figure import Figure
 
 @dataclass(frozen=True)
 class Paragraph:
-    """Plain text; ``kind`` is ``"text"``, ``"note"`` (muted) or ``"conclusion"`` (stands out)."""
+    """Plain text; ``kind`` is ``"text"``, ``"note"`` (muted), ``"conclusion"`` (stands out)
+    or ``"heading"`` (a sub-heading within a section)."""
 
     text: str
     kind: str = "text"
@@ -62,7 +63,20 @@ class Plot:
         return f"Plot({self.name!r})"
 
 
-Block = Union[Paragraph, Table, Plot]
+@dataclass(frozen=True)
+class Details:
+    """Blocks folded away on screen behind a ``summary`` line (HTML ``<details>``), and
+    always shown in print and in the PDF: e.g. a long table of secondary rows."""
+
+    name: str
+    summary: str
+    blocks: tuple[Union[Paragraph, Table, Plot], ...]
+
+    def __repr__(self) -> str:
+        return f"Details({self.name!r}, {len(self.blocks)} blocks)"
+
+
+Block = Union[Paragraph, Table, Plot, Details]
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import math
 from contextlib import contextmanager
-from typing import Iterator, Sequence
+from typing import TYPE_CHECKING, Iterator, Sequence
 
 import matplotlib
 import matplotlib.ticker as ticker
@@ -19,10 +19,13 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..results import DatasetResiduals, EffectFinding, Identifiability
+from ..results import DatasetResiduals, Identifiability
 from ..robot import Robot
 from ..units import Units
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
+
+if TYPE_CHECKING:
+    from .effect_views import EffectView
 
 COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
 ALPHA = {"nominal": 0.35, "geometric": 0.45, "final": 0.6}
@@ -265,74 +268,57 @@ def error_over_rows(residuals: tuple[DatasetResiduals, ...], units: Units, title
     return figure
 
 
-def effect_variable(effect: EffectFinding,
-                    residuals: tuple[DatasetResiduals, ...]) -> tuple[str, list[int]]:
-    """What an effect is best seen against: ``("joint", [0-based joints])``, or
-    ``("temperature" | "time" | "row", [])`` for effects that do not name joints."""
-    with_joints = [r for r in residuals if r.joints is not None]
-    if effect.joints and with_joints:
-        return "joint", [j - 1 for j in effect.joints]
-    for column in ("temperature", "time"):
-        if any(column in r.extras for r in residuals):
-            return column, []
-    return "row", []
+def effect_evidence(view: "EffectView", units: Units) -> Figure:
+    """Errors before (geometric) and after (final) an effect against its own variable.
 
-
-def effect_evidence(effect: EffectFinding, residuals: tuple[DatasetResiduals, ...],
-                    robot: Robot, units: Units) -> Figure:
-    """Errors before (geometric) and after (final) the effect against its variable.
-
-    Scatter of both, with the RMS in bins of the variable as a line, so what the effect
-    took out of the residual shows as the gap between the two lines.
+    One panel per joint (``view.panels``): scatter of both error sets with their RMS in
+    bins of the variable as lines, so what the effect took out shows as the gap between
+    the lines; the fitted effect on a right-hand axis (dashed line, or points when it is
+    not a function of the variable alone).
     """
-    variable, joints = effect_variable(effect, residuals)
-    panels_wanted = max(1, len(joints))
-    columns = min(3, panels_wanted)
-    lines = math.ceil(panels_wanted / columns)
-    scale = units.length_scale
+    count = max(1, len(view.panels))
+    columns = min(2, count)
+    lines = math.ceil(count / columns)
+    width = WIDTH if columns > 1 else WIDTH * 0.85
     with report_style():
-        figure = new_figure(2.5 * lines + 0.4)
-        panels = figure.subplots(lines, columns, squeeze=False, sharey=True).ravel()
+        figure = new_figure(2.9 * lines + 0.4, width)
+        panels = figure.subplots(lines, columns, squeeze=False).ravel()
         for p, axes in enumerate(panels):
-            if p >= panels_wanted:
+            if p >= len(view.panels):
                 axes.set_visible(False)
                 continue
-            xs, models = [], {"geometric": [], "final": []}
-            for r in residuals:
-                mapped = _mapped(r)
-                rows = np.asarray(r.rows)[mapped]
-                if variable == "joint":
-                    if r.joints is None:
-                        continue
-                    reading_scale, reading_unit = joint_reading_unit(robot, joints[p], units)
-                    xs.append(np.asarray(r.joints)[rows, joints[p]] / reading_scale)
-                    label = f"q{joints[p] + 1} [{reading_unit}]"
-                elif variable in ("temperature", "time"):
-                    if variable not in r.extras:
-                        continue
-                    xs.append(np.asarray(r.extras[variable], dtype=float)[rows])
-                    label = "temperature [C]" if variable == "temperature" else "time [s]"
-                else:
-                    xs.append(rows.astype(float))
-                    label = "data row (measurement order)"
-                for model in models:
-                    models[model].append(errors_of(r, model)[mapped] / scale)
-            if not xs:
-                continue
-            x = np.concatenate(xs)
-            keep = _thin(x.size)
-            for model, parts in models.items():
-                errors = np.concatenate(parts)
-                axes.scatter(x[keep], errors[keep], s=4, alpha=0.3, linewidths=0,
+            panel = view.panels[p]
+            keep = _thin(panel.x.size)
+            handles = []
+            for model, errors in (("geometric", panel.geometric), ("final", panel.final)):
+                axes.scatter(panel.x[keep], errors[keep], s=4, alpha=0.3, linewidths=0,
                              color=COLOURS[model], rasterized=True)
-                centres, values = _binned_rms(x, errors)
-                axes.plot(centres, values, color=COLOURS[model], marker="o", markersize=3,
-                          label=f"{MODEL_TITLES[model]} (RMS per bin)")
-            axes.set_xlabel(label)
-            if p % columns == 0:
-                axes.set_ylabel(f"error [{units.length}]")
-        panels[0].legend(loc="best")
-        joints_text = (f" on joint{'s' if len(effect.joints) > 1 else ''} "
-                       f"{', '.join(str(j) for j in effect.joints)}") if effect.joints else ""
-        figure.suptitle(f"{effect.name}{joints_text}: error before and after the effect")
+                centres, values = _binned_rms(panel.x, errors)
+                title = "before: geometric only" if model == "geometric" else \
+                    "after: with the effects"
+                handles += axes.plot(centres, values, color=COLOURS[model], marker="o",
+                                     markersize=3, label=f"{title}, RMS per bin")
+            if (panel.geometric >= 0).all() and (panel.final >= 0).all():
+                axes.set_ylim(bottom=0)
+            axes.set_xlabel(panel.x_label)
+            axes.set_ylabel(f"error [{units.length}]")
+            if panel.fitted is not None and panel.fitted.size == panel.x.size:
+                right = axes.twinx()
+                right.grid(False)
+                right.spines["right"].set_visible(True)
+                if panel.fitted_is_curve:
+                    order = np.argsort(panel.x)
+                    handles += right.plot(panel.x[order], panel.fitted[order], color="#222222",
+                                          linestyle="--", linewidth=1.3, label="fitted effect (right axis)")
+                else:
+                    handles.append(right.scatter(panel.x[keep], panel.fitted[keep], s=3,
+                                                 color="#222222", alpha=0.5, linewidths=0,
+                                                 rasterized=True, label="fitted effect (right axis)"))
+                right.axhline(0.0, color="#222222", linewidth=0.5, alpha=0.4)
+                right.set_ylabel(panel.fitted_label)
+                right.yaxis.set_major_formatter(ticker.ScalarFormatter(useMathText=True))
+                right.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4))
+            if p == 0:
+                figure.legend(handles=handles, loc="outside lower center", ncols=len(handles))
+        figure.suptitle(f"{view.title}: error before and after")
     return figure

@@ -17,7 +17,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..output import atomic_file
 from ..results import CalibrationResult
-from .content import Document, Paragraph, Plot, Section, Table
+from .content import Details, Document, Paragraph, Plot, Section, Table
 from .figures import png_bytes
 from .sections import build_document
 
@@ -43,19 +43,36 @@ table { border-collapse: collapse; font-size: 0.9em; min-width: 40%; }
 caption { text-align: left; font-weight: 600; padding: 4px 0; }
 th, td { border-bottom: 1px solid var(--line); padding: 4px 10px; vertical-align: top; }
 th { background: var(--band); text-align: left; }
-td.number, th.number { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+td.number, th.number { text-align: right; font-variant-numeric: tabular-nums; }
+td.number { white-space: nowrap; }
+table.diagnosis td, table.diagnosis-summary td { white-space: nowrap; }
+table.diagnosis, table.diagnosis-summary { font-size: 0.82em; }
 tr.muted td { color: var(--muted); font-style: italic; }
 figure { margin: 14px 0 22px; }
 figure img { display: block; max-width: 100%; height: auto; border: 1px solid var(--line); }
-figcaption { color: #5b6570; font-size: 0.9em; margin-top: 4px; }
+figcaption { color: #5b6570; font-size: 0.9em; margin-top: 4px; max-width: 880px; }
+h3 { font-size: 1.08em; margin: 22px 0 6px; }
+details { margin: 8px 0 18px; }
+details > summary { cursor: pointer; color: var(--accent); font-weight: 600; padding: 4px 0; }
 @media print {
   body { font-size: 11pt; }
   main { max-width: none; padding: 0; }
   nav { display: none; }
   section { break-before: auto; }
   figure, table, p.conclusion { break-inside: avoid; page-break-inside: avoid; }
+  table.diagnosis, table.parameters, table.not-identifiable { break-inside: auto;
+                                                              page-break-inside: auto; }
+  .table-wrap { overflow: visible; }
+  table.diagnosis, table.diagnosis-summary { font-size: 7.5pt; }
+  table.diagnosis td, table.diagnosis-summary td { white-space: normal; padding: 2px 5px; }
+  table.diagnosis th, table.diagnosis-summary th { padding: 2px 5px; }
+  h3 { break-after: avoid; page-break-after: avoid; }
   h2 { break-after: avoid; page-break-after: avoid; }
   a { color: inherit; }
+  details > summary { color: inherit; }
+  details::details-content { content-visibility: visible; display: block; }
+  tr { break-inside: avoid; page-break-inside: avoid; }
+  thead { display: table-header-group; }
 }
 @page { size: A4; margin: 16mm 14mm; }
 """
@@ -75,6 +92,15 @@ READY_SCRIPT = """
     if (loaded === images.length) { body.setAttribute("data-report-ready", "true"); }
   }
   window.addEventListener("load", check);
+  // folded blocks print in full: open them for printing, fold them again after
+  var opened = [];
+  window.addEventListener("beforeprint", function () {
+    var folded = document.querySelectorAll("details:not([open])");
+    for (var i = 0; i < folded.length; i++) { folded[i].open = true; opened.push(folded[i]); }
+  });
+  window.addEventListener("afterprint", function () {
+    while (opened.length) { opened.pop().open = false; }
+  });
 })();
 """
 
@@ -139,17 +165,25 @@ def render_html(document: Document) -> str:
 
 def _section(section: Section) -> str:
     parts = [f'<section id="{_attr(section.anchor)}">', f"<h2>{_text(section.title)}</h2>"]
-    for block in section.blocks:
-        if isinstance(block, Paragraph):
-            parts.append(f'<p class="{_attr(block.kind)}">{_text(block.text)}</p>')
-        elif isinstance(block, Table):
-            parts.append(_table(block))
-        elif isinstance(block, Plot):
-            parts.append(_figure(block))
-        else:  # pragma: no cover - the content module defines every block type
-            raise TypeError(f"unknown report block {block!r}")
+    parts += [_block(block) for block in section.blocks]
     parts.append("</section>")
     return "\n".join(parts)
+
+
+def _block(block) -> str:
+    if isinstance(block, Paragraph):
+        if block.kind == "heading":
+            return f"<h3>{_text(block.text)}</h3>"
+        return f'<p class="{_attr(block.kind)}">{_text(block.text)}</p>'
+    if isinstance(block, Table):
+        return _table(block)
+    if isinstance(block, Plot):
+        return _figure(block)
+    if isinstance(block, Details):
+        inner = "\n".join(_block(b) for b in block.blocks)
+        return (f'<details id="{_attr(block.name)}"><summary>{_text(block.summary)}</summary>'
+                f"\n{inner}\n</details>")
+    raise TypeError(f"unknown report block {block!r}")  # pragma: no cover
 
 
 def _table(table: Table) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 from matplotlib.backends.backend_pdf import PdfPages
 
 from ..output import atomic_file
-from .content import Document, Paragraph, Plot, Table
+from .content import Details, Document, Paragraph, Plot, Table
 from .figures import new_figure, report_style
 
 PAGE = (8.27, 11.69)  # A4 [in]
@@ -39,8 +39,14 @@ def write_pdf(document: Document, path: str | Path) -> Path:
                               _Line("")]
         for section in document.sections:
             lines += [_Line(""), _Line(section.title, "bold", 11.0)]
-            for block in section.blocks:
-                if isinstance(block, Paragraph):
+            blocks = []
+            for block in section.blocks:  # folded blocks are printed in full
+                blocks += [block] if not isinstance(block, Details) else \
+                    [Paragraph(block.summary, "heading"), *block.blocks]
+            for block in blocks:
+                if isinstance(block, Paragraph) and block.kind == "heading":
+                    lines += [_Line(t, "bold", 9.5) for t in _wrap(block.text)]
+                elif isinstance(block, Paragraph):
                     lines += [_Line(t, "bold" if block.kind == "conclusion" else "normal")
                               for t in _wrap(block.text)] + [_Line("")]
                 elif isinstance(block, Table):

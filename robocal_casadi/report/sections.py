@@ -16,8 +16,9 @@ import numpy as np
 from ..results import CalibrationResult
 from ..units import Units
 from . import figures
-from .content import Document, Paragraph, Plot, Section, Table
+from .content import Details, Document, Paragraph, Plot, Section, Table
 from .conclusion import conclusion_paragraphs
+from .effect_views import effect_models_of, effect_title, effect_view
 from .numbers import (
     ErrorStats,
     errors_of,
@@ -206,63 +207,134 @@ def errors_section(result: CalibrationResult) -> Section:
 
 
 def effects_section(result: CalibrationResult) -> Section:
+    units = result.units
     blocks: list = []
     if not result.effects:
         blocks.append(Paragraph("Diagnosis added no effect beyond the geometric model: "
                                 "nothing left in the residual was explained well enough by a "
                                 "candidate effect to justify its parameters."))
-    residuals = result.residuals or result.validation_residuals
     for effect in result.effects:
-        joints = f" on joint{'s' if len(effect.joints) > 1 else ''} " \
-                 f"{', '.join(str(j) for j in effect.joints)}" if effect.joints else ""
-        summary = f": {effect.summary[:1].upper()}{effect.summary[1:]}" if effect.summary else ""
-        blocks.append(Paragraph(f"{effect.name}{joints}{summary}".rstrip(".") + "."))
-        rows = tuple((name, format_number(value, 4),
-                      format_number(effect.std.get(name), 3), effect.unit)
-                     for name, value in effect.parameters.items())
-        blocks.append(Table(f"effect-{effect.name}", f"{effect.name}: parameters",
-                            ("parameter", "value", "standard error", "unit"), rows,
-                            numeric=(False, True, True, False)))
+        view = effect_view(result, effect)
+        title = view.title if view is not None else effect_title(effect.name)
+        blocks.append(Paragraph(title, "heading"))
+        if effect.summary:
+            blocks.append(Paragraph(f"{effect.summary[:1].upper()}{effect.summary[1:]}"
+                                    .rstrip(".") + "."))
+        if view is not None and view.panels:
+            blocks.append(Plot(f"effect-{effect.name}", view.caption,
+                               partial(figures.effect_evidence, view, units)))
+        blocks.append(_effect_parameters(result, effect))
         if effect.evidence:
-            blocks.append(Table(f"evidence-{effect.name}", f"{effect.name}: evidence",
+            blocks.append(Table(f"evidence-{effect.name}", f"{title}: evidence",
                                 ("measure", "value"),
-                                tuple(_evidence_row(k, v, result.units)
+                                tuple(_evidence_row(k, v, units)
                                       for k, v in effect.evidence.items()),
                                 numeric=(False, True)))
-        if residuals and any((np.asarray(r.rows) >= 0).any() for r in residuals):
-            variable, _ = figures.effect_variable(effect, residuals)
-            shown = "the joint reading" if variable == "joint" else {
-                "temperature": "temperature", "time": "time"}.get(variable, "measurement order")
-            blocks.append(Plot(f"effect-{effect.name}", f"{effect.name}: error before (geometric) "
-                               f"and after (final) the effect, against {shown}",
-                               partial(figures.effect_evidence, effect, residuals,
-                                       result.robot_nominal, result.units)))
     if result.diagnosis:
-        blocks.append(diagnosis_table(result.diagnosis, result.units))
+        blocks += diagnosis_blocks(result.diagnosis, units)
     return Section("effects", "Effects found", tuple(blocks))
 
 
-def diagnosis_table(diagnosis: tuple[dict, ...], units: Units) -> Table:
-    """Every candidate effect diagnosis tested, with the numbers it recorded.
+def _effect_parameters(result: CalibrationResult, effect) -> Table:
+    """The fitted parameters of ``effect``, in the model's order; pure angles [rad] in the
+    file's angle unit, other units as in result.json."""
+    order: list[str] = []
+    for model, _ in effect_models_of(result, effect):
+        order += [n for n in model.parameter_names() if n in effect.parameters]
+    names = order + [n for n in effect.parameters if n not in order]
+    scale, unit = 1.0, effect.unit
+    if effect.unit == "rad" and result.units.angle != "rad":
+        scale, unit = result.units.angle_scale, result.units.angle
+    rows = tuple((name, format_number(effect.parameters[name] / scale, 4),
+                  format_number(None if effect.std.get(name) is None
+                                else effect.std[name] / scale, 3), unit)
+                 for name in names)
+    return Table(f"effect-{effect.name}", f"{effect_title(effect.name)}: fitted parameters "
+                 f"({effect.name} in result.json)",
+                 ("parameter", "value", "standard error", "unit"), rows,
+                 numeric=(False, True, True, False))
+
+
+DIAGNOSIS_SHOWN = 5  # rejected candidates shown in the main text, strongest first
+DIAGNOSIS_HEADERS = {
+    "round": "round", "effect": "effect", "joints": "joints", "parameters": "parameters",
+    "held": "held at zero", "remaining_norm": "independence",
+    "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "held-out RMS before",
+    "cv_rms_after": "held-out RMS with it", "decision": "decision",
+}
+NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
+                "cv_rms_before", "cv_rms_after"}
+
+
+def diagnosis_blocks(diagnosis: tuple, units: Units) -> list:
+    """What diagnosis tested: the candidates added and the strongest few rejected in the
+    main text, every candidate in a block folded away on screen (printed in full)."""
+    entries = [dict(entry) for entry in diagnosis]
+    added = [e for e in entries if e.get("decision") == "added"]
+    rejected = [e for e in entries if e.get("decision") != "added"
+                and isinstance(e.get("bic_drop"), (int, float))
+                and math.isfinite(float(e["bic_drop"]))
+                and int(e.get("parameters", 1) or 0) > 0]
+    rejected.sort(key=lambda e: float(e["bic_drop"]), reverse=True)
+    strongest = rejected[:DIAGNOSIS_SHOWN]
+    rounds = max((int(e.get("round", 1) or 1) for e in entries), default=1)
+    shown = added + strongest
+    text = (f"Diagnosis tested {len(entries)} candidates in {rounds} round"
+            f"{'s' if rounds != 1 else ''} and added {len(added)}. Below: "
+            + ("the candidates added and " if added else "")
+            + f"the {len(strongest)} strongest rejected (largest BIC drop); every candidate is "
+              f"listed after it.")
+    blocks: list = [Paragraph(text),
+                    diagnosis_table(tuple(shown), units, name="diagnosis-summary",
+                                    caption="Candidates added and the strongest rejected"),
+                    Paragraph("RSS drop: relative fall of the sum of squared errors with the "
+                              "candidate; BIC drop: that fall weighed against the parameters "
+                              "it adds (positive favours the candidate); held-out RMS: "
+                              "cross-validated RMS of the errors before and with it; "
+                              "independence: 1 when the candidate acts unlike "
+                              "any geometric parameter, 0 when the geometry already absorbs "
+                              "it.", "note")]
+    blocks.append(Details("diagnosis-all", f"All {len(entries)} candidates tested",
+                          (diagnosis_table(diagnosis, units),)))
+    return blocks
+
+
+def diagnosis_table(diagnosis: tuple, units: Units, *, name: str = "diagnosis",
+                    caption: str = "Every candidate tested by diagnosis") -> Table:
+    """Candidate effects diagnosis tested, with the numbers it recorded.
 
     RMS values (keys holding ``rms`` that are not a relative ``drop``) are lengths [m]
-    and are shown in the file's length unit.
+    and are shown in the file's length unit; relative drops in percent.
     """
     keys: list[str] = []
     for entry in diagnosis:
-        for k, v in entry.items():
+        for k, v in dict(entry).items():
             if k not in keys and isinstance(v, (int, float, str, bool, list, tuple)):
                 keys.append(k)
     lengths = {k for k in keys if "rms" in k and "drop" not in k}
 
     def cell(key: str, value) -> str:
-        if key in lengths and isinstance(value, (int, float)) and not isinstance(value, bool):
-            return format_number(value / units.length_scale, 4)
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if key in lengths and number:
+            return format_number(value / units.length_scale, 4) if math.isfinite(value) else "-"
+        if key == "effect" and isinstance(value, str):
+            return effect_title(value).lower()
+        if key == "rss_drop" and number:
+            return f"{100 * value:.1f} %" if math.isfinite(value) else "-"
+        if key == "bic_drop" and number:
+            return f"{value:.1f}" if math.isfinite(value) else "-"
+        if key == "remaining_norm" and number:
+            return f"{value:.3f}" if math.isfinite(value) else "-"
+        if isinstance(value, (list, tuple)) and not value:
+            return "-"
         return _scalar_text(value)
 
-    rows = tuple(tuple(cell(k, entry.get(k, "")) for k in keys) for entry in diagnosis)
-    header = tuple(f"{k} [{units.length}]" if k in lengths else k for k in keys)
-    return Table("diagnosis", "Candidates tested by diagnosis", header, rows)
+    rows = tuple(tuple(cell(k, dict(entry).get(k, "")) for k in keys) for entry in diagnosis)
+    header = tuple(f"{DIAGNOSIS_HEADERS.get(k, k)} [{units.length}]" if k in lengths
+                   else DIAGNOSIS_HEADERS.get(k, k) for k in keys)
+    muted = tuple(dict(entry).get("decision") != "added" for entry in diagnosis)
+    return Table(name, caption, header, rows, muted,
+                 tuple(k in NUMERIC_KEYS for k in keys))
 
 
 def sphere_section(result: CalibrationResult) -> Section | None:
@@ -334,11 +406,25 @@ def _values_table(name: str, caption: str, entries: list[tuple[str, float, float
                  numeric=(False, True, True, False))
 
 
+EVIDENCE_TITLES = {
+    "rms_drop": "fall of the RMS on the fit data",
+    "bic_drop": "BIC drop (positive favours the effect)",
+    "cv_rms_before": "held-out RMS without it",
+    "cv_rms_after": "held-out RMS with it",
+}
+
+
 def _evidence_row(key: str, value: float, units: Units) -> tuple[str, str]:
-    """An evidence entry; RMS values (not relative drops) are lengths [m], shown in file units."""
+    """An evidence entry in words; RMS values (not relative drops) are lengths [m], shown
+    in file units, relative drops in percent."""
+    title = EVIDENCE_TITLES.get(key, key)
     if "rms" in key and "drop" not in key:
-        return f"{key} [{units.length}]", format_number(value / units.length_scale, 4)
-    return key, format_number(value, 4)
+        return f"{title} [{units.length}]", format_number(value / units.length_scale, 4)
+    if key == "rms_drop":
+        return title, f"{100 * value:.1f} %"
+    if key == "bic_drop":
+        return title, f"{value:.1f}"
+    return title, format_number(value, 4)
 
 
 def _belongs(name: str, label: str) -> bool:

@@ -1,0 +1,310 @@
+"""What each effect found is plotted against, and the fitted effect to draw over it.
+
+An engineer believes an effect when the error before it (geometric calibration only)
+shows a pattern against the effect's own variable and the error after it does not:
+
+- ``joint_compliance``: the gravity torque at the joint [N m] (pinocchio's generalized
+  gravity of the calibrated robot's links, plus the row's ``payload`` [kg] at
+  ``payload_com`` in the flange frame; the flange origin when the data gives none).
+  A robot file without link masses has no torque to show: the joint angle instead.
+- ``joint_cyclic`` and ``joint_scale``: the joint angle.
+- ``thermal_drift``: the ``temperature`` [C] or ``time`` [s] column.
+
+The fitted effect is evaluated from the effect models of the result
+(``result.effect_models`` with ``result.effect_values``, SI) row by row with the same
+``Effect.delta`` the identification used, on the calibrated geometry: the joint
+correction ``dq_j`` [rad or m] for joint effects, the relative length change
+``k (T - T_ref)`` [1] for thermal drift. Everything returned here is in display units
+(the robot file's length and angle units; torques in N m, forces in N).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..effects.base import RowContext
+from ..results import CalibrationResult, DatasetResiduals, EffectFinding
+from ..robot import Robot
+from ..units import Units
+from .numbers import errors_of, joint_reading_unit
+
+EFFECT_TITLES = {
+    "joint_compliance": "Joint compliance",
+    "joint_cyclic": "Periodic joint error",
+    "joint_scale": "Joint scale error",
+    "thermal_drift": "Thermal drift",
+}
+
+
+def effect_title(name: str) -> str:
+    """The effect's name in words (``joint_cyclic`` -> ``Periodic joint error``)."""
+    return EFFECT_TITLES.get(name, name.replace("_", " ").capitalize())
+
+
+@dataclass(frozen=True)
+class EffectPanel:
+    """One panel: errors before and after against ``x``, with the fitted effect.
+
+    ``x`` and the errors are per measurement (display units); ``fitted`` is the fitted
+    effect at each measurement (display units, right-hand axis) or None when it cannot
+    be evaluated; ``fitted_is_curve`` says it is a function of ``x`` alone (drawn as a
+    line), otherwise it is drawn as points.
+    """
+
+    x: np.ndarray
+    geometric: np.ndarray
+    final: np.ndarray
+    x_label: str
+    fitted: np.ndarray | None
+    fitted_label: str
+    fitted_is_curve: bool
+
+
+@dataclass(frozen=True)
+class EffectView:
+    """The plot of one effect: its panels, a title and the caption that explains them."""
+
+    name: str
+    title: str
+    panels: tuple[EffectPanel, ...]
+    caption: str
+    variable: str  # "torque" | "joint" | "temperature" | "time" | "row"
+
+
+# ----------------------------------------------------------------------------- fitted models
+
+
+def effect_models_of(result: CalibrationResult,
+                     finding: EffectFinding) -> list[tuple[object, np.ndarray]]:
+    """``(Effect, theta [SI])`` of every fitted effect model that makes up ``finding``."""
+    models = tuple(result.effect_models)
+    values = np.asarray(result.effect_values, dtype=float).ravel()
+    sizes = [len(m.parameter_names()) for m in models]
+    if not models or sum(sizes) != values.size:
+        return []
+    wanted = set(finding.parameters)
+    out, start = [], 0
+    for model, size in zip(models, sizes):
+        names = set(model.parameter_names())
+        if model.name == finding.name and (not wanted or names & wanted):
+            out.append((model, values[start:start + size]))
+        start += size
+    return out
+
+
+def _numeric_extras(residuals: DatasetResiduals, rows: np.ndarray) -> dict[str, np.ndarray]:
+    out = {}
+    for name, column in residuals.extras.items():
+        try:
+            values = np.asarray(column, dtype=float)
+        except (TypeError, ValueError):
+            continue
+        if values.ndim == 1 and len(values) > int(rows.max(initial=-1)):
+            out[name] = values[rows]
+    return out
+
+
+def _payload_com(residuals: DatasetResiduals) -> np.ndarray:
+    com = getattr(residuals, "payload_com", None)
+    return np.zeros(3) if com is None else np.asarray(com, dtype=float).reshape(3)
+
+
+def joint_corrections(robot: Robot, model, theta: np.ndarray, Q: np.ndarray,
+                      extras: dict[str, np.ndarray],
+                      payload_com: np.ndarray | None = None) -> np.ndarray:
+    """The correction ``dq`` [rad or m] (N x dof) that ``model`` with ``theta`` makes at
+    each row of ``Q`` (N x dof readings, SI); ``extras`` maps column names to N values."""
+    registry = robot.parameters()
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    columns = sorted(extras)
+    q = ca.SX.sym("q", robot.dof)
+    e = ca.SX.sym("e", len(columns))
+    p = ca.SX.sym("p", len(registry))
+    t = ca.SX.sym("theta", len(theta))
+    com = ca.SX.sym("payload_com", 3)
+    row = RowContext(robot, registry, q, p, {c: e[i] for i, c in enumerate(columns)}, com)
+    dq, _ = model.delta(row, t)
+    function = ca.Function("effect_correction", [q, e, p, t, com], [dq]).map(len(Q))
+    E = np.array([np.asarray(extras[c], dtype=float) for c in columns]).reshape(len(columns),
+                                                                                len(Q))
+    P = np.tile(robot.parameter_vector()[:, None], (1, len(Q)))
+    T = np.tile(np.asarray(theta, dtype=float)[:, None], (1, len(Q)))
+    C = np.tile((np.zeros(3) if payload_com is None else payload_com)[:, None], (1, len(Q)))
+    return np.asarray(function(Q.T, E, P, T, C)).T
+
+
+def gravity_torque_at(robot: Robot, Q: np.ndarray, extras: dict[str, np.ndarray],
+                      payload_com: np.ndarray | None = None) -> np.ndarray:
+    """Gravity torques [N m] (forces [N] at prismatic joints), N x dof, from pinocchio,
+    with the ``payload`` column [kg] (0 without it)."""
+    from ..pinocchio_model import gravity_torques
+
+    payload = extras.get("payload", 0.0)
+    return gravity_torques(robot, Q, payload_mass=payload, payload_com=payload_com)
+
+
+# ----------------------------------------------------------------------------- views
+
+
+def _joint_list(joints) -> str:
+    joints = list(joints)
+    if len(joints) == 1:
+        return f"joint {joints[0]}"
+    return "joints " + ", ".join(map(str, joints[:-1])) + f" and {joints[-1]}"
+
+
+def _column_of(finding: EffectFinding, models, residuals) -> str:
+    for model, _ in models:
+        column = getattr(model, "column", None)
+        if column:
+            return column
+    names = " ".join(finding.parameters)
+    if "k_t" in names.split():
+        return "time"
+    for column in ("temperature", "time"):
+        if any(column in r.extras for r in residuals):
+            return column
+    return "row"
+
+
+def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView | None:
+    """The plot of ``finding`` on the fit data (validation data when there is none).
+
+    None when no error belongs to a data row (nothing to plot against).
+    """
+    residuals = tuple(r for r in (result.residuals or result.validation_residuals)
+                      if (np.asarray(r.rows) >= 0).any())
+    if not residuals:
+        return None
+    units = result.units
+    robot = result.robot_calibrated
+    models = effect_models_of(result, finding)
+    with_joints = tuple(r for r in residuals if r.joints is not None)
+    joint_effect = bool(finding.joints) and bool(with_joints) and finding.name != "thermal_drift"
+    title = effect_title(finding.name)
+    if joint_effect:
+        title += f", {_joint_list(finding.joints)}"
+    if joint_effect:
+        return _joint_view(result, finding, title, models, with_joints)
+    return _column_view(result, finding, title, models, residuals, units)
+
+
+def _gather(residuals: DatasetResiduals, units: Units):
+    mapped = np.flatnonzero(np.asarray(residuals.rows) >= 0)
+    rows = np.asarray(residuals.rows)[mapped].astype(int)
+    scale = units.length_scale
+    return (rows, errors_of(residuals, "geometric")[mapped] / scale,
+            errors_of(residuals, "final")[mapped] / scale)
+
+
+def _joint_view(result, finding, title, models, residuals) -> EffectView:
+    units, robot = result.units, result.robot_calibrated
+    compliance = finding.name == "joint_compliance"
+    torque = compliance and robot.has_inertia
+    panels = []
+    fitted_any = False
+    for joint in finding.joints:
+        j = joint - 1
+        angle_scale, angle_unit = joint_reading_unit(robot, j, units)
+        xs, geo, fin, fits = [], [], [], []
+        for r in residuals:
+            rows, g, f = _gather(r, units)
+            Q = np.asarray(r.joints, dtype=float)[rows]
+            extras = _numeric_extras(r, rows)
+            com = _payload_com(r)
+            if torque:
+                xs.append(gravity_torque_at(robot, Q, extras, com)[:, j])
+            else:
+                xs.append(Q[:, j] / angle_scale)
+            geo.append(g)
+            fin.append(f)
+            fits.append(_fitted_dq(robot, models, Q, extras, com, j, angle_scale))
+        fitted = None if any(v is None for v in fits) or not fits else np.concatenate(fits)
+        fitted_any |= fitted is not None
+        if torque:
+            unit = "N m" if robot.joints[j].revolute else "N"
+            x_label = f"gravity {'torque' if robot.joints[j].revolute else 'force'} " \
+                      f"at joint {joint} [{unit}]"
+        else:
+            x_label = f"q{joint} [{angle_unit}]"
+        what = "deflection" if compliance else "reading error"
+        panels.append(EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin),
+                                  x_label, fitted, f"fitted {what} dq{joint} [{angle_unit}]",
+                                  fitted_is_curve=torque or not compliance))
+    before_after = ("Error before the effects (geometric calibration only, orange) and after "
+                    "them (with every effect found, blue) on the fit data; lines are the RMS "
+                    "in bins")
+    if compliance and torque:
+        against = ("against the gravity torque the joint holds, computed with pinocchio from "
+                   "the calibrated robot's link masses and the data's payload column. Without "
+                   "compliance the error grows with the torque; with it, it does not")
+        fitted_text = "the dashed line (right axis) is the fitted deflection -c tau"
+    elif compliance:
+        against = ("against the joint angle: the robot file gives no link masses, so the "
+                   "gravity torque cannot be computed and the compliance was fitted with "
+                   "lumped link terms")
+        fitted_text = ("the black points (right axis) are the fitted deflection at each "
+                       "measurement, which depends on the whole pose")
+    elif finding.name == "joint_cyclic":
+        against = "against the joint angle"
+        fitted_text = ("the dashed line (right axis) is the fitted reading error "
+                       "a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q")
+    else:
+        against = "against the joint angle"
+        fitted_text = "the dashed line (right axis) is the fitted reading error s q"
+    caption = f"{title}. {before_after}, {against}"
+    caption += f"; {fitted_text}." if fitted_any else "."
+    return EffectView(finding.name, title, tuple(panels), caption,
+                      "torque" if torque else "joint")
+
+
+def _fitted_dq(robot, models, Q, extras, com, j, angle_scale) -> np.ndarray | None:
+    if not models:
+        return None
+    total = np.zeros(len(Q))
+    for model, theta in models:
+        try:
+            dq = joint_corrections(robot, model, theta, Q, extras, com)
+        except Exception:  # noqa: BLE001 - a missing column etc.: the plot goes without it
+            return None
+        total += dq[:, j]
+    return total / angle_scale
+
+
+def _column_view(result, finding, title, models, residuals, units) -> EffectView:
+    column = _column_of(finding, models, residuals)
+    xs, geo, fin, fits = [], [], [], []
+    for r in residuals:
+        rows, g, f = _gather(r, units)
+        if column in ("temperature", "time"):
+            if column not in r.extras:
+                continue
+            x = np.asarray(r.extras[column], dtype=float)[rows]
+        else:
+            x = rows.astype(float)
+        xs.append(x)
+        geo.append(g)
+        fin.append(f)
+        reference = next((getattr(m, "reference_value", None) for m, _ in models), None)
+        if models and reference is not None and column in ("temperature", "time"):
+            k = sum(float(theta[0]) for _, theta in models)
+            fits.append(k * (x - reference) * 1e6)
+        else:
+            fits.append(None)
+    if not xs:
+        return EffectView(finding.name, title, (), f"{title}: no data to plot.", column)
+    fitted = None if any(v is None for v in fits) else np.concatenate(fits)
+    label = {"temperature": "temperature [C]", "time": "time [s]"}.get(
+        column, "data row (measurement order)")
+    panel = EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin), label,
+                        fitted, "fitted length change [µm/m]", True)
+    caption = (f"{title}. Error before the effects (geometric calibration only, orange) and "
+               f"after them (with every effect found, blue) on the fit data, against "
+               f"{label.split(' [')[0]}; lines are the RMS in bins")
+    if fitted is not None:
+        caption += ("; the dashed line (right axis) is the fitted relative change of every "
+                    "link length, k (T - T_ref)")
+    return EffectView(finding.name, title, (panel,), caption + ".", column)
