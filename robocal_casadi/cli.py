@@ -2,7 +2,8 @@
 
 Each verb module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and a
 module docstring whose first line is the verb's help. Any ``InputError`` (or other
-``RobocalError``) ends the program with status 2 and one line on standard error.
+``RobocalError``), and any file that cannot be read or written (``OSError``), ends the
+program with status 2 and one line on standard error.
 """
 
 from __future__ import annotations
@@ -45,6 +46,13 @@ def main(argv: list[str] | None = None) -> int:
     except RobocalError as error:
         message = " ".join(str(error).split())
         print(f"robocal {args.verb}: error: {message}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        # A path that cannot be read or written (permissions, a full disk, a name that
+        # is too long): the user's to fix, so one line, not a traceback.
+        where = f"{error.filename}: " if error.filename else ""
+        reason = error.strerror or str(error)
+        print(f"robocal {args.verb}: error: {where}{' '.join(reason.split())}", file=sys.stderr)
         return 2
 
 

@@ -6,6 +6,14 @@ kind with every quantity in SI; the file's units are kept for writing results ba
 
 Extra CSV columns are kept in ``extras`` (``temperature`` [C], ``time`` [s],
 ``payload`` [kg], others as read) and offered to diagnosis.
+
+Keys are checked strictly: a key the kind does not define (at the top level or inside
+``bar``, ``probe``, ``artifact``, ``sphere``, ``laser``, ``target``, ``instrument``) is
+refused with the list of allowed keys, so a misspelt optional key (``centre_gues``,
+``payload_comm``) is never ignored. An optional key written with no value counts as
+absent. Socket names are text (or whole numbers); a socket that appears in no known
+distance or perpendicularity and is touched only once in the whole table adds nothing
+to the fit and is refused as a likely misspelling.
 """
 
 from __future__ import annotations
@@ -17,16 +25,25 @@ from typing import Any, Union
 import numpy as np
 
 from .errors import InputError
-from .fields import load_yaml, number, require, vector
+from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, file_name, load_yaml, mapping, quantities,
+                     quantity, require, units_of, vector)
 from .robot import Robot, load_robot
 from .table import Table, read_table
 from .transforms import matrix_from_quaternion
-from .units import Units, parse_units
+from .units import Units
 
 KINDS = ("cross_bar", "artifact_touches", "sphere_laser", "tracker_points")
 BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
+COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning")
+KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
+             "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
+BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),
+              "sphere": ("radius", "centre_guess"),
+              "laser": ("origin_guess", "direction_guess"), "target": ("xyz",),
+              "instrument": ("xyz",)}
+MAX_POSE_ID = 10**9
 
 
 @dataclass(frozen=True)
@@ -116,25 +133,34 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     path = Path(path)
     content = load_yaml(path, what="dataset file")
     kind = require(content, "kind", file=path)
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise InputError(f"unknown kind {kind!r}; expected one of {list(KINDS)}", file=path,
                          where="kind")
-    units = parse_units(require(content, "units", file=path), file=path)
+    check_keys(content, COMMON_KEYS + KIND_KEYS[kind], file=path)
+    for block in KIND_KEYS[kind]:
+        if content.get(block) is not None:
+            mapping(content[block], file=path, where=block)
+            check_keys(content[block], BLOCK_KEYS[block], file=path, where=block)
+    units = units_of(content, file=path)
     robot_path, robot = referenced_robot(content, path, robot)
     data_name = content.get("data")
     table = None
     data_path = None
     if data_name is not None:
-        data_path = path.parent / str(data_name)
-        if data_path.is_file() or require_data:
+        data_path = path.parent / file_name(data_name, file=path, where="data")
+        if data_path.is_dir():
+            raise InputError(f"the data table {data_path} is a folder", file=path, where="data")
+        if not data_path.exists() and require_data:
+            raise InputError(f"data table {data_path} not found", file=path, where="data")
+        if data_path.exists():
             table = read_table(data_path)
     elif require_data:
-        raise InputError("missing required key", file=path, where="data")
+        raise InputError("missing required key (the data table)", file=path, where="data")
 
     payload_com = None
-    if "payload_com" in content:
-        payload_com = np.array(vector(content["payload_com"], 3, file=path,
-                                      where="payload_com")) * units.length_scale
+    if content.get("payload_com") is not None:
+        payload_com = np.array(quantities(content["payload_com"], 3, units.length_scale, "length",
+                                          file=path, where="payload_com", unit=units.length))
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
                   data_path=data_path, payload_com=payload_com, raw=content)
     reader = {"cross_bar": _cross_bar, "artifact_touches": _artifact,
@@ -144,9 +170,16 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
 
 def referenced_robot(content: dict, path: Path, robot: Robot | None = None
                      ) -> tuple[Path, Robot]:
-    """The robot file a dataset or job names (relative to it), loaded unless given."""
-    robot_path = (path.parent / str(require(content, "robot", file=path))).resolve()
+    """The robot file a dataset or job names (relative to it), loaded unless given.
+
+    A missing robot file is reported against the naming file's ``robot`` key; a broken
+    one by its own name, key and line.
+    """
+    name = file_name(require(content, "robot", file=path), file=path, where="robot")
+    robot_path = (path.parent / name).resolve()
     if robot is None:
+        if robot_path.is_dir():
+            raise InputError(f"robot file {robot_path} is a folder", file=path, where="robot")
         if not robot_path.is_file():
             raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
         robot = load_robot(robot_path)
@@ -156,23 +189,34 @@ def referenced_robot(content: dict, path: Path, robot: Robot | None = None
 def _positive_length(content: dict, block: str, key: str, hint: str, units: Units,
                      path: Path) -> tuple[dict, float]:
     """``content[block][key]`` as a positive length [m], with the block mapping."""
-    mapping = require(content, block, file=path)
-    if not isinstance(mapping, dict):
-        raise InputError(f"expected a mapping {hint}", file=path, where=block)
-    value = number(require(mapping, key, file=path, where=block), file=path,
-                   where=f"{block}.{key}") * units.length_scale
+    block_map = mapping(require(content, block, file=path), file=path, where=block, hint=hint)
+    value = quantity(require(block_map, key, file=path, where=block), units.length_scale,
+                     "length", file=path, where=f"{block}.{key}", unit=units.length)
     if value <= 0:
         raise InputError(f"{block} {key} must be positive, got {value / units.length_scale:g}",
                          file=path, where=f"{block}.{key}")
-    return mapping, value
+    return block_map, value
 
 
 def _length3(content: dict, key: str, sub: str, units: Units, path: Path) -> np.ndarray:
-    block = require(content, key, file=path)
-    if not isinstance(block, dict):
-        raise InputError("expected a mapping", file=path, where=key)
-    return np.array(vector(require(block, sub, file=path, where=key), 3, file=path,
-                           where=f"{key}.{sub}")) * units.length_scale
+    """``content[key][sub]``: three lengths in file units, as SI [m]."""
+    block = mapping(require(content, key, file=path), file=path, where=key,
+                    hint=f"{{{sub}: [x, y, z]}}")
+    return np.array(quantities(require(block, sub, file=path, where=key), 3, units.length_scale,
+                               "length", file=path, where=f"{key}.{sub}", unit=units.length))
+
+
+def _lengths(table: Table, names, units: Units) -> np.ndarray:
+    """Table columns of lengths in the dataset's unit, as SI [m] (N x len(names))."""
+    table.require(*names)
+    values = np.column_stack([table.numbers(n) for n in names])
+    too_big = np.abs(values * units.length_scale) > MAX_LENGTH
+    if too_big.any():
+        row, col = map(int, np.argwhere(too_big)[0])
+        check_magnitude(values[row, col] * units.length_scale, "length", file=table.path,
+                        where=f"line {table.line(row)}, column {names[col]!r}",
+                        shown=values[row, col], unit=units.length)
+    return values * units.length_scale
 
 
 def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> np.ndarray:
@@ -184,30 +228,35 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> 
     names = [f"q{i}" for i in range(1, robot.dof + 1)]
     missing = [n for n in names if not table.has(n)]
     if missing:
+        near = table.missing(missing)
+        hint = ""
+        if near is not None and "case-sensitive" in near.what:
+            hint = near.what[near.what.index(" (found"):]
         raise InputError(
-            f"missing joint column(s) {missing}: robot {robot.name!r} has {robot.dof} joints",
-            file=table.path)
+            f"missing joint column(s) {missing}: robot {robot.name!r} has {robot.dof} joints"
+            f"{hint}", file=table.path, where="line 1")
     extra_q = [c for c in table.columns if c.startswith("q") and c[1:].isdigit() and c not in names]
     if extra_q:
-        raise InputError(f"joint column(s) {extra_q} beyond the robot's {robot.dof} joints",
-                         file=table.path)
+        raise InputError(f"joint column(s) {extra_q} beyond the robot's {robot.dof} joints "
+                         f"(robot file {robot.name!r})", file=table.path, where="line 1")
     used.update(names)
     # The dataset's units apply to its table; prismatic readings are lengths.
     scales = np.array([units.angle_scale if j.revolute else units.length_scale
                        for j in robot.joints])
-    Q = np.column_stack([table.numbers(n) for n in names]) * scales
+    raw = np.column_stack([table.numbers(n) for n in names])
+    Q = raw * scales
     lower, upper = robot.lower_limits, robot.upper_limits
     tolerance = 1e-9
     bad = (Q < lower - tolerance) | (Q > upper + tolerance)
     if bad.any():
         row, col = map(int, np.argwhere(bad)[0])
-        value = Q[row, col] / scales[col]
+        value = raw[row, col]
         unit = units.angle if robot.joints[col].revolute else units.length
         lo, hi = lower[col] / scales[col], upper[col] / scales[col]
         hint = ""
         if robot.joints[col].revolute and units.angle == "rad" and abs(value) > 2 * np.pi:
             hint = "; the value looks like degrees in a file that declares rad"
-        elif robot.joints[col].revolute and units.angle == "deg" and np.all(np.abs(Q / scales) < 2 * np.pi):
+        elif robot.joints[col].revolute and units.angle == "deg" and np.all(np.abs(raw) < 2 * np.pi):
             hint = "; all readings are small: radians in a file that declares deg?"
         elif not robot.joints[col].revolute:
             hint = "; check the length unit (mm or m)"
@@ -215,20 +264,42 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> 
             f"q{col + 1} = {value:g} {unit} is outside the robot's limits [{lo:g}, {hi:g}] {unit}"
             f" ({int(bad.sum())} reading(s) out of limits){hint}",
             file=table.path, where=f"line {table.line(row)}")
+    # Joints without limits: still refuse readings no joint could have (overflow, typos).
+    bound = np.array([MAX_ANGLE if j.revolute else MAX_LENGTH for j in robot.joints])
+    huge = np.abs(Q) > bound
+    if huge.any():
+        row, col = map(int, np.argwhere(huge)[0])
+        kind = "angle" if robot.joints[col].revolute else "length"
+        check_magnitude(Q[row, col], kind, file=table.path, where=f"line {table.line(row)}, q{col + 1}",
+                        shown=raw[row, col], unit=units.unit_name(kind))
     return Q
 
 
 def _extras(table: Table, used: set[str]) -> dict[str, np.ndarray]:
-    """Unused columns: numeric ones as floats, others left out with no loss (kept as text)."""
+    """Unused columns: numeric ones as floats, others kept as text.
+
+    ``temperature`` [C], ``time`` [s] and ``payload`` [kg] feed the effects and must be
+    numbers in every row; a payload is never negative and a temperature never below
+    absolute zero.
+    """
     extras: dict[str, Any] = {}
     for name in table.columns:
         if name in used:
             continue
+        if name in ("temperature", "time", "payload"):
+            values = table.numbers(name)
+            floor = {"payload": 0.0, "temperature": -273.15}.get(name)
+            if floor is not None and np.any(values < floor):
+                row = int(np.argmax(values < floor))
+                what = "a payload must not be negative [kg]" if name == "payload" else \
+                    "a temperature [C] below absolute zero"
+                raise InputError(f"column {name!r}: {values[row]:g}: {what}", file=table.path,
+                                 where=f"line {table.line(row)}")
+            extras[name] = values
+            continue
         try:
             extras[name] = table.numbers(name)
         except InputError:
-            if name in ("temperature", "time", "payload"):
-                raise
             extras[name] = np.array(table.text(name), dtype=object)
     return extras
 
@@ -240,17 +311,21 @@ def _with_table(common: dict, table: Table | None, robot: Robot, used: set[str])
 
 
 def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The ``pose`` ids (whole numbers) and ``point`` socket names of a touch table."""
+    table.require("pose", "point")
     poses = table.numbers("pose")
-    if np.any(poses != np.round(poses)):
-        row = int(np.argmax(poses != np.round(poses)))
-        raise InputError(f"column 'pose': expected an integer id, got {table.text('pose')[row]!r}",
+    bad = (poses != np.round(poses)) | (np.abs(poses) > MAX_POSE_ID)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise InputError(f"column 'pose': expected a whole-number placement id (at most "
+                         f"{MAX_POSE_ID:.0e} in size), got {table.text('pose')[row]!r}",
                          file=table.path, where=f"line {table.line(row)}")
     points = tuple(table.text("point"))
     for i, p in enumerate(points):
         if not p:
             raise InputError("column 'point': empty socket name", file=table.path,
                              where=f"line {table.line(i)}")
-    return poses.astype(int), points
+    return poses.astype(np.int64), points
 
 
 def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouches:
@@ -260,10 +335,6 @@ def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouc
     fields: dict[str, Any] = dict(probe=probe, distances=(("A", "C", length), ("B", "D", length)),
                                   perpendicular=(("A", "C", "B", "D"),))
     if table is not None:
-        for column in ("pose", "point"):
-            if not table.has(column):
-                raise InputError(f"missing column {column!r}; the table has {list(table.columns)}",
-                                 file=table.path)
         used = {"pose", "point"}
         poses, points = _touch_columns(table, path)
         for i, p in enumerate(points):
@@ -274,43 +345,77 @@ def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouc
             seen = {points[i] for i in np.flatnonzero(poses == pose_id)}
             if seen != set(BAR_POINTS):
                 missing = sorted(set(BAR_POINTS) - seen)
+                first = int(np.flatnonzero(poses == pose_id)[0])
                 raise InputError(f"bar pose {pose_id} has touches of {sorted(seen)} only; "
                                  f"missing {missing} (each pose needs A, B, C and D)",
-                                 file=table.path, where=f"pose {pose_id}")
+                                 file=table.path,
+                                 where=f"pose {pose_id} (line {table.line(first)})")
         common = _with_table(common, table, common["robot"], used)
         fields.update(pose=poses, point=points, extras=_extras(table, used))
     return ArtifactTouches(**common, **fields)
 
 
+def _socket_name(value: Any, *, path: Path, where: str) -> str:
+    """A socket named in the artifact block: text or a whole number, as text."""
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or str(value).strip() == "":
+        raise InputError(f"expected a socket name, got {value!r}", file=path, where=where)
+    return str(value).strip()
+
+
+def _list_of(artifact: dict, key: str, path: Path) -> list:
+    value = artifact.get(key)
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise InputError(f"expected a list, got {value!r}", file=path, where=f"artifact.{key}")
+    return value
+
+
 def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouches:
     path, units = common["path"], common["units"]
     probe = _length3(content, "probe", "xyz", units, path)
-    artifact = require(content, "artifact", file=path)
-    if not isinstance(artifact, dict):
-        raise InputError("expected a mapping", file=path, where="artifact")
+    artifact = mapping(require(content, "artifact", file=path), file=path, where="artifact",
+                       hint="{distances: [[socket, socket, length], ...]}")
     distances = []
-    for k, entry in enumerate(artifact.get("distances", []) or []):
+    lengths: dict[frozenset, tuple[float, str]] = {}
+    for k, entry in enumerate(_list_of(artifact, "distances", path)):
         where = f"artifact.distances[{k}]"
         if not isinstance(entry, list) or len(entry) != 3:
             raise InputError(f"expected [socket, socket, length], got {entry!r}", file=path,
                              where=where)
-        length = number(entry[2], file=path, where=f"{where}[2]") * units.length_scale
+        a = _socket_name(entry[0], path=path, where=f"{where}[0]")
+        b = _socket_name(entry[1], path=path, where=f"{where}[1]")
+        if a == b:
+            raise InputError(f"a distance from socket {a!r} to itself", file=path, where=where)
+        length = quantity(entry[2], units.length_scale, "length", file=path, where=f"{where}[2]",
+                          unit=units.length)
         if length <= 0:
-            raise InputError("distance must be positive", file=path, where=f"{where}[2]")
-        distances.append((str(entry[0]), str(entry[1]), length))
+            raise InputError(f"distance must be positive, got {entry[2]!r}", file=path,
+                             where=f"{where}[2]")
+        pair = frozenset((a, b))
+        if pair in lengths:
+            raise InputError(f"the distance {a}-{b} is given twice (also {lengths[pair][1]})",
+                             file=path, where=where)
+        lengths[pair] = (length, where)
+        distances.append((a, b, length))
     perpendicular = []
-    for k, entry in enumerate(artifact.get("perpendicular", []) or []):
+    for k, entry in enumerate(_list_of(artifact, "perpendicular", path)):
+        where = f"artifact.perpendicular[{k}]"
         if not isinstance(entry, list) or len(entry) != 4:
-            raise InputError(f"expected [A, C, B, D], got {entry!r}", file=path,
-                             where=f"artifact.perpendicular[{k}]")
-        perpendicular.append(tuple(str(e) for e in entry))
+            raise InputError(f"expected [A, C, B, D] (AC perpendicular to BD), got {entry!r}",
+                             file=path, where=where)
+        names = tuple(_socket_name(e, path=path, where=f"{where}[{i}]")
+                      for i, e in enumerate(entry))
+        if names[0] == names[1] or names[2] == names[3]:
+            raise InputError(f"each of the two lines needs two different sockets, got "
+                             f"{list(names)}", file=path, where=where)
+        if {names[0], names[1]} == {names[2], names[3]}:
+            raise InputError(f"a line cannot be perpendicular to itself: {list(names)}",
+                             file=path, where=where)
+        perpendicular.append(names)
     fields: dict[str, Any] = dict(probe=probe, distances=tuple(distances),
                                   perpendicular=tuple(perpendicular))
     if table is not None:
-        for column in ("pose", "point"):
-            if not table.has(column):
-                raise InputError(f"missing column {column!r}; the table has {list(table.columns)}",
-                                 file=table.path)
         used = {"pose", "point"}
         poses, points = _touch_columns(table, path)
         named = {s for d in distances for s in d[:2]} | {s for p in perpendicular for s in p}
@@ -318,6 +423,15 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
         if unknown:
             raise InputError(f"socket(s) {sorted(unknown)} named in the artifact are never "
                              f"touched in {table.path.name}", file=path, where="artifact")
+        counts: dict[str, int] = {}
+        for p in points:
+            counts[p] = counts.get(p, 0) + 1
+        for i, p in enumerate(points):
+            if counts[p] == 1 and p not in named:
+                raise InputError(f"socket {p!r} is touched only once and named in no distance "
+                                 f"or perpendicularity: it adds nothing (a misspelt socket "
+                                 f"name? sockets: {sorted(counts)})", file=table.path,
+                                 where=f"line {table.line(i)}")
         common = _with_table(common, table, common["robot"], used)
         fields.update(pose=poses, point=points, extras=_extras(table, used))
     return ArtifactTouches(**common, **fields)
@@ -326,49 +440,59 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
 def _sphere_laser(content: dict, table: Table | None, common: dict) -> SphereLaser:
     path, units = common["path"], common["units"]
     sphere, radius = _positive_length(content, "sphere", "radius", "{radius: R}", units, path)
+    L = units.length_scale
     centre = None
-    if "centre_guess" in sphere:
-        centre = np.array(vector(sphere["centre_guess"], 3, file=path,
-                                 where="sphere.centre_guess")) * units.length_scale
+    if sphere.get("centre_guess") is not None:
+        centre = np.array(quantities(sphere["centre_guess"], 3, L, "length", file=path,
+                                     where="sphere.centre_guess", unit=units.length))
     origin = direction = None
     laser = content.get("laser") or {}
-    if not isinstance(laser, dict):
-        raise InputError("expected a mapping", file=path, where="laser")
-    if "origin_guess" in laser:
-        origin = np.array(vector(laser["origin_guess"], 3, file=path,
-                                 where="laser.origin_guess")) * units.length_scale
-    if "direction_guess" in laser:
+    if laser.get("origin_guess") is not None:
+        origin = np.array(quantities(laser["origin_guess"], 3, L, "length", file=path,
+                                     where="laser.origin_guess", unit=units.length))
+    if laser.get("direction_guess") is not None:
         direction = np.array(vector(laser["direction_guess"], 3, file=path,
                                     where="laser.direction_guess"))
-        if np.linalg.norm(direction) < 1e-12:
-            raise InputError("direction must not be zero", file=path,
+        norm = float(np.linalg.norm(direction / max(np.abs(direction).max(), 1e-300)))
+        norm *= float(np.abs(direction).max())
+        if not np.isfinite(norm) or norm < 1e-12:
+            raise InputError("direction must be a non-zero vector", file=path,
                              where="laser.direction_guess")
-        direction = direction / np.linalg.norm(direction)
+        direction = direction / norm
     fields: dict[str, Any] = dict(radius=radius, centre_guess=centre, origin_guess=origin,
                                   direction_guess=direction)
     if table is not None:
         if not table.has("distance"):
-            raise InputError(f"missing column 'distance'; the table has {list(table.columns)}",
-                             file=table.path)
+            raise InputError(f"missing column 'distance' (the laser readings); the table has "
+                             f"{list(table.columns)}", file=table.path, where="line 1")
         used = {"distance"}
-        fields["distance"] = table.numbers("distance") * units.length_scale
-        if all(table.has(c) for c in POSE_COLUMNS):
+        fields["distance"] = _lengths(table, ["distance"], units)[:, 0]
+        pose_columns = [c for c in POSE_COLUMNS if table.has(c)]
+        joint_columns = [c for c in table.columns if c.startswith("q") and c[1:].isdigit()]
+        if pose_columns and joint_columns:
+            raise InputError(f"the table has both pendant pose columns {pose_columns} and joint "
+                             f"columns {joint_columns}; a scan is read one way: keep one",
+                             file=table.path, where="line 1")
+        if pose_columns:
+            table.require(*POSE_COLUMNS)
             used.update(POSE_COLUMNS)
             fields["flange_poses"] = _pendant_poses(table, units)
-        elif table.has("q1"):
+        elif joint_columns:
             common = _with_table(common, table, common["robot"], used)
         else:
             raise InputError("expected joint columns q1..qn or pendant pose columns "
-                             f"{list(POSE_COLUMNS)}, with 'distance'", file=table.path)
+                             f"{list(POSE_COLUMNS)}, with 'distance'; the table has "
+                             f"{list(table.columns)}", file=table.path, where="line 1")
         fields["extras"] = _extras(table, used)
     return SphereLaser(**common, **fields)
 
 
 def _pendant_poses(table: Table, units: Units) -> np.ndarray:
-    xyz = np.column_stack([table.numbers(c) for c in "xyz"]) * units.length_scale
+    xyz = _lengths(table, list("xyz"), units)
     quaternions = np.column_stack([table.numbers(c) for c in ("qw", "qx", "qy", "qz")])
-    norms = np.linalg.norm(quaternions, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_TOLERANCE)
+    big = np.abs(quaternions).max(axis=1, keepdims=True)
+    norms = np.linalg.norm(quaternions / np.where(big > 0, big, 1.0), axis=1) * big[:, 0]
+    bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
     if bad.size:
         row = int(bad[0])
         raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 within "
@@ -384,16 +508,13 @@ def _tracker(content: dict, table: Table | None, common: dict) -> TrackerPoints:
     path, units = common["path"], common["units"]
     target = _length3(content, "target", "xyz", units, path)
     instrument = None
-    if "instrument" in content:
+    if content.get("instrument") is not None:
         instrument = _length3(content, "instrument", "xyz", units, path)
     fields: dict[str, Any] = dict(target=target, instrument=instrument)
     if table is not None:
-        for column in "xyz":
-            if not table.has(column):
-                raise InputError(f"missing column {column!r}; the table has {list(table.columns)}",
-                                 file=table.path)
+        table.require(*"xyz")
         used = set("xyz")
-        fields["measured"] = np.column_stack([table.numbers(c) for c in "xyz"]) * units.length_scale
+        fields["measured"] = _lengths(table, list("xyz"), units)
         common = _with_table(common, table, common["robot"], used)
         fields["extras"] = _extras(table, used)
     return TrackerPoints(**common, **fields)

@@ -24,12 +24,16 @@ import numpy as np
 import yaml
 
 from .errors import InputError
-from .fields import load_yaml, number, require, vector
-from .units import SI, Units, parse_units
+from .fields import (check_keys, load_yaml, mapping, number, quantities, quantity, require,
+                     vector)
+from .units import SI, Units
 
 JOINT_TYPES = ("revolute", "prismatic")
 CONVENTIONS = ("dh", "mdh")
 JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com"}
+ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity")
+MAX_MASS = 1e5  # kg, a link heavier than this is a typo
+MAX_GRAVITY = 1e3  # m/s^2
 
 
 @dataclass(frozen=True)
@@ -134,18 +138,28 @@ def load_robot(path: str | Path) -> Robot:
 
 
 def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
-    """Build a ``Robot`` from the parsed YAML mapping of a robot file."""
+    """Build a ``Robot`` from the parsed YAML mapping of a robot file.
+
+    Unknown keys are refused (at the top level, in a joint, in ``base``/``tool``) with
+    the list of allowed ones, so a misspelt key is never silently ignored. An optional
+    key written with no value (``tool:``) counts as absent. A joint's ``mass`` and ``com``
+    go together.
+    """
+    from .fields import units_of
+
+    check_keys(content, ROBOT_KEYS, file=file)
     convention = require(content, "convention", file=file)
-    if convention not in CONVENTIONS:
+    if not isinstance(convention, str) or convention not in CONVENTIONS:
         raise InputError(
             f"unknown convention {convention!r}; expected one of {list(CONVENTIONS)}",
             file=file,
             where="convention",
         )
-    units = parse_units(require(content, "units", file=file), file=file)
+    units = units_of(content, file=file)
     raw_joints = require(content, "joints", file=file)
     if not isinstance(raw_joints, list) or not raw_joints:
-        raise InputError("expected a non-empty list of joints", file=file, where="joints")
+        raise InputError(f"expected a non-empty list of joints, got {raw_joints!r}"[:200],
+                         file=file, where="joints")
     joints = tuple(
         _joint_from_dict(raw, units, file=file, where=f"joints[{i}] (joint {i + 1})")
         for i, raw in enumerate(raw_joints)
@@ -153,9 +167,16 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     base = _frame_from_dict(content.get("base"), units, file=file, where="base")
     tool = _frame_from_dict(content.get("tool"), units, file=file, where="tool")
     gravity = (0.0, 0.0, -9.81)
-    if "gravity" in content:
+    if content.get("gravity") is not None:
         gravity = tuple(vector(content["gravity"], 3, file=file, where="gravity"))
-    name = content.get("name", Path(file).stem if file else "robot")
+        if max(abs(g) for g in gravity) > MAX_GRAVITY:
+            raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
+                             file=file, where="gravity")
+    name = content.get("name")
+    if name is None:
+        name = Path(file).stem if file else "robot"
+    elif isinstance(name, (list, dict, bool)):
+        raise InputError(f"expected a name, got {name!r}", file=file, where="name")
     return Robot(
         name=str(name),
         convention=convention,
@@ -164,23 +185,24 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         tool=tool,
         gravity=gravity,  # type: ignore[arg-type]
         units=units,
-        has_base="base" in content,
-        has_tool="tool" in content,
-        has_gravity="gravity" in content,
+        has_base=content.get("base") is not None,
+        has_tool=content.get("tool") is not None,
+        has_gravity=content.get("gravity") is not None,
     )
 
 
 def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     if not isinstance(raw, dict):
-        raise InputError(f"expected a mapping, got {raw!r}", file=file, where=where)
+        raise InputError(f"expected a mapping {{type, theta, d, a, alpha, ...}}, got {raw!r}",
+                         file=file, where=where)
     unknown = set(raw) - JOINT_KEYS
     if unknown:
         raise InputError(
-            f"unknown key(s) {sorted(unknown)}; allowed: {sorted(JOINT_KEYS)}", file=file,
-            where=where,
+            f"unknown key(s) {sorted(map(str, unknown))}; allowed: {sorted(JOINT_KEYS)}",
+            file=file, where=where,
         )
     joint_type = raw.get("type", "revolute")
-    if joint_type not in JOINT_TYPES:
+    if not isinstance(joint_type, str) or joint_type not in JOINT_TYPES:
         raise InputError(
             f"unknown joint type {joint_type!r}; expected one of {list(JOINT_TYPES)}",
             file=file,
@@ -188,47 +210,62 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
         )
     L, A = units.length_scale, units.angle_scale
     values = {}
-    for key, scale in (("theta", A), ("d", L), ("a", L), ("alpha", A)):
-        values[key] = number(require(raw, key, file=file, where=where), file=file,
-                             where=f"{where}.{key}") * scale
-    beta = number(raw.get("beta", 0.0), file=file, where=f"{where}.beta") * A
+    for key, scale, kind, unit in (("theta", A, "angle", units.angle),
+                                   ("d", L, "length", units.length),
+                                   ("a", L, "length", units.length),
+                                   ("alpha", A, "angle", units.angle)):
+        values[key] = quantity(require(raw, key, file=file, where=where), scale, kind,
+                               file=file, where=f"{where}.{key}", unit=unit)
+    beta = 0.0
+    if raw.get("beta") is not None:
+        beta = quantity(raw["beta"], A, "angle", file=file, where=f"{where}.beta",
+                        unit=units.angle)
     limits = None
-    if "limits" in raw:
-        lo, hi = vector(raw["limits"], 2, file=file, where=f"{where}.limits")
-        scale = A if joint_type == "revolute" else L
+    if raw.get("limits") is not None:
+        revolute = joint_type == "revolute"
+        scale = A if revolute else L
+        lo, hi = quantities(raw["limits"], 2, scale, "angle" if revolute else "length",
+                            file=file, where=f"{where}.limits",
+                            unit=units.angle if revolute else units.length)
         if lo >= hi:
-            raise InputError(f"lower limit {lo} is not below upper limit {hi}", file=file,
-                             where=f"{where}.limits")
-        limits = (lo * scale, hi * scale)
+            raise InputError(f"lower limit {lo / scale:g} is not below upper limit "
+                             f"{hi / scale:g}", file=file, where=f"{where}.limits")
+        limits = (lo, hi)
     mass = None
-    if "mass" in raw:
+    if raw.get("mass") is not None:
         mass = number(raw["mass"], file=file, where=f"{where}.mass")
         if mass < 0:
-            raise InputError(f"mass must not be negative, got {mass}", file=file,
+            raise InputError(f"mass must not be negative, got {mass:g} kg", file=file,
+                             where=f"{where}.mass")
+        if mass > MAX_MASS:
+            raise InputError(f"mass {mass:g} kg is implausibly large", file=file,
                              where=f"{where}.mass")
     com = None
-    if "com" in raw:
-        com = tuple(c * L for c in vector(raw["com"], 3, file=file, where=f"{where}.com"))
+    if raw.get("com") is not None:
+        com = tuple(quantities(raw["com"], 3, L, "length", file=file, where=f"{where}.com",
+                               unit=units.length))
+    if (mass is None) != (com is None):
+        given, lacking = ("mass", "com") if com is None else ("com", "mass")
+        raise InputError(f"{given} given without {lacking}: a link's gravity needs both",
+                         file=file, where=f"{where}.{lacking}")
     return Joint(
         type=joint_type, beta=beta, limits=limits, mass=mass, com=com,  # type: ignore[arg-type]
-        has_beta="beta" in raw, **values,
+        has_beta=raw.get("beta") is not None, **values,
     )
 
 
 def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
     if raw is None:
         return Frame()
-    if not isinstance(raw, dict):
-        raise InputError("expected a mapping {xyz: [...], rpy: [...]}", file=file, where=where)
-    unknown = set(raw) - {"xyz", "rpy"}
-    if unknown:
-        raise InputError(f"unknown key(s) {sorted(unknown)}; allowed: ['rpy', 'xyz']",
-                         file=file, where=where)
-    xyz = vector(raw.get("xyz", [0, 0, 0]), 3, file=file, where=f"{where}.xyz")
-    rpy = vector(raw.get("rpy", [0, 0, 0]), 3, file=file, where=f"{where}.rpy")
+    mapping(raw, file=file, where=where, hint="{xyz: [...], rpy: [...]}")
+    check_keys(raw, ("xyz", "rpy"), file=file, where=where)
+    xyz = raw.get("xyz")
+    rpy = raw.get("rpy")
     return Frame(
-        tuple(v * units.length_scale for v in xyz),  # type: ignore[arg-type]
-        tuple(v * units.angle_scale for v in rpy),  # type: ignore[arg-type]
+        tuple(quantities([0, 0, 0] if xyz is None else xyz, 3, units.length_scale, "length",
+                         file=file, where=f"{where}.xyz", unit=units.length)),  # type: ignore
+        tuple(quantities([0, 0, 0] if rpy is None else rpy, 3, units.angle_scale, "angle",
+                         file=file, where=f"{where}.rpy", unit=units.angle)),  # type: ignore
     )
 
 

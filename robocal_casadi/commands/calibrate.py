@@ -18,11 +18,13 @@ import sys
 from pathlib import Path
 
 from ..datasets import load_dataset
+from ..errors import InputError
 from ..identification import calibrate
 from ..output import atomic_directory
 from ..results import CalibrationResult
 from ..robot import save_robot
 from ..solver import METHODS
+from .arguments import not_replacing_inputs, output_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -99,8 +101,25 @@ def summary(result: CalibrationResult) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_folder(args.out)
+    if args.max_iterations < 1:
+        raise InputError(f"expected a positive count, got {args.max_iterations}",
+                         where="--max-iterations")
+    if args.select_growth is not None and not (math.isfinite(args.select_growth)
+                                               and args.select_growth > 0):
+        raise InputError(f"expected a positive fraction, got {args.select_growth}",
+                         where="--select-growth")
     datasets = [load_dataset(p) for p in args.datasets]
     validation = [load_dataset(p) for p in args.validate]
+    seen: dict = {}
+    for dataset in datasets + validation:
+        key = dataset.path.resolve()
+        if key in seen:
+            raise InputError(f"the same dataset is given twice ({seen[key]} and {dataset.path}); "
+                             "a dataset is either fitted or held out, once", file=dataset.path)
+        seen[key] = dataset.path
+    not_replacing_inputs(args.out, [p for d in datasets + validation
+                                    for p in (d.path, d.data_path, d.robot_path)])
     result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
                        loss=args.loss, select_growth=args.select_growth,
                        max_iterations=args.max_iterations,

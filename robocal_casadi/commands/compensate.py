@@ -23,9 +23,11 @@ import numpy as np
 
 from ..compensation import compensate
 from ..errors import InputError
+from ..fields import MAX_LENGTH, check_magnitude
 from ..output import atomic_file
 from ..robot import Robot, load_robot
 from ..table import read_table, write_table
+from .arguments import output_file
 
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
 POSITION = ("x", "y", "z")
@@ -62,6 +64,9 @@ def robot_of(argument: str) -> Robot:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_file(args.out)
+    if args.restarts < 0:
+        raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
     robot = robot_of(args.robot)
     table = read_table(args.targets, required=POSITION)
     L, A = robot.units.length_scale, robot.units.angle_scale
@@ -69,13 +74,17 @@ def run(args: argparse.Namespace) -> int:
     if has_orientation and len(has_orientation) != 4:
         missing = [c for c in QUATERNION if not table.has(c)]
         raise InputError(f"orientation columns need all of {list(QUATERNION)}; missing "
-                         f"{missing}", file=table.path)
+                         f"{missing}", file=table.path, where="line 1")
     columns = POSITION + (QUATERNION if has_orientation else ())
     targets = np.column_stack([table.numbers(c) for c in columns])
+    for row, col in np.argwhere(np.abs(targets[:, :3] * L) > MAX_LENGTH)[:1]:
+        check_magnitude(targets[row, col] * L, "length", file=table.path,
+                        where=f"line {table.line(int(row))}, column {POSITION[col]!r}",
+                        shown=targets[row, col], unit=robot.units.length)
     targets[:, :3] *= L
     if has_orientation:
         norms = np.linalg.norm(targets[:, 3:], axis=1)
-        bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_TOLERANCE)
+        bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
         if bad.size:
             row = int(bad[0])
             raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 "
@@ -86,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
     clashes = [c for c in extras if c in joint_names or c in ("status", "position_error",
                                                               "orientation_error")]
     if clashes:
-        raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path)
+        raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path,
+                         where="line 1")
     scales = robot.reading_scales()
     start = None
     if args.start:
@@ -98,7 +108,14 @@ def run(args: argparse.Namespace) -> int:
         if len(start) != robot.dof:
             raise InputError(f"expected {robot.dof} joint values, got {len(start)}",
                              where="--start")
+        if not np.all(np.isfinite(start)):
+            raise InputError(f"expected finite numbers, got {args.start!r}", where="--start")
         start = start * scales
+        outside = np.flatnonzero((start < robot.lower_limits) | (start > robot.upper_limits))
+        if outside.size:
+            k = int(outside[0])
+            raise InputError(f"q{k + 1} = {start[k] / scales[k]:g} is outside the robot's limits",
+                             where="--start")
     if args.restarts < 0:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
     result = compensate(robot, targets, start=start, restarts=args.restarts, seed=args.seed)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..datasets import load_dataset
 from ..identification import calibrate
+from .arguments import output_folder
 from .calibrate import summary, write_outputs
 
 PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
@@ -53,6 +54,7 @@ def cases() -> dict[str, tuple[list[Path], list[Path]]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_folder(args.out)
     for name, (fit_files, validation_files) in cases().items():
         print(f"== {name}")
         fit = [load_dataset(p) for p in fit_files]

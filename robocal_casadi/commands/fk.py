@@ -25,6 +25,7 @@ from ..output import atomic_file
 from ..robot import Robot, load_robot
 from ..table import read_table, write_table
 from ..transforms import quaternion_from_matrix
+from .arguments import input_file, output_file
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
@@ -67,7 +68,8 @@ def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    robot_path = Path(args.robot)
+    robot_path = input_file(args.robot, "robot file")
+    output_file(args.out)
     robot = load_robot(robot_path)
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), robot, robot_path)

@@ -11,9 +11,11 @@ and the median of random feasible plans of the same size.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
+from .arguments import output_file
 
 INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
 
@@ -41,7 +43,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.count < 1:
         raise InputError(f"expected a positive count, got {args.count}", where="--count")
+    output_file(args.out)
     dataset = load_dataset(args.dataset, require_data=False)
+    if dataset.data_path is not None and Path(args.out).resolve() == dataset.data_path.resolve() \
+            and dataset.rows:
+        raise InputError(f"{args.out} is the dataset's own data table, which holds measurements; "
+                         "write the plan to another file", where="--out")
     plan = design_plan(dataset, args.count, args.index, seed=args.seed,
                        refine=not args.no_refine)
     write_plan(plan, args.out)

@@ -25,6 +25,7 @@ from ..progress import Progress
 from ..table import write_table
 from ..tracking.job import load_tracking_job
 from ..tracking.tracker import Tracker
+from .arguments import output_file
 from .fk import calibrated_robot
 
 
@@ -41,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     job_path = Path(args.job)
+    output_file(args.out)
+    if args.max_step is not None and not (np.isfinite(args.max_step) and args.max_step > 0):
+        raise InputError(f"expected a positive number, got {args.max_step}", where="--max-step")
     job = load_tracking_job(job_path)
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), job.robot, job.robot_path)
