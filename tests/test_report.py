@@ -365,6 +365,10 @@ def test_report_in_metres_and_radians_without_validation_or_effects(tmp_path):
     assert "Diagnosis added no effect" in texts
     ids = {attrs.get("id") for tag, attrs in page.tags if tag == "section"}
     assert "sphere" not in ids
+    # the conclusion writes the millimetre-sized errors of a metre file in mm
+    conclusion = next(t for kind, t in page.paragraphs if kind == "conclusion")
+    assert f"to {result.fit.rms_final * 1e3:.3g} mm RMS" in conclusion
+    assert " m RMS" not in conclusion
 
 
 def test_pdf_beside_the_page(tmp_path):

@@ -21,10 +21,13 @@ CONVERGED_WORDS = ("converged", "success", "ok", "solve_succeeded")
 def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     """The conclusion as a few short paragraphs, the headline first."""
     units = result.units
-    unit = units.length
+    # Errors and corrections are millimetre-sized: a file in metres reads them in mm here
+    # (the tables keep the file's unit).
+    unit = "mm" if units.length == "m" else units.length
+    scale = 1e-3 if units.length == "m" else units.length_scale
 
     def length(value_si: float) -> str:
-        return f"{format_number(value_si / units.length_scale, 3)} {unit}"
+        return f"{format_number(value_si / scale, 3)} {unit}"
 
     held_out = result.validation is not None
     summary = result.validation if held_out else result.fit
@@ -93,10 +96,13 @@ def _largest_changes(result: CalibrationResult, per_quantity: int = 2) -> list[s
     for quantity in ("length", "angle"):
         entries = [p for p in result.parameters if p.identifiable and p.quantity == quantity]
         entries.sort(key=lambda p: abs(p.estimate - p.nominal), reverse=True)
+        scale, unit = units.scale(quantity), units.unit_name(quantity)
+        if quantity == "length" and units.length == "m":
+            scale, unit = 1e-3, "mm"
         for p in entries[:per_quantity]:
-            change = (p.estimate - p.nominal) / units.scale(quantity)
+            change = (p.estimate - p.nominal) / scale
             if change != 0:
-                moved.append(f"{p.name} {change:+.3g} {units.unit_name(quantity)}")
+                moved.append(f"{p.name} {change:+.3g} {unit}")
     return moved
 
 

@@ -30,6 +30,8 @@ from .numbers import (
     row_count,
 )
 
+SOLVER_TITLES = {"seconds": "time [s]", "residuals": "residual entries",
+                 "free_unknowns": "free unknowns"}
 CONVENTION_TITLES = {"dh": "standard Denavit-Hartenberg (dh)",
                      "mdh": "modified Denavit-Hartenberg, Craig (mdh)"}
 
@@ -102,8 +104,9 @@ def robot_and_data_section(result: CalibrationResult) -> Section:
                                                 "errors", "extra columns"), tuple(rows),
                        numeric=(False, False, False, True, True, False))
     blocks: list = [robot_table, data_table]
-    solver = [(str(k), _scalar_text(v)) for k, v in result.solver.items()
-              if isinstance(v, (int, float, str, bool))]
+    solver = [(SOLVER_TITLES.get(str(k), str(k).replace("_", " ")),
+               format_number(v, 3) if isinstance(v, float) else _scalar_text(v))
+              for k, v in result.solver.items() if isinstance(v, (int, float, str, bool))]
     if solver:
         blocks.append(Table("solver", "Solver", ("item", "value"), tuple(solver)))
     return Section("robot-data", "Robot and data", tuple(blocks))
@@ -280,7 +283,7 @@ def diagnosis_blocks(diagnosis: tuple, units: Units) -> list:
     rounds = max((int(e.get("round", 1) or 1) for e in entries), default=1)
     shown = added + strongest
     text = (f"Diagnosis tested {len(entries)} candidates in {rounds} round"
-            f"{'s' if rounds != 1 else ''} and added {len(added)}. Below: "
+            f"{'s' if rounds != 1 else ''} and added {len(added) or 'none'}. Below: "
             + ("the candidates added and " if added else "")
             + f"the {len(strongest)} strongest rejected (largest BIC drop); every candidate is "
               f"listed after it.")
