@@ -13,6 +13,7 @@ validation); the residual and Jacobian are built once per problem as CasADi func
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cached_property
 from typing import Sequence
 
@@ -30,10 +31,13 @@ from .robot import Robot
 def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Sequence[str]):
     """Per-row CasADi function of one flange-frame point after the effects act.
 
-    ``(q, extras, p, theta, offset, payload_com) -> (p_world, dp/dp, dp/dtheta, dp/doffset)``
-    with ``q`` the joint readings, ``extras`` the data columns the effects read, ``p`` the
-    robot geometry, ``theta`` all effect parameters, ``offset`` [m] in the flange frame;
-    ``p_world`` [m] and its exact derivatives (SX, so a batch of rows is one cheap map).
+    ``(q, extras, p, theta, offset, payload_com, constants) -> (p_world, dp/dp, dp/dtheta,
+    dp/doffset)`` with ``q`` the joint readings, ``extras`` the data columns the effects
+    read, ``p`` the robot geometry, ``theta`` all effect parameters, ``offset`` [m] in the
+    flange frame, ``constants`` the effects' numbers fixed from the data
+    (``Effect.constants``, e.g. a reference temperature: an input, not a literal, so
+    compiled code is shared between datasets); ``p_world`` [m] and its exact derivatives
+    (SX, so a batch of rows is one cheap map).
     """
     robot, registry = kinematics.robot, kinematics.registry
     q = ca.SX.sym("q", robot.dof)
@@ -43,20 +47,24 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
     theta = ca.SX.sym("theta", sum(sizes))
     offset = ca.SX.sym("offset", 3)
     payload_com = ca.SX.sym("payload_com", 3)
+    constant_sizes = [len(e.constants()) for e in effects]
+    constants = ca.SX.sym("constants", sum(constant_sizes))
     row = RowContext(robot, registry, q, p, {c: extras[i] for i, c in enumerate(columns)},
                      payload_com)
     dq = ca.SX.zeros(robot.dof)
     dp = ca.SX.zeros(len(registry))
-    start = 0
-    for effect, size in zip(effects, sizes):
-        delta_q, delta_p = effect.delta(row, theta[start:start + size])
+    start = constant_start = 0
+    for effect, size, constant_size in zip(effects, sizes, constant_sizes):
+        own = replace(row, constants=constants[constant_start:constant_start + constant_size])
+        delta_q, delta_p = effect.delta(own, theta[start:start + size])
         dq += delta_q
         if delta_p is not None:
             dp += delta_p
         start += size
+        constant_start += constant_size
     position = kinematics.point(q + dq, p + dp, offset)
-    inputs = [q, extras, p, theta, offset, payload_com]
-    names = ["q", "extras", "p", "theta", "offset", "payload_com"]
+    inputs = [q, extras, p, theta, offset, payload_com, constants]
+    names = ["q", "extras", "p", "theta", "offset", "payload_com", "constants"]
     point = ca.Function("row_point", inputs, [position], names, ["p_world"])
     derivatives = ca.Function("row_point_jacobians", inputs,
                               [position, ca.jacobian(position, p), ca.jacobian(position, theta),
@@ -138,6 +146,11 @@ class Problem:
 
     # ------------------------------------------------------------------ data per model
 
+    def _effect_constants(self) -> np.ndarray:
+        """The effects' constants (``Effect.constants``), in effect order."""
+        parts = [np.asarray(e.constants(), dtype=float).ravel() for e in self.effects]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
     def _data(self, model: MeasurementModel):
         dataset = model.dataset
         n = dataset.rows
@@ -165,7 +178,7 @@ class Problem:
 
         def points(offsets):
             return np.asarray(mapped(Q, extras, p, theta, np.asarray(offsets, float),
-                                     payload_com))
+                                     payload_com, self._effect_constants()))
 
         return points
 
@@ -257,17 +270,21 @@ class Problem:
             self._maps[key] = None
             return None
         row = self._row[0]
-        q, extras, p, theta, _, payload_com = (row.sx_in(i) for i in range(6))
+        q, extras, p, theta, _, payload_com, effect_constants = (row.sx_in(i) for i in range(7))
         data = ca.SX.sym("data", model.row_data().shape[1])
         mounted = ca.SX.sym("mounted", len(model.mounted))
         placement = ca.SX.sym("placement", len(model.placement))
-        point = row(q, extras, p, theta, model.row_offset(data, mounted), payload_com)
-        r = model.row_residual(point, data, mounted, placement)
+        constants = ca.SX.sym("constants", len(model.row_constants()))
+        point = row(q, extras, p, theta, model.row_offset(data, mounted), payload_com,
+                    effect_constants)
+        r = model.row_residual(point, data, mounted, placement, constants)
         from .codegen import BatchFunction
 
         unknowns = ca.vertcat(p, theta, mounted, placement)
-        inputs = [q, extras, data, p, theta, mounted, placement, payload_com]
-        names = ["q", "extras", "data", "p", "theta", "mounted", "placement", "payload_com"]
+        inputs = [q, extras, data, p, theta, mounted, placement, payload_com, constants,
+                  effect_constants]
+        names = ["q", "extras", "data", "p", "theta", "mounted", "placement", "payload_com",
+                 "constants", "effect_constants"]
         compile = model.dataset.rows >= COMPILE_ROWS
         per_row = ("q", "extras", "data")
         residual = ca.Function("row_residual", inputs, [r], names, ["r"])
@@ -286,7 +303,8 @@ class Problem:
         Q, extras, payload_com = self._data(model)
         arguments = (Q.T, extras.T, model.row_data(), x[self.slices["robot"]],
                      x[self.slices["effects"]], x[self.mounted_indices(model)],
-                     x[self.placement_indices(model)], payload_com)
+                     x[self.placement_indices(model)], payload_com, model.row_constants(),
+                     self._effect_constants())
         if not with_jacobian:
             (r,) = residual(*arguments)
             return r.ravel(), None
@@ -321,14 +339,16 @@ class Problem:
             else offsets.T
         if not with_jacobian:
             if rows >= COMPILE_ROWS:
-                (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com)
+                (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
+                                         self._effect_constants())
                 P_flat = P.ravel()
             else:
-                P_flat = np.asarray(self._mapped(0, rows)(Q, extras, p, theta, offsets,
-                                                          payload_com)).T.ravel()
+                P_flat = np.asarray(self._mapped(0, rows)(
+                    Q, extras, p, theta, offsets, payload_com,
+                    self._effect_constants())).T.ravel()
             return np.asarray(entry["residual"](P_flat, x)).ravel(), None
         P, J_p, J_theta, J_offset = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets,
-                                                    payload_com)
+                                                    payload_com, self._effect_constants())
         # M = dP/dx for the requested columns only (rows x 3 x k).
         position = np.full(nx, -1)
         position[columns] = np.arange(len(columns))
@@ -388,7 +408,8 @@ class Problem:
                 continue
             Q, extras, payload_com = self._data(model)
             offsets = entry["offsets"](x)[0]
-            P = self._mapped(0, model.dataset.rows)(Q, extras, p, theta, offsets, payload_com)
+            P = self._mapped(0, model.dataset.rows)(Q, extras, p, theta, offsets, payload_com,
+                                                    self._effect_constants())
             parts.append(entry["residual"](ca.vec(P), x))
         return ca.vertcat(*parts)
 

@@ -31,7 +31,9 @@ class RowContext:
 
     ``q`` (dof,) joint readings; ``p`` geometric parameters (registry order, SI);
     ``extras`` maps column names (``temperature`` [C], ``time`` [s], ``payload`` [kg], ...)
-    to scalar symbols; ``payload_com`` (3,) [m] in the flange frame.
+    to scalar symbols; ``payload_com`` (3,) [m] in the flange frame; ``constants`` the
+    effect's own ``Effect.constants`` as symbols (None where the caller gives none: the
+    effect then uses its numbers directly).
     """
 
     robot: Robot
@@ -40,6 +42,7 @@ class RowContext:
     p: ca.SX
     extras: dict
     payload_com: ca.SX
+    constants: ca.SX | None = None
 
 
 class Effect(ABC):
@@ -73,6 +76,13 @@ class Effect(ABC):
     def reference(self, extras: dict) -> dict:
         """Constants fixed from the data when the effect is created (e.g. mean temperature)."""
         return {}
+
+    def constants(self) -> tuple[float, ...]:
+        """Numbers fixed from the data that ``delta`` reads through ``row.constants``.
+
+        They reach compiled code as inputs, so code built for one dataset serves the next.
+        """
+        return ()
 
     @abstractmethod
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, ca.SX | None]:

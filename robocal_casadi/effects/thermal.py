@@ -69,14 +69,19 @@ class ThermalDrift(Effect):
             self.reference_value = float(np.mean(values))
         return {"reference": self.reference_value}
 
-    def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, ca.SX]:
+    def constants(self) -> tuple[float, ...]:
+        """``(T_ref,)`` [C or s]."""
         if self.reference_value is None:
             raise RobocalError("thermal_drift: reference value not fixed; call "
                                "reference(extras) with the fit data first")
+        return (self.reference_value,)
+
+    def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, ca.SX]:
+        reference = row.constants[0] if row.constants is not None else self.constants()[0]
         if self.column not in row.extras:
             raise InputError(f"thermal_drift needs a {self.column!r} column in the data",
                              where=self.column)
-        change = theta[0] * (row.extras[self.column] - self.reference_value)
+        change = theta[0] * (row.extras[self.column] - reference)
         entries = {}
         for i in range(1, row.robot.dof + 1):
             for stem in ("d", "a"):

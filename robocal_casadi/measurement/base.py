@@ -104,19 +104,26 @@ class MeasurementModel(ABC):
     # A model whose residual splits into the same few entries per data row (each row's
     # entries depending on that row's point only) may say so; the engine then evaluates
     # residual and Jacobian row by row in compiled code. ``row_residual`` returns None
-    # for models that are not separable.
+    # for models that are not separable. The compiled code is cached by its source, so
+    # numbers that depend on the data must come in as ``data`` or ``constants``, never
+    # as literals: a literal makes every new dataset compile anew.
 
-    def row_residual(self, point, data, mounted, placement):
+    def row_residual(self, point, data, mounted, placement, constants):
         """One row's residual entries from its world point ``point`` [m] (CasADi SX).
 
         ``data`` are the row's own numbers (``row_data``), ``mounted`` and
-        ``placement`` this model's unknowns. None: the model is not separable.
+        ``placement`` this model's unknowns, ``constants`` numbers fixed for the whole
+        dataset (``row_constants``). None: the model is not separable.
         """
         return None
 
     def row_data(self) -> np.ndarray:
         """Per-row numbers the separable residual reads (N x k)."""
         return np.zeros((self.dataset.rows, 0))
+
+    def row_constants(self) -> np.ndarray:
+        """Numbers the separable residual reads that are the same for every row (k,)."""
+        return np.zeros(0)
 
     def row_offset(self, data, mounted):
         """The flange-frame point measured in one row (CasADi SX) [m]."""

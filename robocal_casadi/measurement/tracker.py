@@ -78,14 +78,20 @@ class TrackerModel(MeasurementModel):
         predicted = R @ world + ca.repmat(T[:3, 3], 1, self.dataset.rows)
         return ca.vec(ca.DM(self.dataset.measured.T) - predicted)
 
-    def row_residual(self, point, data, mounted, placement):
-        """``measured - (R point + t)`` for one row (the same as ``residual``)."""
+    def row_residual(self, point, data, mounted, placement, constants):
+        """``measured - (R point + t)`` for one row (the same as ``residual``); ``R0``
+        comes in as ``constants`` (row-major), so the compiled code fits every dataset."""
         T = pose_from_xyz_rpy([placement[0], placement[1], placement[2]],
                               [placement[3], placement[4], placement[5]])
-        return data - (ca.DM(self.R0) @ T[:3, :3] @ point + T[:3, 3])
+        R0 = ca.reshape(constants, 3, 3).T  # CasADi reshapes column by column
+        return data - (R0 @ T[:3, :3] @ point + T[:3, 3])
 
     def row_data(self) -> np.ndarray:
         return np.asarray(self.dataset.measured, dtype=float)
+
+    def row_constants(self) -> np.ndarray:
+        """``R0`` row by row (9,)."""
+        return np.asarray(self.R0, dtype=float).ravel()
 
     def errors(self, residual: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.asarray(residual, float).reshape(-1, 3), axis=1)
