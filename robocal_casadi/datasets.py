@@ -25,8 +25,8 @@ from typing import Any, Union
 import numpy as np
 
 from .errors import InputError
-from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, file_name, load_yaml, mapping, quantities,
-                     quantity, require, units_of, vector)
+from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, file_kind, file_name,
+                     load_yaml, mapping, quantities, quantity, require, units_of, vector)
 from .robot import Robot, load_robot
 from .table import Table, read_table
 from .transforms import matrix_from_quaternion
@@ -132,6 +132,9 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     """
     path = Path(path)
     content = load_yaml(path, what="dataset file")
+    looks = file_kind(content)
+    if looks is not None and looks != "a dataset file":
+        raise InputError(f"this is {looks}, not a dataset file", file=path)
     kind = require(content, "kind", file=path)
     if not isinstance(kind, str) or kind not in KINDS:
         raise InputError(f"unknown kind {kind!r}; expected one of {list(KINDS)}", file=path,
@@ -219,12 +222,15 @@ def _lengths(table: Table, names, units: Units) -> np.ndarray:
     return values * units.length_scale
 
 
-def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> np.ndarray:
+def joint_readings(table: Table, robot: Robot, units: Units, used: set[str],
+                   robot_file: Path | str | None = None) -> np.ndarray:
     """Joint columns ``q1..qn`` in SI, checked against the robot's limits.
 
     Names added to ``used``; a reading outside the limits is an ``InputError`` that says
     when it looks like a unit mix-up (degrees in a file that declares rad, ...).
+    ``robot_file`` (where the joints and limits come from) is named in the messages.
     """
+    source = f"robot {robot.name!r}" + (f" ({Path(robot_file).name})" if robot_file else "")
     names = [f"q{i}" for i in range(1, robot.dof + 1)]
     missing = [n for n in names if not table.has(n)]
     if missing:
@@ -233,12 +239,12 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> 
         if near is not None and "case-sensitive" in near.what:
             hint = near.what[near.what.index(" (found"):]
         raise InputError(
-            f"missing joint column(s) {missing}: robot {robot.name!r} has {robot.dof} joints"
+            f"missing joint column(s) {missing}: {source} has {robot.dof} joints"
             f"{hint}", file=table.path, where="line 1")
     extra_q = [c for c in table.columns if c.startswith("q") and c[1:].isdigit() and c not in names]
     if extra_q:
-        raise InputError(f"joint column(s) {extra_q} beyond the robot's {robot.dof} joints "
-                         f"(robot file {robot.name!r})", file=table.path, where="line 1")
+        raise InputError(f"joint column(s) {extra_q} beyond the {robot.dof} joints of {source}",
+                         file=table.path, where="line 1")
     used.update(names)
     # The dataset's units apply to its table; prismatic readings are lengths.
     scales = np.array([units.angle_scale if j.revolute else units.length_scale
@@ -262,7 +268,7 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str]) -> 
             hint = "; check the length unit (mm or m)"
         raise InputError(
             f"q{col + 1} = {value:g} {unit} is outside the robot's limits [{lo:g}, {hi:g}] {unit}"
-            f" ({int(bad.sum())} reading(s) out of limits){hint}",
+            f" ({int(bad.sum())} reading(s) out of limits; limits from {source}){hint}",
             file=table.path, where=f"line {table.line(row)}")
     # Joints without limits: still refuse readings no joint could have (overflow, typos).
     bound = np.array([MAX_ANGLE if j.revolute else MAX_LENGTH for j in robot.joints])
@@ -307,7 +313,8 @@ def _extras(table: Table, used: set[str]) -> dict[str, np.ndarray]:
 def _with_table(common: dict, table: Table | None, robot: Robot, used: set[str]) -> dict:
     if table is None:
         return common
-    return dict(common, joints=joint_readings(table, robot, common["units"], used))
+    return dict(common, joints=joint_readings(table, robot, common["units"], used,
+                                              common.get("robot_path")))
 
 
 def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...]]:

@@ -48,9 +48,10 @@ def _describe(value: Any) -> str:
     if isinstance(value, (int, float)):
         return f"a number ({value!r})"
     if isinstance(value, str):
-        return f"text ({value!r})"
+        text = repr(value)
+        return f"text ({text if len(text) < 60 else text[:50] + '...'})"
     if isinstance(value, list):
-        return f"a list ({value!r})" if len(repr(value)) < 60 else "a list"
+        return f"a list ({value!r})" if len(repr(value)) < 60 else f"a list of {len(value)} items"
     if isinstance(value, dict):
         return "a mapping"
     return type(value).__name__
@@ -90,6 +91,8 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
         mark = getattr(error, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else None
         problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+        if problem.startswith("duplicate key") or problem.startswith("a mapping key"):
+            raise InputError(problem, file=path, where=where) from None
         raise InputError(f"not valid YAML ({problem})", file=path, where=where) from None
     if content is None:
         raise InputError(f"the {what} is empty; expected a YAML mapping of keys", file=path)
@@ -102,8 +105,31 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
     return content
 
 
-def check_keys(mapping: dict, allowed, *, file: str | Path | None, where: str = "") -> None:
-    """Refuse keys of ``mapping`` not in ``allowed`` (a misspelt key is never ignored)."""
+FILE_KINDS = {"joints": "a robot file", "tracking": "a tracking job",
+              "dataset": "a dataset file"}
+
+
+def file_kind(content: dict) -> str | None:
+    """What a YAML mapping looks like: a robot file, a tracking job or a dataset file."""
+    if content.get("kind") == "tracking":
+        return FILE_KINDS["tracking"]
+    if "kind" in content:
+        return FILE_KINDS["dataset"]
+    if "joints" in content and "convention" in content:
+        return FILE_KINDS["joints"]
+    return None
+
+
+def check_keys(mapping: dict, allowed, *, file: str | Path | None, where: str = "",
+               expected: str | None = None) -> None:
+    """Refuse keys of ``mapping`` not in ``allowed`` (a misspelt key is never ignored).
+
+    ``expected`` (e.g. "a robot file") adds a hint when the mapping looks like another
+    kind of file given in the wrong place."""
+    if expected is not None:
+        looks = file_kind(mapping)
+        if looks is not None and looks != expected:
+            raise InputError(f"this is {looks}, not {expected}", file=file)
     unknown = sorted(str(k) for k in mapping if k not in allowed)
     if unknown:
         at = f"{where}.{unknown[0]}" if where else unknown[0]
@@ -136,6 +162,9 @@ def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
     for name, known in (("length", LENGTH_SCALE), ("angle", ANGLE_SCALE)):
         if name not in value:
             raise InputError(f"missing required key; expected one of {sorted(known)}",
+                             file=file, where=f"{key}.{name}")
+        if value[name] is None:
+            raise InputError(f"no {name} unit given; expected one of {sorted(known)}",
                              file=file, where=f"{key}.{name}")
         if not isinstance(value[name], str):
             raise InputError(f"unknown {name} unit {value[name]!r}; expected one of "

@@ -147,7 +147,7 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     """
     from .fields import units_of
 
-    check_keys(content, ROBOT_KEYS, file=file)
+    check_keys(content, ROBOT_KEYS, file=file, expected="a robot file")
     convention = require(content, "convention", file=file)
     if not isinstance(convention, str) or convention not in CONVENTIONS:
         raise InputError(

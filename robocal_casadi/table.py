@@ -118,7 +118,7 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
     """Read a CSV with a header row; ragged rows, missing columns and empty tables are errors."""
     path = Path(path)
     text = read_text(path, what="data table")
-    reader = csv.reader(io.StringIO(text, newline=""))
+    reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True)
     records: list[tuple[int, list[str]]] = []
     try:
         line = reader.line_num + 1

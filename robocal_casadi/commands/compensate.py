@@ -83,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
                         shown=targets[row, col], unit=robot.units.length)
     targets[:, :3] *= L
     if has_orientation:
-        norms = np.linalg.norm(targets[:, 3:], axis=1)
+        big = np.abs(targets[:, 3:]).max(axis=1)
+        big = np.where(big > 0, big, 1.0)
+        norms = np.linalg.norm(targets[:, 3:] / big[:, None], axis=1) * big  # no overflow
         bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
         if bad.size:
             row = int(bad[0])

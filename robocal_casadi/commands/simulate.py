@@ -36,13 +36,16 @@ Example:
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ..errors import InputError
+from ..fields import check_magnitude
 from ..examples import ROBOTS
 from ..robot import Robot, load_robot
 from ..simulate import EFFECT_NAMES, READINGS, simulate
 from ..units import Units, parse_units
+from .arguments import output_folder
 
 DEFAULTS = {"joint_compliance": 1e-6, "joint_cyclic": (2e-4, 1e-4, 1e-4, 5e-5),
             "joint_scale": 5e-4, "thermal_drift": 1.2e-5}
@@ -98,13 +101,46 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _floats(text: str, count: int | None, option: str) -> list[float]:
+    """Comma-separated finite numbers (``count`` of them when given)."""
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
         raise InputError(f"expected comma-separated numbers, got {text!r}", where=option) from None
     if count is not None and len(values) != count:
         raise InputError(f"expected {count} numbers, got {text!r}", where=option)
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f"expected finite numbers, got {text!r}", where=option)
     return values
+
+
+def _check_options(args: argparse.Namespace, robot: Robot) -> None:
+    """Single-number options: finite, with the sign they need, of a plausible size."""
+    L = robot.units.length_scale
+    for option, value, rule in (("--noise", args.noise, ">=0"),
+                                ("--mounted-error", args.mounted_error, ">=0"),
+                                ("--bar-length", args.bar_length, ">0"),
+                                ("--socket-distance", args.socket_distance, ">0"),
+                                ("--sphere-radius", args.sphere_radius, ">0"),
+                                ("--reference-temperature", args.reference_temperature, "")):
+        if value is None:
+            continue
+        if not math.isfinite(value):
+            raise InputError(f"expected a finite number, got {value}", where=option)
+        if rule == ">=0" and value < 0:
+            raise InputError(f"must not be negative, got {value:g}", where=option)
+        if rule == ">0" and value <= 0:
+            raise InputError(f"must be positive, got {value:g}", where=option)
+        if rule:
+            check_magnitude(value * L, "length", file=None, where=option, shown=value,
+                            unit=robot.units.length)
+    if args.sockets < 2:
+        raise InputError(f"an artifact needs at least 2 sockets, got {args.sockets}",
+                         where="--sockets")
+    if args.touches < 1:
+        raise InputError(f"expected at least 1 touch per socket, got {args.touches}",
+                         where="--touches")
+    if args.rows < 1:
+        raise InputError(f"expected at least 1, got {args.rows}", where="--rows")
 
 
 def parse_effect_options(options: list[str], robot: Robot) -> dict:
@@ -142,12 +178,21 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_folder(args.out)
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
+    _check_options(args, robot)
     L, A = robot.units.length_scale, robot.units.angle_scale
     geometric_errors = None
     mounted_error = None if args.mounted_error is None else args.mounted_error * L
     if args.errors:
         length_std, angle_std = _floats(args.errors, 2, "--errors")
+        if length_std < 0 or angle_std < 0:
+            raise InputError(f"standard deviations must not be negative, got {args.errors!r}",
+                             where="--errors")
+        check_magnitude(length_std * L, "length", file=None, where="--errors",
+                        shown=length_std, unit=robot.units.length)
+        check_magnitude(angle_std * A, "angle", file=None, where="--errors",
+                        shown=angle_std, unit=robot.units.angle)
         geometric_errors = (length_std * L, angle_std * A)
     elif args.error:
         registry = robot.parameters()
@@ -159,6 +204,11 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"unknown parameter {name!r}; valid names: "
                                  f"{', '.join(registry.names)}", where=f"--error {item}")
             number = _floats(value, 1, f"--error {item}")[0]
+            quantity_name = registry.quantity(name)
+            if quantity_name in ("length", "angle"):
+                check_magnitude(number * robot.units.scale(quantity_name), quantity_name,
+                                file=None, where=f"--error {item}", shown=number,
+                                unit=robot.units.unit_name(quantity_name))
             geometric_errors[name] = number * robot.units.scale(registry.quantity(name))
     payload = None
     if args.payload:

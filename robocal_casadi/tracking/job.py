@@ -73,10 +73,10 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
     """
     path = Path(path)
     content = load_yaml(path, what="tracking job")
-    check_keys(content, KEYS, file=path)
     kind = require(content, "kind", file=path)
     if kind != "tracking":
         raise InputError(f"expected kind 'tracking', got {kind!r}", file=path, where="kind")
+    check_keys(content, KEYS, file=path)
     units = units_of(content, file=path)
     L = units.length_scale
     robot_path, robot = referenced_robot(content, path, robot)
@@ -103,7 +103,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
     if not data_path.is_file():
         raise InputError(f"observation table {data_path} not found", file=path, where="data")
     table = read_table(data_path, required=("time", *OBSERVATION_COLUMNS))
-    joints = checked_joint_readings(table, robot, units, set())
+    joints = checked_joint_readings(table, robot, units, set(), robot_path)
     time = table.numbers("time")
     backwards = np.flatnonzero(np.diff(time) < 0)
     if backwards.size:
