@@ -197,6 +197,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         free = _free_mask(problem, identifiability)
         geometric = solve(problem, geometric.x, free, method=method, loss=loss,
                           max_iterations=max_iterations)
+    # A fit wandering along a flat valley neither converges nor means anything: say why.
+    _check_determined(problem, geometric, datasets[0].path)
     if geometric.status != "converged":
         rms = float(np.sqrt(np.mean(geometric.residual**2)))
         raise SolverError(
@@ -266,6 +268,34 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         diagnosis=tuple(tested),
         selection={} if selection is None else {k: v for k, v in selection.dropped.items()},
     )
+
+
+UNDETERMINED_STD = {"length": 0.1, "angle": 0.1, "none": 0.1}  # [m], [rad], [1]
+
+
+def _check_determined(problem: Problem, solution: Solution, path) -> None:
+    """Refuse a fit whose robot or mounted estimates the data leave undetermined.
+
+    Identifiability is judged on the linearised problem; with barely enough data the
+    least-squares minimum can still lie anywhere along a nearly flat valley (a probe
+    offset of metres fitting 12 bar placements to the noise). A standard error beyond
+    ``UNDETERMINED_STD`` (0.1 m, 0.1 rad) means the data do not fix the parameter at all.
+    """
+    std = solution.std
+    names = problem.unknowns.names
+    keep = problem.mask("robot", "effects", "mounted") & solution.free
+    loose = [(names[i], float(std[i]), problem.unknowns.quantity(names[i]))
+             for i in np.flatnonzero(keep)
+             if not std[i] <= UNDETERMINED_STD.get(problem.unknowns.quantity(names[i]), 0.1)]
+    if loose:
+        units = {"length": "m", "angle": "rad"}
+        listed = ", ".join(f"{n} (std {v:.3g} {units.get(q, '')})".replace(" )", ")")
+                           for n, v, q in loose[:6])
+        more = f" and {len(loose) - 6} more" if len(loose) > 6 else ""
+        raise InputError(f"the data do not determine {listed}{more}: {problem.size} "
+                         f"residuals for {int(solution.free.sum())} unknowns leave them free; "
+                         f"add data (more placements or readings, more varied orientations)",
+                         file=path)
 
 
 def _embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:

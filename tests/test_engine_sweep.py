@@ -295,3 +295,78 @@ def test_reasons_read_right_for_the_kind(kind, expected, tmp_path):
         named = [term.split("*")[1] for term in relation.split("~")[1].split()
                  if "*" in term]
         assert named and set(named) <= set(ident.identifiable), relation
+
+
+# ----------------------------------------------------------------------------- diagnosis
+
+DIAGNOSIS_NOISE = 10e-6  # [m] per tracker coordinate
+FLOOR = DIAGNOSIS_NOISE * np.sqrt(3)  # RMS of the 3-D point error from noise alone
+
+
+def _errors(robot, seed: int) -> dict[str, float]:
+    """Fixed true errors on every DH parameter, shared by fit and held-out data."""
+    rng = np.random.default_rng(1000 + seed)
+    return {f"{stem}{i}": float(rng.normal(0.0, 5e-4)) for i in range(1, robot.dof + 1)
+            for stem in ("theta", "d", "a", "alpha")}
+
+
+# (name, robot, effects, expected (effect, joints) or None, simulation options)
+DIAGNOSIS = [
+    ("clean-ur", ur_type, None, None, {"payload": (0.0, 10.0), "temperature": (18.0, 26.0)}),
+    ("clean-scara", prismatic_rrp, None, None, {}),
+    ("compliance-payload-com", ur_type, {"joint_compliance": {2: 3e-6}},
+     ("joint_compliance", (2,)), {"payload": (0.0, 10.0), "payload_com": (0.0, 0.05, 0.1)}),
+    ("thermal-time-column", industrial_6r, {"thermal_drift": 1.2e-5}, ("thermal_drift", ()),
+     {"temperature": (18.0, 28.0), "time_column": True}),
+    pytest.param("scale-five-axis", five_axis, {"joint_scale": {2: 3e-4}},
+                 ("joint_scale", (2,)), {}, marks=pytest.mark.slow),
+    pytest.param("cyclic-7dof", panda_7dof, {"joint_cyclic": {4: (0.0, 0.0, 1.5e-4, 1e-4)}},
+                 ("joint_cyclic", (4,)), {}, marks=pytest.mark.slow),
+    pytest.param("compliance-turned-base", turned_base_6r, {"joint_compliance": {2: 2e-6}},
+                 ("joint_compliance", (2,)), {}, marks=pytest.mark.slow),
+    pytest.param("clean-7dof", panda_7dof, None, None, {"payload": (0.0, 3.0)},
+                 marks=pytest.mark.slow),
+]
+
+
+@pytest.mark.parametrize("name,make_robot,effects,expected,options", DIAGNOSIS,
+                         ids=[_id(c) for c in DIAGNOSIS])
+def test_diagnosis_names_the_effect_and_nothing_else(name, make_robot, effects, expected,
+                                                     options, tmp_path):
+    robot = make_robot()
+    options = dict(options)
+    time_column = options.pop("time_column", False)
+    common = dict(noise=DIAGNOSIS_NOISE, geometric_errors=_errors(robot, 0), effects=effects,
+                  mounted_error=0.0, progress=False, **options)
+    fit, val = (simulate(robot, "tracker_points", out_dir=tmp_path / folder, rows=rows,
+                         seed=seed, **common).load()
+                for folder, rows, seed in (("fit", 300, 0), ("val", 150, 500)))
+    if time_column:  # the same drift logged against time [s] instead of temperature
+        fit, val = (replace(d, extras={"time": 100.0 * d.extras["temperature"]})
+                    for d in (fit, val))
+    result = calibrate([fit], [val])
+    found = [(e.name, tuple(e.joints)) for e in result.effects]
+    if expected is None:
+        assert found == []
+        assert result.fit.rms_final == result.fit.rms_geometric
+    else:
+        assert found == [expected]
+        if time_column:
+            assert result.effects[0].parameters["k_t"] == pytest.approx(1.2e-7, rel=0.1)
+    assert result.validation.rms_final <= 1.1 * FLOOR, result.validation
+
+
+# ----------------------------------------------------------------------------- small data
+
+
+@pytest.mark.parametrize("rows", [8, 10])
+def test_barely_enough_bar_placements_are_refused_when_they_fix_nothing(rows, tmp_path):
+    """More residuals than unknowns, yet a nearly flat valley: without the refusal the fit
+    wandered off to a probe offset of metres (or did not converge) at the noise level."""
+    from robocal_casadi.errors import InputError
+
+    data = simulate(industrial_6r(), "cross_bar", out_dir=tmp_path / "bar", rows=rows,
+                    noise=NOISE, geometric_errors=ERRORS, seed=1, progress=False).load()
+    with pytest.raises(InputError, match="do not determine .*probe_z .*add data") as caught:
+        calibrate([data], diagnose=False)
+    assert "dataset.yaml" in str(caught.value)
