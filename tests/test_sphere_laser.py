@@ -447,7 +447,7 @@ def test_missing_distance_column_is_named(tmp_path, patent_scan):
     path = write_pendant_dataset(tmp_path, poses[:20], distance[:20])
     lines = (tmp_path / "scan.csv").read_text().splitlines()
     (tmp_path / "scan.csv").write_text("\n".join(line.rsplit(",", 1)[0] for line in lines))
-    with pytest.raises(InputError, match="scan.csv: missing column 'distance'"):
+    with pytest.raises(InputError, match="scan.csv: line 1: missing column 'distance'"):
         load_dataset(path)
 
 
