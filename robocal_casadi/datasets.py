@@ -145,6 +145,8 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
             mapping(content[block], file=path, where=block)
             check_keys(content[block], BLOCK_KEYS[block], file=path, where=block)
     units = units_of(content, file=path)
+    if content.get("planning") is not None:
+        _check_planning(content["planning"], units, path)
     robot_path, robot = referenced_robot(content, path, robot)
     data_name = content.get("data")
     table = None
@@ -169,6 +171,37 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     reader = {"cross_bar": _cross_bar, "artifact_touches": _artifact,
               "sphere_laser": _sphere_laser, "tracker_points": _tracker}[kind]
     return reader(content, table, common)
+
+
+# The planning block's angles (file units) must lie in (0, limit] degrees.
+PLANNING_ANGLES = {"max_tilt": 90.0, "max_incidence": 90.0, "visibility_cone": 180.0}
+
+
+def _check_planning(block: Any, units: Units, path: Path) -> None:
+    """Types and ranges of the optional ``planning`` block (its keys are checked by the
+    planner): angles within (0, 90] deg (cone (0, 180]), a whole touch count of at least
+    1, plausible lengths."""
+    if not isinstance(block, dict):
+        return  # the planner names it
+    for key, limit in PLANNING_ANGLES.items():
+        if block.get(key) is None:
+            continue
+        value = quantity(block[key], units.angle_scale, "angle", file=path,
+                         where=f"planning.{key}", unit=units.angle)
+        if not 0 < value <= np.radians(limit) + 1e-12:
+            raise InputError(f"expected an angle above 0 and at most {limit:g} deg, got "
+                             f"{block[key]!r} {units.angle}", file=path, where=f"planning.{key}")
+    touches = block.get("touches_per_socket")
+    if touches is not None and (isinstance(touches, bool) or not isinstance(touches, int)
+                                or touches < 1):
+        raise InputError(f"expected a whole number of at least 1, got {touches!r}", file=path,
+                         where="planning.touches_per_socket")
+    if block.get("table_height") is not None:
+        quantity(block["table_height"], units.length_scale, "length", file=path,
+                 where="planning.table_height", unit=units.length)
+    if block.get("laser_range") is not None:
+        quantities(block["laser_range"], 2, units.length_scale, "length", file=path,
+                   where="planning.laser_range", unit=units.length)
 
 
 def referenced_robot(content: dict, path: Path, robot: Robot | None = None

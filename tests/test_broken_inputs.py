@@ -361,6 +361,12 @@ CASES = [
     ("plan on a broken dataset", "tracker", "plan",
      yaml_set("dataset.yaml", ("instrument", "xyz"), [0, 0]),
      ["dataset.yaml", "instrument.xyz", "3"]),
+    ("planning tilt negative", "bar", "plan",
+     yaml_set("dataset.yaml", ("planning",), {"max_tilt": -5}),
+     ["dataset.yaml", "planning.max_tilt", "above 0"]),
+    ("planning touches not whole", "art", "plan",
+     yaml_set("dataset.yaml", ("planning",), {"touches_per_socket": 1.5}),
+     ["dataset.yaml", "planning.touches_per_socket", "1.5"]),
     # --- data tables
     ("table header only", "bar", "calibrate",
      lambda f: (f / "touches.csv").write_text((f / "touches.csv").read_text().splitlines()[0]),
@@ -547,6 +553,14 @@ def test_out_folder_holding_the_inputs_is_refused(templates, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "--out" in err and "holds the input" in err
     assert sorted(p.name for p in folder.iterdir()) == before
+
+
+def test_plan_count_beyond_reason_is_refused_at_once(templates, tmp_path, capsys):
+    out = tmp_path / "plan.csv"
+    assert main(["plan", str(templates / "tracker" / "dataset.yaml"), "--count", "100000000",
+                 "--out", str(out)]) == 2
+    assert "--count" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_validation_dataset_of_another_robot_is_refused(templates, tmp_path, capsys):

@@ -17,6 +17,7 @@ from ..datasets import load_dataset
 from ..errors import InputError
 from .arguments import output_file
 
+MAX_COUNT = 10_000  # placements or readings in one plan
 INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
 
 
@@ -43,6 +44,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.count < 1:
         raise InputError(f"expected a positive count, got {args.count}", where="--count")
+    if args.count > MAX_COUNT:
+        raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
+                         "plan in parts", where="--count")
     output_file(args.out)
     dataset = load_dataset(args.dataset, require_data=False)
     if dataset.data_path is not None and Path(args.out).resolve() == dataset.data_path.resolve() \
