@@ -17,8 +17,16 @@ from .errors import RobocalError
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "demo")
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose refusals are one line, like every other error."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} "
+                     f"(see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="robocal",
         description="Calibrate, diagnose and track industrial robots (robocal_casadi).",
     )

@@ -640,3 +640,14 @@ def test_null_optional_keys_count_as_absent(templates, tmp_path):
     yaml_set("dataset.yaml", ("laser",), None)(folder)
     loaded = load_dataset(folder / "dataset.yaml")
     assert loaded.origin_guess is None and loaded.direction_guess is None
+
+
+def test_a_bad_command_line_is_one_line_too(capsys):
+    for bad in (["fk"], ["calibrate", "d.yaml", "--out", "r", "--method", "newton"],
+                ["plan", "d.yaml", "--count", "many", "--out", "p.csv"]):
+        with pytest.raises(SystemExit) as stop:
+            main(bad)
+        assert stop.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith(f"robocal {bad[0]}: error: "), err
+        assert "--help" in err
