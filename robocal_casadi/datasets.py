@@ -555,6 +555,44 @@ def _tracker(content: dict, table: Table | None, common: dict) -> TrackerPoints:
         table.require(*"xyz")
         used = set("xyz")
         fields["measured"] = _lengths(table, list("xyz"), units)
+        _check_spread(fields["measured"], common["robot"], target, table, units)
         common = _with_table(common, table, common["robot"], used)
         fields["extras"] = _extras(table, used)
     return TrackerPoints(**common, **fields)
+
+
+def _reach(robot: Robot) -> float:
+    """An upper bound [m] on how far the flange can be from the first joint's frame:
+    the sum over links of sqrt(a^2 + d^2), a prismatic joint at its farthest reading,
+    plus the tool offset."""
+    total = float(np.linalg.norm(robot.tool.xyz))
+    for joint in robot.joints:
+        d = joint.d
+        if not joint.revolute:
+            lo, hi = joint.limits if joint.limits else (-MAX_LENGTH, MAX_LENGTH)
+            d = max(abs(d + lo), abs(d + hi))
+        total += float(np.hypot(joint.a, d))
+    return total
+
+
+def _check_spread(points: np.ndarray, robot: Robot, target: np.ndarray, table: Table,
+                  units: Units) -> None:
+    """Refuse a measured point farther from the others than the robot can move its target.
+
+    The instrument frame is unknown, so the test is on the spread: every target position
+    lies within ``reach + |target|`` of the first joint, hence within twice that of any
+    other, and of the median point. A point beyond is an outlier or a unit mix-up that
+    the fit would otherwise report as undetermined parameters.
+    """
+    if len(points) < 3:
+        return
+    limit = 2.0 * (_reach(robot) + float(np.linalg.norm(target))) * 1.05
+    distance = np.linalg.norm(points - np.median(points, axis=0), axis=1)
+    far = np.flatnonzero(distance > limit)
+    if far.size:
+        row = int(far[np.argmax(distance[far])])
+        scale = units.length_scale
+        raise InputError(f"the point is {distance[row] / scale:g} {units.length} from the median "
+                         f"of the others, farther than the robot can carry its target "
+                         f"({limit / scale:g} {units.length}): an outlier or a unit mix-up?",
+                         file=table.path, where=f"line {table.line(row)}")
