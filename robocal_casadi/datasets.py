@@ -126,7 +126,8 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
                  robot: Robot | None = None) -> Dataset:
     """Read and check a dataset file and its table.
 
-    ``require_data=False`` (planning) accepts a missing table and returns no rows.
+    ``require_data=False`` (planning) does not read the table (it may be missing, or a
+    plan whose measured columns are still empty) and returns no rows.
     ``robot`` replaces the robot file the dataset names (e.g. a calibrated robot).
     Every problem raises ``InputError`` naming the file, the key or line, and what is wrong.
     """
@@ -157,7 +158,8 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
             raise InputError(f"the data table {data_path} is a folder", file=path, where="data")
         if not data_path.exists() and require_data:
             raise InputError(f"data table {data_path} not found", file=path, where="data")
-        if data_path.exists():
+        # Planning describes a set-up: its table may be missing or an unmeasured plan.
+        if require_data:
             table = read_table(data_path)
     elif require_data:
         raise InputError("missing required key (the data table)", file=path, where="data")

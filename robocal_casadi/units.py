@@ -61,13 +61,13 @@ def parse_units(value: Any, *, file: str | Path | None, key: str = "units") -> U
         )
     length = value.get("length")
     angle = value.get("angle")
-    if length not in LENGTH_SCALE:
+    if not isinstance(length, str) or length not in LENGTH_SCALE:
         raise InputError(
             f"unknown length unit {length!r}; expected one of {sorted(LENGTH_SCALE)}",
             file=file,
             where=f"{key}.length",
         )
-    if angle not in ANGLE_SCALE:
+    if not isinstance(angle, str) or angle not in ANGLE_SCALE:
         raise InputError(
             f"unknown angle unit {angle!r}; expected one of {sorted(ANGLE_SCALE)}",
             file=file,

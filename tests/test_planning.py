@@ -320,3 +320,20 @@ def test_reference_scaling_keeps_size_and_design_scaling_does_not(setups):
     for mode in ("design", "reference"):
         batched = info.spectra(info.matrices[once].sum(axis=0)[None], mode)[0]
         assert np.allclose(batched, info.spectrum(once, mode), rtol=1e-6)
+
+
+def test_a_dataset_pointing_at_an_unmeasured_plan_can_be_planned_again(tmp_path):
+    """The set-up is what matters: a table with empty measured columns is not read."""
+    from robocal_casadi.simulate import simulate as write_simulated
+
+    sim = write_simulated(industrial_6r(), "tracker_points", out_dir=tmp_path / "sim", rows=30,
+                          seed=1, progress=False)
+    first = tmp_path / "sim" / "plan.csv"
+    assert main(["plan", str(sim.dataset_path), "--count", "12", "--out", str(first),
+                 "--no-refine"]) == 0
+    text = sim.dataset_path.read_text().replace("data: points.csv", "data: plan.csv")
+    sim.dataset_path.write_text(text)
+    second = tmp_path / "plan2.csv"
+    assert main(["plan", str(sim.dataset_path), "--count", "12", "--out", str(second),
+                 "--no-refine"]) == 0
+    assert second.read_text().splitlines()[0] == first.read_text().splitlines()[0]
