@@ -1,9 +1,10 @@
 """Which parameters the data can determine, and why the others cannot.
 
 Method: take the Jacobian of the residual at a start point, project out the columns of
-the placement unknowns (they are always estimated), scale every remaining column to
-unit length (so metres and radians compare), then run a column-pivoted QR in which,
-among equally good columns, the earlier one in a preference order wins. A column is
+the placement unknowns (they are always estimated), and measure every remaining column
+as a fraction of its own unprojected length (so metres and radians compare, and what
+the placement takes away counts). A column-pivoted QR then picks parameters; among
+columns nearly as good, the earlier one in a preference order wins. A column is
 
 * "invisible" when its unscaled norm is zero: it changes no residual (the patent's
   all-zero column);
@@ -13,7 +14,12 @@ among equally good columns, the earlier one in a preference order wins. A column
   one of linearly dependent columns"); the combination is reported as a base-parameter
   relation.
 
-The identifiable set is the pivoted columns up to the numerical rank.
+"Zero" is exact up to ``RANK_TOLERANCE``; a parameter whose own part is below
+``PRACTICAL_TOLERANCE`` of its effect is treated the same way, with the fraction in the
+reason: the data cannot determine it (its standard error would be a hundred times that
+of a well-determined one) and it is better held at its nominal value than fitted to
+noise. The condition number is that of the identifiable columns after projection, each
+scaled to unit length.
 """
 
 from __future__ import annotations
@@ -24,8 +30,9 @@ import numpy as np
 
 from .results import Identifiability
 
-RANK_TOLERANCE = 1e-7
-PREFERENCE_BAND = 0.5  # a preferred column may be picked if it has half the best remaining norm  # relative residual norm of a unit column below which it is dependent
+RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
+PRACTICAL_TOLERANCE = 1e-2  # own part below which the data cannot determine a parameter
+PREFERENCE_BAND = 0.5  # a preferred column may be picked if it has half the best remaining norm
 
 
 def preference(name: str) -> tuple:
@@ -84,10 +91,12 @@ def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
 
 def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int],
             placement: Sequence[int], *, invisible_reason: str, absorbed_reason: str,
-            tolerance: float = RANK_TOLERANCE) -> Identifiability:
+            tolerance: float = PRACTICAL_TOLERANCE) -> Identifiability:
     """Identifiability of the ``candidates`` columns of ``jacobian`` (indices into ``names``).
 
     ``placement`` columns are projected out first. Reasons are worded for the data kind.
+    ``tolerance`` is the smallest own part of a column (fraction of its effect) that
+    counts as determined.
     """
     J = np.asarray(jacobian, float)
     candidates = list(candidates)
@@ -113,15 +122,22 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
                                         "flange, so the tool frame does not enter these data")
             else:
                 unidentifiable[name] = f"changes no residual ({invisible_reason})"
-        elif projected_norms[k] <= tolerance * raw_norms[k] * 10:
+        elif projected_norms[k] <= RANK_TOLERANCE * raw_norms[k] * 10:
             unidentifiable[name] = absorbed_reason
+        elif projected_norms[k] < tolerance * raw_norms[k]:
+            share = projected_norms[k] / raw_norms[k]
+            unidentifiable[name] = (f"{absorbed_reason}, all but {100 * share:.2g}% of its effect:"
+                                    f" too little for these data to determine it")
         else:
             usable.append(k)
+    # Own part of each column as a fraction of its full effect.
+    fraction = projected[:, usable] / raw_norms[usable]
     unit = projected[:, usable] / projected_norms[usable]
     priority = [preference(names[candidates[k]]) for k in usable]
     order = sorted(range(len(usable)), key=lambda j: priority[j])
     rank_of = {j: r for r, j in enumerate(order)}
-    chosen, _ = pivoted_qr_order(unit, [rank_of[j] for j in range(len(usable))], tolerance)
+    chosen, remaining = pivoted_qr_order(fraction, [rank_of[j] for j in range(len(usable))],
+                                         tolerance)
     chosen_set = set(chosen)
     identifiable_local = [usable[j] for j in sorted(chosen, key=lambda j: usable[j])]
 
@@ -140,8 +156,14 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
                 if abs(c) > 1e-3:
                     terms.append(f"{factor:+.4g}*{names[candidates[usable[k]]]}")
             relation = " ".join(terms[:4]) + (" ..." if len(terms) > 4 else "")
-            unidentifiable[name] = (f"a combination of parameters already identified "
-                                    f"({name} acts like {relation})")
+            if remaining[j] <= RANK_TOLERANCE * 10:
+                unidentifiable[name] = (f"a combination of parameters already identified "
+                                        f"({name} acts like {relation})")
+            else:
+                unidentifiable[name] = (
+                    f"nearly a combination of parameters already identified ({name} acts "
+                    f"like {relation}; only {100 * remaining[j]:.2g}% of its effect is its "
+                    f"own): too little for these data to determine it")
             combinations.append(f"{name} ~ {relation}")
 
     if identifiable_local:

@@ -21,7 +21,7 @@ import numpy as np
 
 from .effects.base import Effect
 from .errors import InputError, SolverError
-from .identifiability import RANK_TOLERANCE, analyse
+from .identifiability import PRACTICAL_TOLERANCE, analyse
 from .measurement import model_for
 from .problem import Problem
 from .results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
@@ -64,12 +64,9 @@ def consistent_problem(problem: Problem, x: np.ndarray) -> tuple[Problem, np.nda
     return consistent, out
 
 
-RELEASE_TOLERANCE = 1e-2
-
-
 def analyse_identifiability(problem: Problem, x: np.ndarray,
                             candidates: Sequence[str] | None = None,
-                            tolerance: float = RANK_TOLERANCE) -> Identifiability:
+                            tolerance: float = PRACTICAL_TOLERANCE) -> Identifiability:
     """Identifiability of ``candidates`` (default: robot, effect and mounted unknowns) at ``x``.
 
     Judged on the Jacobian of data made consistent with ``x`` (``consistent_problem``).
@@ -188,10 +185,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
-    # Only clearly informative additions count here (a unique part of at least
-    # RELEASE_TOLERANCE of the column): a real probe or target a few tenths of a millimetre off
-    # axis must not turn a structural dependency into a parameter fitted to noise.
-    revised = analyse_identifiability(problem, geometric.x, tolerance=RELEASE_TOLERANCE)
+    revised = analyse_identifiability(problem, geometric.x)
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)

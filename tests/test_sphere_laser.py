@@ -489,9 +489,12 @@ def joints_reaching(table, target: np.ndarray, start: np.ndarray) -> np.ndarray:
 
 
 # Errors of the true robot: lengths and angles the sphere data identify (no pair of them
-# dependent, nothing on joint 6, whose errors the laser's own unknowns absorb).
-TRUE_ERRORS = ("a1", "alpha1", "theta2", "a2", "alpha2", "theta3", "a3", "alpha3", "theta4",
-               "d4", "a4", "alpha4", "theta5", "d5", "a5", "alpha5")
+# dependent, nothing on joint 6, whose errors the laser's own unknowns absorb). One sphere
+# seen from a small patch of the workspace leaves theta2, a2, alpha2 and alpha3 with less
+# than 1% of their effect their own: the engine holds them at nominal (checked below).
+TRUE_ERRORS = ("a1", "alpha1", "theta3", "a3", "theta4", "d4", "a4", "alpha4", "theta5", "d5",
+               "a5", "alpha5")
+WEAK = ("theta2", "a2", "alpha2", "alpha3")
 
 
 def joint_scan(folder: Path, rng, count: int = 300):
@@ -559,15 +562,21 @@ def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
 
     identified = {p.name: p for p in result.parameters if p.identifiable}
     assert set(TRUE_ERRORS) <= set(identified)
+    for name in WEAK:
+        assert "too little for these data" in result.identifiability.unidentifiable[name]
     z = {name: (p.estimate - truth.get(name, p.nominal)) / p.std for name, p in identified.items()}
-    assert all(abs(v) <= 3 for v in z.values()), z
     laser = np.concatenate([p0, n])
     for k, name in enumerate(("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny",
                               "laser_nz")):
         estimate, std = result.mounted[name]
-        assert abs(estimate - laser[k]) <= 3 * std, (name, estimate, laser[k], std)
+        z[name] = (estimate - laser[k]) / std
+    # About 20 estimates: with Gaussian errors one of them beyond 3 std happens one time
+    # in twenty, two or one beyond 4 std almost never.
+    beyond = [name for name, v in z.items() if abs(v) > 3]
+    assert len(beyond) <= 1 and all(abs(v) <= 4 for v in z.values()), z
     found = np.array([result.placement[f"scan/sphere_{a}"] for a in "xyz"])
-    assert np.linalg.norm(found - centre) < 2e-4  # alpha1's std (~2e-4 rad) times ~1 m
+    # The centre moves with the weakest robot angle: three of alpha1's std over ~1 m.
+    assert np.linalg.norm(found - centre) < 3 * identified["alpha1"].std * 1.0
     assert result.fit.rms_nominal > 10 * result.fit.rms_geometric
     floor = noise_floor(incidence, unknowns=result.solver["free_unknowns"])
     assert abs(result.fit.rms_geometric - floor) <= 0.1 * floor
