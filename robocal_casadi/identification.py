@@ -110,7 +110,8 @@ def _residuals(problem: Problem, x_nominal, x_geometric, x_final) -> list[Datase
         out.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
-            joints=dataset.joints, extras=dict(dataset.extras)))
+            joints=dataset.joints, extras=dict(dataset.extras),
+            payload_com=dataset.payload_com))
     return out
 
 
@@ -318,7 +319,8 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
         residuals.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
-            joints=dataset.joints, extras=dict(dataset.extras)))
+            joints=dataset.joints, extras=dict(dataset.extras),
+            payload_com=dataset.payload_com))
     return summary, residuals
 
 

@@ -115,6 +115,7 @@ class DatasetResiduals:
     rows: np.ndarray
     joints: np.ndarray | None
     extras: dict[str, np.ndarray] = field(default_factory=dict)
+    payload_com: np.ndarray | None = None  # [m], flange frame, where the dataset gives one
 
     def __repr__(self) -> str:
         rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")  # noqa: E731
