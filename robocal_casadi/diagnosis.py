@@ -423,15 +423,22 @@ class _Step:
 def run(problem: Problem, geometric: Solution, identifiability: Identifiability | None = None,
         *, method: str = "lm", loss: str = "linear", folds: int = FOLDS,
         bic_threshold: float = BIC_THRESHOLD, max_rounds: int = MAX_ROUNDS, seed: int = 0,
-        progress: bool = True) -> Diagnosis:
+        progress: bool = True, available_columns=None) -> Diagnosis:
     """Diagnose the residual of ``geometric`` (a solution of ``problem``); see the module.
 
     ``identifiability`` is accepted for the caller's convenience; the free set is
     ``geometric.free``. ``method``/``loss`` go to ``solver.solve`` for the refits.
+    ``available_columns``, when given, are the extra columns the model must be able to
+    use elsewhere (e.g. in every validation dataset): an effect that reads a column
+    missing there is not offered.
     """
     del identifiability
     start = time.perf_counter()
     extras = _joined_extras(problem)
+    if available_columns is not None:
+        for column in THERMAL_COLUMNS:
+            if column in extras and column not in available_columns:
+                del extras[column]
     candidates, candidate_effects = _candidates(problem, extras)
     tested: list[CandidateTest] = []
     steps: list[_Step] = []

@@ -207,7 +207,12 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     if diagnose:
         from . import diagnosis  # the diagnosis builds on this module
 
-        outcome = diagnosis.run(problem, geometric, identifiability, method=method, loss=loss)
+        # An effect must also be usable on the held-out data: columns they all carry.
+        available = None
+        if validation:
+            available = set.intersection(*(set(d.extras) for d in validation))
+        outcome = diagnosis.run(problem, geometric, identifiability, method=method, loss=loss,
+                                available_columns=available)
         final_problem, final = outcome.problem, outcome.solution
         findings, tested = outcome.added, outcome.tested
 

@@ -266,3 +266,15 @@ def test_undeclared_effect_in_cross_bar_data(tmp_path, effect, joint, truth):
     floor = floor_problem.rms(x)
     assert result.validation.rms_final <= 1.10 * floor
     assert result.validation.rms_geometric > 3 * floor
+
+
+def test_no_thermal_finding_when_the_held_out_data_have_no_temperature(tmp_path):
+    """A model with thermal drift could not be applied to validation data without the
+    column: diagnosis does not offer it, and the run completes."""
+    robot = ROBOTS["industrial_6r"]()
+    fit, validation = tracker_pair(tmp_path, robot, effects={"thermal_drift": 2e-5},
+                                   thermal=True)
+    stripped = replace(validation, extras={})
+    result = calibrate([fit], [stripped])
+    assert all(e.name != "thermal_drift" for e in result.effects)
+    assert result.validation is not None
