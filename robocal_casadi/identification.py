@@ -126,9 +126,13 @@ def refit_placement(problem: Problem, x: np.ndarray, *, method: str = "lm") -> n
 
 
 def evaluate(robot, datasets: Sequence, effects: Sequence[Effect], values: dict[str, float],
-             label_prefix: str = "") -> tuple[Problem, np.ndarray]:
-    """Problem over ``datasets`` started at ``values`` (by name), placements re-fitted."""
-    problem = Problem(robot, models_for(datasets, label_prefix), effects, start=values)
+             label_prefix: str = "", kinematics=None) -> tuple[Problem, np.ndarray]:
+    """Problem over ``datasets`` started at ``values`` (by name), placements re-fitted.
+
+    ``kinematics`` of the same robot may be passed to reuse its CasADi functions.
+    """
+    problem = Problem(robot, models_for(datasets, label_prefix), effects, start=values,
+                      kinematics=kinematics)
     return problem, refit_placement(problem, problem.initial())
 
 
@@ -169,7 +173,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
                                         growth=select_growth)
         if any(selection.dropped.values()):
             datasets = [m.subset(selection.kept[m.label]) for m in problem.models]
-            problem = Problem(robot, models_for(datasets), effects)
+            problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)
             identifiability = analyse_identifiability(problem, nominal.x)
@@ -314,6 +318,7 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
     for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
         values = {} if x is None else _values(stage_problem, x)
         val_problem, x_val = evaluate(robot, validation, stage_problem.effects, values,
+                                      kinematics=problem.kinematics,
                                       label_prefix="validation:")
         stages.append((val_problem, x_val))
     errors = [p.errors(x) for p, x in stages]
