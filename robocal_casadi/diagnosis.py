@@ -416,7 +416,8 @@ class _Screening:
         rss_after = float(after @ after) + float(self.rss - self.r_perp @ self.r_perp)
         held_out = self.held_out(self.base + [self.column_of[n] for n in kept])
         bic = self.bic_drop(rss_after, len(kept))
-        values = tuple((n, float(c / self.raw_norm[n])) for n, c in zip(kept, coefficients))
+        # A Gauss-Newton step moves the parameters against the residual's regression.
+        values = tuple((n, float(-c / self.raw_norm[n])) for n, c in zip(kept, coefficients))
         decision = ""
         if min(remaining) < IMITATED:
             decision = "imitated by the geometry on these data"
