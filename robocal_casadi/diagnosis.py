@@ -48,7 +48,7 @@ import numpy as np
 
 from .effects import make_effect
 from .effects.base import Effect
-from .folds import FoldScheme, fold_schemes
+from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
 from .progress import Progress
 from .results import EffectFinding, Identifiability
@@ -60,6 +60,7 @@ INVISIBLE = 1e-9  # [m] RMS change of a typical-size effect below which the data
 FOLDS = 5
 IMITATED = 0.01  # relative remaining norm below which the geometry nearly imitates a column
 CONFOUNDED = 0.9  # share of each other's explained residual two rival effects both explain
+RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
 EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
 EFFECT_TYPES = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift")
@@ -260,39 +261,6 @@ def residual_groups(model) -> np.ndarray:
     return np.asarray(model.residual_groups())
 
 
-class _FoldGrams:
-    """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation."""
-
-    def __init__(self, Z: np.ndarray, fold: np.ndarray, total: np.ndarray | None = None):
-        self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
-        self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
-        self.total = Z.T @ Z if total is None else total
-        self.r = Z.shape[1] - 1
-
-    def held_out_sse(self, columns: Sequence[int]) -> float:
-        """Sum over folds of the held-out squared residual after fitting ``columns``.
-
-        Columns with no weight in a fold's training rows (that fold's own placement) are
-        fitted on its held-out rows instead.
-        """
-        if not self.count:
-            return float("nan")
-        S = np.asarray(columns, dtype=int)
-        r = self.r
-        total = 0.0
-        for Gf in self.parts:
-            Gt = self.total - Gf
-            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
-            shared, own = S[~local], S[local]
-            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
-            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
-            if own.size:
-                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
-                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
-            total += max(float(sse), 0.0)
-        return total
-
-
 # ----------------------------------------------------------------------------- screening
 
 
@@ -356,7 +324,7 @@ class _Screening:
         Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
         self.schemes = list(schemes)
-        self.grams = [_FoldGrams(Z, scheme.fold, total) for scheme in self.schemes]
+        self.grams = [FoldGrams(Z, scheme.fold, total) for scheme in self.schemes]
         self.base = list(range(len(self.free_index)))
         self.held_out_before = self.held_out(self.base)
         self.cv_before = self._cv(self.held_out_before)
@@ -487,6 +455,11 @@ def _fallback_implausibility(name: str, values: dict[str, float]) -> str:
     return ""
 
 
+def _total(held_out: Sequence[float]) -> float:
+    """Held-out SSE [m^2] summed over the fold schemes (nan-free)."""
+    return float(sum(v for v in held_out if np.isfinite(v)))
+
+
 # ----------------------------------------------------------------------------- the loop
 
 
@@ -559,6 +532,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 rivals = [t for t in screens if t is not s and t.P is not None
                           and t.candidate.effect != s.candidate.effect
                           and t.bic_drop > bic_threshold
+                          and _total(t.held_out) <= RIVAL_MARGIN * _total(s.held_out)
                           and screening.overlap(s, t) > CONFOUNDED
                           and screening.overlap(t, s) > CONFOUNDED]
                 if rivals:

@@ -22,6 +22,7 @@ The last three are *extrapolating* schemes. Residual entries that belong to no u
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -143,3 +144,41 @@ def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
     if len(problem.models) > 1 and _enough(units.dataset, len(problem.models)):
         schemes.append(FoldScheme("datasets", _entry_folds(units, units.dataset), True))
     return schemes
+
+
+class FoldGrams:
+    """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation.
+
+    ``fold`` numbers the rows of ``Z`` (-1: always trained on); ``total`` may pass
+    ``Z.T @ Z`` when several schemes share one ``Z``. The last column of ``Z`` is the
+    residual [m]; the others are the linearised unknowns (any scaling).
+    """
+
+    def __init__(self, Z: np.ndarray, fold: np.ndarray, total: np.ndarray | None = None):
+        self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
+        self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
+        self.total = Z.T @ Z if total is None else total
+        self.r = Z.shape[1] - 1
+
+    def held_out_sse(self, columns: Sequence[int]) -> float:
+        """Sum over folds of the held-out squared residual after fitting ``columns``.
+
+        Columns with no weight in a fold's training rows (that fold's own placement) are
+        fitted on its held-out rows instead.
+        """
+        if not self.count:
+            return float("nan")
+        S = np.asarray(columns, dtype=int)
+        r = self.r
+        total = 0.0
+        for Gf in self.parts:
+            Gt = self.total - Gf
+            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
+            shared, own = S[~local], S[local]
+            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
+            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
+            if own.size:
+                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
+                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
+            total += max(float(sse), 0.0)
+        return total
