@@ -65,14 +65,25 @@ def _units(problem) -> _Units:
         groups = np.asarray(model.residual_groups())
         row_units = np.asarray(model.row_units())
         readings = model.dataset.joints
-        ids = sorted(set(int(g) for g in groups if g >= 0))
-        position = {g: len(joints) + i for i, g in enumerate(ids)}
-        for g in ids:
-            rows = row_units == g
-            joints.append(readings[rows].mean(axis=0) if readings is not None and rows.any()
-                          else np.full(problem.robot.dof, np.nan))
-            dataset.append(k)
-        entry_unit.append(np.array([position.get(int(g), -1) for g in groups], dtype=int))
+        ids = np.unique(groups[groups >= 0])
+        start = len(joints)
+        if readings is not None and len(row_units):
+            # Mean joint readings of each unit's rows.
+            index = np.searchsorted(ids, row_units)
+            inside = (index < len(ids)) & (ids[np.minimum(index, len(ids) - 1)] == row_units)
+            sums = np.zeros((len(ids), readings.shape[1]))
+            np.add.at(sums, index[inside], readings[inside])
+            counts = np.bincount(index[inside], minlength=len(ids))[:, None]
+            means = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+        else:
+            means = np.full((len(ids), problem.robot.dof), np.nan)
+        joints.extend(means)
+        dataset.extend([k] * len(ids))
+        index = np.searchsorted(ids, groups)
+        unit = np.full(len(groups), -1)
+        valid = groups >= 0
+        unit[valid] = start + index[valid]
+        entry_unit.append(unit)
     dof = problem.robot.dof
     return _Units(np.concatenate(entry_unit) if entry_unit else np.zeros(0, int),
                   np.array(joints).reshape(-1, dof), np.array(dataset, dtype=int))
