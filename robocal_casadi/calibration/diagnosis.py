@@ -13,20 +13,35 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
 3. Supported? From the Gauss-Newton linearisation at the current solution: the residual
    sum of squares with the effect's remaining columns added gives the drop of the
    Bayesian information criterion ``BIC = n log(RSS/n) + k log n`` (n residuals, k
-   parameters added), and K-fold cross-validation gives the held-out RMS before and
-   after: folds of data rows (tracker, sphere) or of whole placements (artifacts,
-   bars); the fold's own placement unknowns (socket positions) are fitted on the held-out
-   data, as in validation. Both come from per-fold Gram matrices, so testing every
-   candidate costs one Jacobian.
+   parameters added), and cross-validation gives the held-out error before and after on
+   every fold scheme of ``folds``: units dealt at random (data rows; whole placements for
+   artifacts and bars, whose own socket positions are fitted on the held-out part, as in
+   validation), and the extrapolating schemes that hold out contiguous ranges of each
+   joint, clusters of configurations and whole datasets. All come from per-fold Gram
+   matrices, so testing every candidate costs one Jacobian.
+4. Does it extrapolate? The held-out squared error summed over the extrapolating schemes
+   must drop, and no single scheme may grow it by more than ``EXTRAPOLATION_TOLERANCE``:
+   an effect that only fits the region it was fitted in (a periodic term bending to the
+   shape of a residual over a short range of its joint) fails here.
+5. Plausible? The estimate must lie in the range real robots show (``_implausible``):
+   a compliance is positive and below 1e-4 rad/Nm, a periodic error below about 0.05 deg,
+   a gear-ratio error below 0.2%, a thermal coefficient that of a metal. An estimate
+   outside stands in for something the library does not name; it is reported, not added.
+6. Separable? A candidate whose columns the geometry nearly imitates (relative remaining
+   norm below ``IMITATED``) is not added; nor is one that a rival of another type explains
+   just as well (each explains more than ``CONFOUNDED`` of the other's share, with a
+   held-out error within ``RIVAL_MARGIN``): the data cannot tell which is the cause, and
+   the decision names both.
 
-The candidate with the largest BIC drop among those with a BIC drop above 10 and a
-lower held-out RMS is then added and everything is re-identified jointly with the
-nonlinear solver; it is kept if the refitted model still passes both tests. This repeats
-until no candidate is supported. All effects of one type found over the rounds form one
-finding (e.g. ``joint_compliance`` on joints 2 and 3). Its evidence (``rms_drop``
-relative, ``bic_drop``, ``cv_rms_before``/``cv_rms_after`` [m]) is what it adds to the
-final model: with several types found, each is left out of the final model in turn and
-the rest re-identified, so no effect is credited with what another one explains.
+The candidate with the largest BIC drop among those passing 3-6 is added and everything
+is re-identified jointly with the nonlinear solver; it is kept if the refitted model still
+passes. This repeats until no candidate is supported. All effects of one type found over
+the rounds form one finding (e.g. ``joint_compliance`` on joints 2 and 3). Its evidence
+(``rms_drop`` relative, ``bic_drop``, ``cv_rms_before``/``cv_rms_after`` [m]) is what it
+adds to the final model: with several types found, each is left out of the final model in
+turn and the rest re-identified, so no effect is credited with what another one explains.
+
+What no candidate explains is tested for structure afterwards (``unexplained``).
 
 The screening is unweighted least squares even when the refits use ``loss='huber'``.
 Data that carry their own flange poses (pendant readings) see no joint effect and are
