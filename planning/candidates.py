@@ -1,13 +1,14 @@
 """Measurements the robot can really make, one ``Candidate`` per bar/artifact placement
-or per reading, drawn at random from what the robot reaches.
+or per reading, drawn at random from what the robot reaches, by how the measurement
+model says the robot takes a reading (``reach``):
 
-* ``cross_bar`` / ``artifact_touches``: the artifact placed with a random position and
+* seated in sockets (the cross bar, an artifact): the artifact placed with a random position and
   yaw (tilt up to ``max_tilt``) above the worktable, every socket touched by the probe in
   ``touches`` different configurations solved by inverse kinematics within the limits.
-* ``sphere_laser``: a surface point of the sphere, a beam direction within
+* aiming a beam (laser on a sphere): a surface point of the sphere, a beam direction within
   ``max_incidence`` of its normal and a stand-off within the sensor's ``laser_range``;
   the flange pose that puts the laser origin and beam there.
-* ``tracker_points``: random configurations within the limits whose target is above the
+* any configuration (tracker): random configurations within the limits whose target is above the
   table and, when the dataset gives the instrument position, faces it (the flange z axis
   within ``visibility_cone`` of the direction from the target to the instrument).
 
@@ -58,9 +59,8 @@ def reach_radius(setup: PlanSetup) -> float:
 
 def generate(setup: PlanSetup, workspace: Workspace, count: int, rng: np.random.Generator,
              progress=None) -> list[Candidate]:
-    """Up to ``count`` feasible candidates for ``setup``'s kind (fewer only if rare)."""
-    maker = {"cross_bar": _touches, "artifact_touches": _touches, "sphere_laser": _sphere,
-             "tracker_points": _tracker}[setup.kind]
+    """Up to ``count`` feasible candidates for ``setup``'s instrument (fewer only if rare)."""
+    maker = {"sockets": _touches, "beam": _sphere, "configuration": _tracker}[setup.model.reach]
     return maker(setup, workspace, count, rng, progress)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from robocal_casadi.datasets import Dataset
 from robocal_casadi.errors import InputError
 from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.measurement import model_class
 from robocal_casadi.progress import Progress
 
 from .candidates import Candidate, generate
@@ -83,7 +84,7 @@ class Plan:
                 f"{len(self.identifiable)} identifiable parameters)")
 
     def summary(self) -> str:
-        what = "placements" if self.setup.kind in ("cross_bar", "artifact_touches") else "readings"
+        what = self.setup.model.unit_name
         ratio = self.value / self.random_median if self.random_median else math.nan
         return (f"planned {len(self.candidates)} {what} ({len(self.joints)} rows) for "
                 f"{len(self.identifiable)} identifiable parameters, chosen from "
@@ -94,10 +95,10 @@ class Plan:
 
 
 def pool_size_for(count: int, kind: str) -> int:
-    """How many feasible candidates to draw for a plan of ``count``."""
-    if kind in ("cross_bar", "artifact_touches"):
-        return max(120, 6 * count)
-    return max(300, 10 * count)
+    """How many feasible candidates to draw for a plan of ``count`` (the measurement
+    model's ``pool_size``)."""
+    least, per_count = model_class(kind).pool_size
+    return max(least, per_count * count)
 
 
 def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int = 0,
@@ -128,7 +129,7 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     info = Information(row_model.blocks(candidates), row_model.parameters, row_model.shared)
     needed = math.ceil((info.m + info.shared) / info.rows_per_candidate())
     if count < needed:
-        what = "placements" if setup.kind in ("cross_bar", "artifact_touches") else "readings"
+        what = setup.model.unit_name
         raise InputError(
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "

@@ -1,9 +1,9 @@
 """Writing a plan as the data table an operator runs (CONTRACT.md ``robocal plan``).
 
-Columns: the dataset kind's data-table columns, joints in the dataset's units, the
-measured columns (``distance`` or ``x, y, z``) left empty for the operator to fill in;
-for bars and artifacts also ``socket_x, socket_y, socket_z``: where the touched socket
-must be, world frame, in the dataset's length unit.
+Columns: the measurement model's (``plan_columns``): the data-table columns, joints in
+the dataset's units, the measured columns (``distance`` or ``x, y, z``) left empty for
+the operator to fill in; for bars and artifacts also ``socket_x, socket_y, socket_z``:
+where the touched socket must be, world frame, in the dataset's length unit.
 """
 
 from __future__ import annotations
@@ -20,12 +20,7 @@ from .design import Plan
 
 def plan_columns(plan: Plan) -> list[str]:
     joints = [f"q{i}" for i in range(1, plan.setup.robot.dof + 1)]
-    kind = plan.setup.kind
-    if kind == "tracker_points":
-        return joints + ["x", "y", "z"]
-    if kind == "sphere_laser":
-        return joints + ["distance"]
-    return ["pose", "point"] + joints + ["socket_x", "socket_y", "socket_z"]
+    return plan.setup.model.plan_columns(joints)
 
 
 def plan_rows(plan: Plan) -> list[list]:
@@ -34,17 +29,13 @@ def plan_rows(plan: Plan) -> list[list]:
     scales = np.array([setup.units.angle_scale if j.revolute else setup.units.length_scale
                        for j in setup.robot.joints])
     length = setup.units.length_scale
+    model = setup.model
     rows = []
     for pose, candidate in enumerate(plan.candidates, start=1):
         for k, q in enumerate(candidate.joints):
-            joints = list(q / scales)
-            if setup.kind == "tracker_points":
-                rows.append(joints + [np.nan] * 3)
-            elif setup.kind == "sphere_laser":
-                rows.append(joints + [np.nan])
-            else:
-                name = candidate.points[k]
-                rows.append([pose, name] + joints + list(candidate.sockets[name] / length))
+            name = candidate.points[k] if candidate.points else None
+            socket = candidate.sockets[name] / length if name is not None else None
+            rows.append(model.plan_row(pose, list(q / scales), name, socket))
     return rows
 
 

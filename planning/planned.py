@@ -1,18 +1,18 @@
 """A plan as a dataset: the readings it asks for with the values the nominal robot would
 give, so the calibration engine (``robocal_casadi.calibration``) can judge it.
 
-For tracker points the instrument frame is taken as the world frame; for the sphere, the
-laser readings are the nominal stand-offs the planner aimed at.
+The measurement model fills them in (``planned_dataset``): tracker positions in an
+instrument frame taken as the world frame, laser readings at the nominal stand-offs the
+planner aimed at, touches by placement and socket.
 """
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 
 from robocal_casadi.datasets import Dataset
 from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.measurement import model_class
 
 from .candidates import Candidate
 
@@ -22,15 +22,12 @@ def planned_dataset(dataset: Dataset, candidates, kinematics: Kinematics | None 
     candidates: list[Candidate] = list(candidates)
     Q = np.vstack([c.joints for c in candidates])
     kinematics = kinematics or Kinematics(dataset.robot)
-    if dataset.kind == "tracker_points":
-        measured = kinematics.points(Q, dataset.target)
-        return replace(dataset, joints=Q, measured=measured, extras={})
-    if dataset.kind == "sphere_laser":
-        distance = np.concatenate([c.distance for c in candidates])
-        return replace(dataset, joints=Q, distance=distance, flange_poses=None, extras={})
     poses = np.concatenate([np.full(len(c.joints), k + 1) for k, c in enumerate(candidates)])
     points = tuple(p for c in candidates for p in c.points)
-    return replace(dataset, joints=Q, pose=poses, point=points, extras={})
+    distance = (np.concatenate([c.distance for c in candidates])
+                if all(c.distance is not None for c in candidates) else None)
+    return model_class(dataset.kind, file=dataset.path).planned_dataset(
+        dataset, Q, kinematics, pose=poses, point=points, distance=distance)
 
 
 def engine_identifiability(dataset: Dataset, candidates, names=None):

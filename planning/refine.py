@@ -5,14 +5,19 @@ The joint readings of the chosen candidates become the variables; the objective 
 unknowns, columns scaled as the index asks), a smooth surrogate of every index; the
 constraints keep each reading runnable:
 
-* all kinds: joint limits, every joint frame origin and the measured point above the
-  worktable, each joint within ``STEP`` [rad or m] of the chosen candidate (the model is
-  trusted locally only);
-* tracker: the target faces the instrument (within the visibility cone);
-* bars and artifacts: the probe stays on its socket (the placement is kept, the joints
-  are re-solved), polished afterwards by inverse kinematics to 1e-9 m;
-* sphere: the beam still hits the sphere within the incidence limit and the sensor's
-  range; the expected reading follows the pose.
+* every instrument: joint limits, every joint frame origin and the measured point above
+  the worktable, each joint within ``STEP`` [rad or m] of the chosen candidate (the
+  model is trusted locally only);
+
+and, by how the measurement model says the robot takes a reading (``reach``):
+
+* any configuration (tracker): the target faces the instrument (within the visibility
+  cone);
+* seated in sockets (bars and artifacts): the probe stays on its socket (the placement
+  is kept, the joints are re-solved), polished afterwards by inverse kinematics to
+  1e-9 m;
+* aiming a beam (laser on a sphere): the beam still hits the sphere within the incidence
+  limit and the sensor's range; the expected reading follows the pose.
 
 The refined plan replaces the chosen one only when it is feasible and improves the
 user's index.
@@ -77,11 +82,11 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
             constraints.append(heights_fn(Q[:, k], p))
             c_lower.append(np.full(dof, workspace.table_height + MARGIN))
             c_upper.append(np.full(dof, np.inf))
-        if setup.kind == "tracker_points":
+        reach = setup.model.reach
+        if reach == "configuration":
             q = Q[:, 0]
-            world, J_p, _, J_offset = kin.point_jacobians(q, p, setup.offset)
-            S = ca.horzcat(ca.DM.eye(3), -_skew(world))
-            blocks.append(ca.horzcat(J_p, J_offset, S))
+            world = kin.point(q, p, setup.offset)
+            blocks.append(row_model.symbolic_block(candidate, Q))
             constraints.append(world[2])
             c_lower.append([workspace.table_height + MARGIN])
             c_upper.append([np.inf])
@@ -91,7 +96,7 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
                 constraints.append(ca.dot(T[:3, 2], towards) / ca.norm_2(towards))
                 c_lower.append([np.cos(setup.visibility_cone - ANGLE_MARGIN)])
                 c_upper.append([1.0])
-        elif setup.kind == "sphere_laser":
+        elif reach == "beam":
             q = Q[:, 0]
             T = kin.flange_pose(q, p)
             o = T[:3, :3] @ setup.offset + T[:3, 3]
@@ -107,18 +112,9 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
                         [np.cos(setup.max_incidence - ANGLE_MARGIN)],
                         [workspace.table_height + MARGIN]]
             c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
-            G, S = row_model._sphere(q, p, setup.offset, np.zeros(2), setup.centre, reading)
-            blocks.append(ca.horzcat(G, S))
+            blocks.append(row_model.symbolic_block(candidate, Q, data=[reading]))
         else:
-            function = row_model._touch_function(candidate.points)
-            repeated = sorted({n for n in candidate.points if candidate.points.count(n) > 1})
-            local = (np.concatenate([candidate.sockets[n] for n in repeated]) if repeated
-                     else np.zeros(0))
-            G, L = function(Q, p, setup.offset, local)
-            if repeated:
-                P = ca.DM.eye(G.shape[0]) - L @ ca.solve(L.T @ L, L.T)
-                G = P @ G
-            blocks.append(G)
+            blocks.append(row_model.symbolic_block(candidate, Q))
             for k, name in enumerate(candidate.points):
                 constraints.append(kin.point(Q[:, k], p, setup.offset) - candidate.sockets[name])
                 c_lower.append(np.zeros(3))
@@ -161,14 +157,15 @@ def _rebuild(setup, workspace, candidates, Q_new):
     rebuilt = []
     for candidate, Q in zip(candidates, Q_new):
         Q = np.clip(Q, workspace.lower, workspace.upper)
-        if setup.kind in ("cross_bar", "artifact_touches"):
+        reach = setup.model.reach
+        if reach == "sockets":
             targets = np.array([candidate.sockets[n] for n in candidate.points])
             solved = workspace.solve_points(targets, setup.offset, Q)
             if not solved.ok.all():
                 return None
             Q = solved.joints
             points = targets
-        elif setup.kind == "sphere_laser":
+        elif reach == "beam":
             pose = kin.flange_poses(Q, workspace.p)[0]
             o = pose[:3, :3] @ setup.offset + pose[:3, 3]
             d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
@@ -192,9 +189,3 @@ def _rebuild(setup, workspace, candidates, Q_new):
             return None
         rebuilt.append(Candidate(Q, candidate.points, candidate.sockets, candidate.distance))
     return rebuilt
-
-
-def _skew(v):
-    return ca.vertcat(ca.horzcat(0, -v[2], v[1]), ca.horzcat(v[2], 0, -v[0]),
-                      ca.horzcat(-v[1], v[0], 0))
-

@@ -1,20 +1,18 @@
 """Rows of the identification Jacobian contributed by each candidate.
 
-For a candidate with residual ``r`` (the contract's residuals of its kind, [m]) the
-planner needs ``G = dr/d(robot geometry, mounted)``, ``L = dr/d(local placement)`` (the
+For a candidate with residual ``r`` the planner needs ``G = dr/d(robot geometry,
+mounted)``, ``L = dr/d(local placement)`` (unknowns of one candidate alone, e.g. the
 sockets of one artifact placement touched more than once, projected out per candidate)
-and ``S = dr/d(shared placement)`` (the tracker frame, the sphere centre, projected out
-of the whole design). A ``Block`` holds ``X = P [G S]`` with ``P`` the projection
+and ``S = dr/d(shared placement)`` (e.g. the tracker frame or the sphere centre, projected
+out of the whole design). A ``Block`` holds ``X = P [G S]`` with ``P`` the projection
 orthogonal to ``L``; the design's Jacobian stacks the blocks' ``X``.
 
-Residuals, nominal robot, instrument at its nominal place:
-
-* touches: each touch of a socket touched more than once ``p(q) - s``; per placement
-  ``|s_a - s_b| - d`` and ``(C - A) . (D - B) / d_AC``, a socket touched once being
-  where the probe was (as in ``measurement.artifact``);
-* tracker: ``R p(q) + t`` with ``(t, R)`` the instrument frame (6 shared unknowns);
-* sphere: ``|T(q) (p0 + l n) - c| - R`` with ``n`` varied in its tangent plane
-  (2 unknowns) and ``c`` the centre (3 shared unknowns).
+The residual is the measurement model's own (``robocal_casadi.measurement``), at the
+nominal robot, the file's mounted values (``nominal_mounted``) and the instrument at
+its nominal place (``nominal_placement``): per row (``row_residual``) for models whose
+residual has entries per row, else the model's ``residual`` of a dataset made of the
+candidate's rows. The mounted unknowns are varied in the model's minimal coordinates
+(``mounted_chart``: the laser beam in its tangent plane, two unknowns).
 """
 
 from __future__ import annotations
@@ -25,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.measurement import MeasurementModel
 
 from .candidates import Candidate
 from .setup import PlanSetup
@@ -38,10 +37,6 @@ class Block:
 
     def __repr__(self) -> str:
         return f"Block({self.X.shape[0]} rows x {self.X.shape[1]} columns)"
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
 
 
 def _project_out(G: np.ndarray, L: np.ndarray) -> np.ndarray:
@@ -60,123 +55,139 @@ class RowModel:
         self.setup = setup
         self.kinematics = kinematics
         self.p = kinematics.nominal
-        robot_names = kinematics.registry.names
-        mounted = {"tracker_points": ("target_x", "target_y", "target_z"),
-                   "sphere_laser": ("laser_x", "laser_y", "laser_z", "laser_n1", "laser_n2")}
-        # (the engine's beam unknowns are laser_nx, _ny, _nz with |n| = 1 as a residual;
-        # here the two directions normal to the nominal beam, the same subspace)
-        self.mounted = mounted.get(setup.kind, ("probe_x", "probe_y", "probe_z"))
-        self.parameters = tuple(robot_names) + self.mounted
-        self.shared = {"tracker_points": 6, "sphere_laser": 3}.get(setup.kind, 0)
-        self._touch_functions: dict[tuple[str, ...], ca.Function] = {}
-        if setup.kind == "sphere_laser":
-            self._sphere = self._sphere_function()
+        self.instrument = setup.model
+        template = self._model([Candidate(np.zeros((1, kinematics.dof)), ("socket",),
+                                          distance=np.zeros(1))])
+        self.nominal = template.nominal_mounted()
+        self.mounted, self._chart = template.mounted_chart(self.nominal)
+        self.parameters = tuple(kinematics.registry.names) + tuple(self.mounted)
+        self.shared = len(template.placement) if self.instrument.placement_shared else 0
+        self._per_row = type(template).row_residual is not MeasurementModel.row_residual
+        self._template = template
+        self._functions: dict[tuple[str, ...], tuple[ca.Function, MeasurementModel]] = {}
+        if self._per_row:
+            self._row = self._row_function(template)
 
     def __repr__(self) -> str:
         return (f"RowModel({self.setup.kind}, parameters={len(self.parameters)}, "
                 f"shared={self.shared})")
 
+    def _model(self, candidates: list[Candidate]) -> MeasurementModel:
+        """The measurement model of a dataset made of ``candidates`` (nominal readings)."""
+        joints = np.vstack([c.joints for c in candidates])
+        pose = np.concatenate([np.full(len(c.joints), k + 1) for k, c in enumerate(candidates)])
+        point = tuple(p for c in candidates for p in c.points)
+        distance = (np.concatenate([c.distance for c in candidates])
+                    if all(c.distance is not None for c in candidates) else None)
+        dataset = self.instrument.planned_dataset(self.setup.dataset, joints, self.kinematics,
+                                                  pose=pose, point=point, distance=distance)
+        return self.instrument(dataset, "plan")
+
     def blocks(self, candidates: list[Candidate]) -> list[Block]:
-        if self.setup.kind == "tracker_points":
-            return self._tracker(candidates)
-        if self.setup.kind == "sphere_laser":
-            return [self._sphere_block(c) for c in candidates]
-        return [self._touch_block(c) for c in candidates]
+        if self._per_row:
+            return self._row_blocks(candidates)
+        return [self._group_block(c) for c in candidates]
 
-    # ------------------------------------------------------------------ tracker
+    def symbolic_block(self, candidate: Candidate, Q, data=None):
+        """The block ``P [G S]`` of ``candidate`` with joint readings ``Q`` (dof x k, CasADi)
+        and, for per-row models, each row's data ``data[k]`` (``row_data``, numbers or
+        CasADi; default the candidate's nominal readings), as CasADi expressions (for
+        continuous refinement)."""
+        if self._per_row:
+            if data is None:
+                data = self._model([candidate]).row_data()
+            placement = self._placement(candidate)
+            rows = []
+            for k in range(Q.shape[1]):
+                G, S = self._row(Q[:, k], data[k], self.p, np.zeros(len(self.mounted)), placement)
+                rows.append(ca.horzcat(G, S))
+            return self._project(ca.vertcat(*rows), None)
+        function, model = self._group_function(candidate)
+        G, L = function(Q, self.p, np.zeros(len(self.mounted)), self._placement(candidate, model))
+        return self._project(G, L)
 
-    def _tracker(self, candidates):
-        Q = np.vstack([c.joints for c in candidates])
-        kin = self.kinematics
-        f = kin.mapped(kin.point_jacobians, len(Q))
-        world, J_p, _, J_offset = f(Q.T, self.p, self.setup.offset)
-        world = np.asarray(world).T
-        n_p = len(self.p)
-        J_p = np.asarray(J_p).reshape(3, len(Q), n_p).transpose(1, 0, 2)
-        J_offset = np.asarray(J_offset).reshape(3, len(Q), 3).transpose(1, 0, 2)
-        blocks = []
-        for i in range(len(Q)):
-            S = np.hstack([np.eye(3), -_skew(world[i])])
-            blocks.append(Block(np.hstack([J_p[i], J_offset[i], S])))
-        return blocks
+    # ------------------------------------------------------------------ per-row models
 
-    # ------------------------------------------------------------------ touches
-
-    def _touch_function(self, points: tuple[str, ...]) -> ca.Function:
-        """Residual Jacobians of one placement whose rows touch ``points`` (cached)."""
-        if points in self._touch_functions:
-            return self._touch_functions[points]
-        kin, dof = self.kinematics, self.kinematics.dof
-        k = len(points)
-        Q = ca.MX.sym("Q", dof, k)
-        p = ca.MX.sym("p", len(self.p))
-        probe = ca.MX.sym("probe", 3)
-        repeated = sorted({n for n in points if points.count(n) > 1})
-        local = ca.MX.sym("sockets", 3 * len(repeated))
-        world = [kin.point(Q[:, j], p, probe) for j in range(k)]
-        position, parts = {}, []
-        for i, name in enumerate(repeated):
-            position[name] = local[3 * i:3 * i + 3]
-        for j, name in enumerate(points):
-            if name in position:
-                parts.append(world[j] - position[name])
-            else:
-                position[name] = world[j]
-        known = {}
-        for a, b, length in self.setup.distances:
-            known[(a, b)] = known[(b, a)] = length
-            if a in position and b in position:
-                parts.append(ca.norm_2(position[a] - position[b]) - length)
-        for a, c, b, d in self.setup.perpendicular:
-            if all(s in position for s in (a, b, c, d)):
-                ac, bd = position[c] - position[a], position[d] - position[b]
-                scale = known.get((a, c))
-                if scale is None:
-                    scale = ca.sqrt(ca.norm_2(ac) * ca.norm_2(bd))
-                parts.append(ca.dot(ac, bd) / scale)
-        r = ca.vertcat(*parts)
-        function = ca.Function("touch_rows", [Q, p, probe, local],
-                               [ca.jacobian(r, ca.vertcat(p, probe)), ca.jacobian(r, local)])
-        self._touch_functions[points] = function
-        return function
-
-    def _touch_block(self, candidate: Candidate) -> Block:
-        function = self._touch_function(candidate.points)
-        repeated = sorted({n for n in candidate.points if candidate.points.count(n) > 1})
-        local = (np.concatenate([candidate.sockets[n] for n in repeated]) if repeated
-                 else np.zeros(0))
-        G, L = function(candidate.joints.T, self.p, self.setup.offset, local)
-        G, L = np.asarray(G), np.asarray(L)
-        return Block(_project_out(G, L.reshape(G.shape[0], -1)))
-
-    # ------------------------------------------------------------------ sphere
-
-    def _sphere_function(self) -> ca.Function:
+    def _row_function(self, model: MeasurementModel) -> ca.Function:
+        """``(q, data, p, delta, placement) -> (dr/d(p, delta), dr/d placement)`` of one row."""
         kin = self.kinematics
         q = ca.SX.sym("q", kin.dof)
+        data = ca.SX.sym("data", model.row_data().shape[1])
         p = ca.SX.sym("p", len(self.p))
-        origin = ca.SX.sym("origin", 3)
-        tangent = ca.SX.sym("tangent", 2)
-        centre = ca.SX.sym("centre", 3)
-        reading = ca.SX.sym("reading")
-        n0 = self.setup.axis / np.linalg.norm(self.setup.axis)
-        helper = np.array([1.0, 0, 0]) if abs(n0[0]) < 0.9 else np.array([0, 1.0, 0])
-        t1 = np.cross(n0, helper)
-        t1 /= np.linalg.norm(t1)
-        t2 = np.cross(n0, t1)
-        n = n0 + tangent[0] * t1 + tangent[1] * t2
-        n = n / ca.norm_2(n)
-        T = kin.flange_pose(q, p)
-        spot = T[:3, :3] @ (origin + reading * n) + T[:3, 3]
-        r = ca.norm_2(spot - centre) - self.setup.radius
-        return ca.Function("sphere_rows", [q, p, origin, tangent, centre, reading],
-                           [ca.jacobian(r, ca.vertcat(p, origin, tangent)),
-                            ca.jacobian(r, centre)])
+        delta = ca.SX.sym("delta", len(self.mounted))
+        placement = ca.SX.sym("placement", len(model.placement))
+        mounted = self._chart(delta)
+        point = kin.point(q, p, model.row_offset(data, mounted))
+        r = model.row_residual(point, data, mounted, placement, ca.DM(model.row_constants()))
+        return ca.Function("instrument_rows", [q, data, p, delta, placement],
+                           [ca.jacobian(r, ca.vertcat(p, delta)), ca.jacobian(r, placement)])
 
-    def _sphere_block(self, candidate: Candidate) -> Block:
-        rows = []
-        for q, reading in zip(candidate.joints, candidate.distance):
-            G, S = self._sphere(q, self.p, self.setup.offset, np.zeros(2), self.setup.centre,
-                                reading)
-            rows.append(np.hstack([np.asarray(G), np.asarray(S)]))
-        return Block(np.vstack(rows))
+    def _placement(self, candidate: Candidate, model: MeasurementModel | None = None):
+        return (model or self._template).nominal_placement(candidate.sockets)
+
+    def _row_blocks(self, candidates: list[Candidate]) -> list[Block]:
+        Q = np.vstack([c.joints for c in candidates])
+        data = self._model(candidates).row_data()
+        n = len(Q)
+        G, S = self._row.map(n)(Q.T, data.T, self.p, np.zeros(len(self.mounted)),
+                                self._placement(candidates[0]))
+        G, S = np.asarray(G), np.asarray(S)
+        size = G.shape[0]
+        G = G.reshape(size, n, -1).transpose(1, 0, 2)
+        S = S.reshape(size, n, -1).transpose(1, 0, 2)
+        blocks, start = [], 0
+        for candidate in candidates:
+            k = len(candidate.joints)
+            X = np.concatenate([np.vstack(G[start:start + k]), np.vstack(S[start:start + k])],
+                               axis=1)
+            blocks.append(Block(X if self.shared else _project_out(X[:, :G.shape[2]],
+                                                                   X[:, G.shape[2]:])))
+            start += k
+        return blocks
+
+    # ------------------------------------------------------------------ group models
+
+    def _group_function(self, candidate: Candidate):
+        """Residual Jacobians of a candidate's rows, cached by its sockets touched."""
+        key = candidate.points
+        if key not in self._functions:
+            kin = self.kinematics
+            model = self._model([candidate])
+            k = len(candidate.joints)
+            Q = ca.MX.sym("Q", kin.dof, k)
+            p = ca.MX.sym("p", len(self.p))
+            delta = ca.MX.sym("delta", len(self.mounted))
+            placement = ca.MX.sym("placement", len(model.placement))
+
+            def points(offsets):
+                columns = offsets.shape[1]
+                return ca.horzcat(*[kin.point(Q[:, j], p, offsets[:, j if columns > 1 else 0])
+                                    for j in range(k)])
+
+            r = model.residual(points, self._chart(delta), placement)
+            function = ca.Function("instrument_rows", [Q, p, delta, placement],
+                                   [ca.jacobian(r, ca.vertcat(p, delta)),
+                                    ca.jacobian(r, placement)])
+            self._functions[key] = (function, model)
+        return self._functions[key]
+
+    def _group_block(self, candidate: Candidate) -> Block:
+        function, model = self._group_function(candidate)
+        G, L = function(candidate.joints.T, self.p, np.zeros(len(self.mounted)),
+                        self._placement(candidate, model))
+        G, L = np.asarray(G), np.asarray(L)
+        if self.shared:
+            return Block(np.hstack([G, L]))
+        return Block(_project_out(G, L.reshape(G.shape[0], -1)))
+
+    def _project(self, X, L):
+        """``X`` with the local placement columns projected out (CasADi)."""
+        if self.shared:
+            return X if L is None else ca.horzcat(X, L)
+        if L is None:
+            m = len(self.parameters)
+            X, L = X[:, :m], X[:, m:]
+        if L.shape[1] == 0:
+            return X
+        P = ca.DM.eye(X.shape[0]) - L @ ca.solve(L.T @ L, L.T)
+        return P @ X

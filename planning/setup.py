@@ -5,17 +5,18 @@ the file's units::
 
     planning:
       table_height: 0.0        # worktable plane z in the world (default: robot base z)
-      touches_per_socket: 4    # artifact_touches: configurations per socket (cross_bar: 1)
+      touches_per_socket: 4    # artifact: configurations per socket (the cross bar: 1)
       max_tilt: 45             # largest tilt of a placed artifact from horizontal (angle)
-      laser_range: [50, 300]   # sphere_laser: usable readings (default 0.05-0.30 m)
-      max_incidence: 45        # sphere_laser: largest beam angle from the surface normal
-      visibility_cone: 60      # tracker_points: target axis within this of the instrument
+      laser_range: [50, 300]   # laser: usable readings (default 0.05-0.30 m)
+      max_incidence: 45        # laser: largest beam angle from the surface normal
+      visibility_cone: 60      # tracker: target axis within this of the instrument
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -23,6 +24,7 @@ from scipy.optimize import least_squares
 from robocal_casadi.datasets import ArtifactTouches, Dataset, SphereLaser, TrackerPoints
 from robocal_casadi.errors import InputError
 from robocal_casadi.fields import number, vector
+from robocal_casadi.measurement import MeasurementModel, model_class
 from robocal_casadi.robot import Robot
 from robocal_casadi.units import Units
 
@@ -37,7 +39,8 @@ class PlanSetup:
     ``offset`` [m] the flange-frame point that is measured (probe centre, reflector,
     laser origin); ``axis`` the laser beam in the flange frame (unit); ``layout`` socket
     positions [m] in the artifact's own frame; ``centre``, ``radius`` [m] the sphere;
-    ``instrument`` [m] the tracker position in the world, or None.
+    ``instrument`` [m] the tracker position in the world, or None; ``dataset`` the
+    dataset it was read from (its measurement model builds the planner's residuals).
     """
 
     path: Path
@@ -59,6 +62,12 @@ class PlanSetup:
     max_incidence: float = np.radians(45.0)
     instrument: np.ndarray | None = None
     visibility_cone: float = np.radians(60.0)
+    dataset: Any = field(default=None, repr=False, compare=False)
+
+    @property
+    def model(self) -> type[MeasurementModel]:
+        """The measurement model class of the set-up's kind: what the planner asks."""
+        return model_class(self.kind, file=self.path)
 
     def __repr__(self) -> str:
         return f"PlanSetup({self.path.name!r}, kind={self.kind}, robot={self.robot.name!r})"
@@ -82,12 +91,13 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
         return number(options[key], file=path, where=f"planning.{key}") * scale
 
     common = dict(path=path, kind=dataset.kind, robot=dataset.robot, units=units,
-                  table_height=option("table_height", None, L))
+                  table_height=option("table_height", None, L), dataset=dataset)
     if isinstance(dataset, TrackerPoints):
         return PlanSetup(offset=np.asarray(dataset.target, float), instrument=dataset.instrument,
                          visibility_cone=option("visibility_cone", np.radians(60.0), A), **common)
     if isinstance(dataset, ArtifactTouches):
-        bar = dataset.kind == "cross_bar"
+        model = model_class(dataset.kind, file=path)
+        bar = model.cross
         touches = 1 if bar else int(option("touches_per_socket", 4, 1.0))
         if touches < 1:
             raise InputError("must be at least 1", file=path, where="planning.touches_per_socket")
@@ -95,7 +105,7 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
                          layout=artifact_layout(dataset, bar),
                          distances=dataset.distances, perpendicular=dataset.perpendicular,
                          touches=touches, max_tilt=option("max_tilt", np.radians(45.0), A),
-                         size_key="bar.length" if bar else "artifact.distances", **common)
+                         size_key=model.size_key, **common)
     assert isinstance(dataset, SphereLaser)
     for value, key in ((dataset.centre_guess, "sphere.centre_guess"),
                        (dataset.origin_guess, "laser.origin_guess"),

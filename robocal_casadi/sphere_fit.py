@@ -7,15 +7,15 @@ residual [m] is the distance of the laser point from the sphere surface::
 
     r_i = || R_i (p0 + l_i n) + t_i - c || - R
 
-Direction without poles or signs: ``n`` moves on the unit sphere as
-``n <- normalise(n + a e1 + b e2)`` with ``e1, e2`` an orthonormal basis of the plane
-perpendicular to the current ``n``; ``(a, b)`` are re-centred to zero after every step,
-so any beam direction is reached with the same conditioning. The 8 local unknowns are
-``[p0 (3), a, b, c (3)]``.
+Direction without poles or signs (``robocal_casadi.beam``): ``n`` moves on the unit
+sphere as ``n <- beam_direction(n, (a, b))`` = ``normalise(n + a e1 + b e2)`` with
+``e1, e2`` the tangent basis of the current ``n``; ``(a, b)`` are re-centred to zero
+after every step, so any beam direction is reached with the same conditioning. The 8
+local unknowns are ``[p0 (3), a, b, c (3)]``.
 
 Two solvers: Levenberg-Marquardt on the closed-form Jacobian (``method="lm"``, the
 default, a few milliseconds for 820 readings) and IPOPT through CasADi on
-``[p0, n, c]`` with ``n.n = 1`` as a constraint and exact derivatives
+``[p0, w, c]``, ``n = beam_direction(w)`` with ``w.w = 1`` as a constraint, exact derivatives
 (``method="ipopt"``, one solver built per reading count, data as parameters).
 
 Identifiability: the Jacobian columns are scaled to unit length and their singular
@@ -33,6 +33,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from .beam import beam_direction, tangent_basis
 from .errors import InputError, SolverError
 
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
@@ -89,21 +90,6 @@ class SensorFit:
 
 
 # ----------------------------------------------------------------------------- geometry
-
-
-def tangent_basis(n: np.ndarray) -> np.ndarray:
-    """``E`` (3 x 2): orthonormal columns perpendicular to the unit vector ``n``."""
-    x, y, z = (float(v) for v in n)
-    if abs(x) <= abs(y) and abs(x) <= abs(z):  # cross with the axis least aligned with n
-        e1 = (0.0, z, -y)
-    elif abs(y) <= abs(z):
-        e1 = (-z, 0.0, x)
-    else:
-        e1 = (y, -x, 0.0)
-    a, b, c = e1
-    norm = (a * a + b * b + c * c) ** 0.5
-    a, b, c = a / norm, b / norm, c / norm
-    return np.array([[a, y * c - z * b], [b, z * a - x * c], [c, x * b - y * a]])
 
 
 @dataclass(frozen=True)
@@ -208,9 +194,8 @@ def sphere_centre(points: np.ndarray, radius: float, beam: np.ndarray | None = N
 
 
 def _step(origin, direction, centre, delta):
-    basis = tangent_basis(direction)
-    n = direction + basis @ delta[3:5]
-    return origin + delta[0:3], n / np.linalg.norm(n), centre + delta[5:8]
+    n = beam_direction(direction, delta[3:5], tangent_basis(direction))
+    return origin + delta[0:3], n, centre + delta[5:8]
 
 
 def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iterations: int,
@@ -267,7 +252,8 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
 
 @lru_cache(maxsize=8)
 def _ipopt_solver(count: int) -> ca.Function:
-    """IPOPT on ``[p0, n, c]`` (mm inside) with ``n.n = 1``, for ``count`` readings.
+    """IPOPT on ``[p0, w, c]`` (mm inside), ``n = beam_direction(w)`` and ``w.w = 1``, for
+    ``count`` readings.
 
     Parameters: ``vec(R)`` (9 x count, column-major per reading), ``t`` [mm] (3 x count),
     ``l`` [mm] (count), radius [mm]. Built once per ``count`` and cached.
@@ -277,7 +263,7 @@ def _ipopt_solver(count: int) -> ca.Function:
     translations = ca.SX.sym("t", 3, count)
     distance = ca.SX.sym("l", 1, count)
     radius = ca.SX.sym("radius")
-    p0, n, c = x[0:3], x[3:6], x[6:9]
+    p0, n, c = x[0:3], beam_direction(x[3:6]), x[6:9]
     offset = [p0[j] + distance * n[j] for j in range(3)]
     squared = 0
     for k in range(3):  # R_i[k, j] sits at row 3 j + k of vec(R_i)
@@ -287,10 +273,11 @@ def _ipopt_solver(count: int) -> ca.Function:
         squared = squared + coordinate ** 2
     residual = ca.sqrt(squared) - radius
     parameters = ca.vertcat(ca.vec(rotations), ca.vec(translations), ca.vec(distance), radius)
-    nlp = {"x": x, "p": parameters, "f": 0.5 * ca.sumsqr(residual), "g": ca.dot(n, n) - 1.0}
+    nlp = {"x": x, "p": parameters, "f": 0.5 * ca.sumsqr(residual),
+           "g": ca.dot(x[3:6], x[3:6]) - 1.0}  # the length of the free beam vector
     options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
                                               "acceptable_tol": 1e-8, "max_iter": 200}}
-    return ca.nlpsol(f"sphere_laser_{count}", "ipopt", nlp, options)
+    return ca.nlpsol(f"sphere_fit_{count}", "ipopt", nlp, options)
 
 
 def _ipopt(scan: Scan, origin, direction, centre):
@@ -435,7 +422,7 @@ def fit_sensor(flange_poses: np.ndarray, distance: np.ndarray, radius: float, *,
 
 
 def fit_dataset(dataset, *, method: str = "lm", robot=None) -> SensorFit:
-    """``fit_sensor`` on a ``sphere_laser`` dataset, with the file's guesses.
+    """``fit_sensor`` on a point-laser dataset, with the file's guesses.
 
     Pendant tables use their own flange poses; joint readings use the flange poses of
     ``robot`` (default: the dataset's robot, nominal), so the robot's own errors stay in

@@ -266,7 +266,7 @@ class Problem:
         key = ("separable", id(model))
         if key in self._maps:
             return self._maps[key]
-        if type(model).row_residual is MeasurementModel.row_residual:
+        if not model.separable:
             self._maps[key] = None
             return None
         row = self._row[0]

@@ -1,4 +1,9 @@
-"""Measurement models, one per dataset kind, behind ``MeasurementModel``."""
+"""Measurement models, one per dataset kind, behind ``MeasurementModel``.
+
+``MODELS`` is the one place that maps a dataset kind to what the toolkit knows about its
+instrument; the planner, the simulator and the report ask the class (``model_class``),
+never the kind string.
+"""
 
 from __future__ import annotations
 
@@ -15,15 +20,20 @@ MODELS: dict[str, type[MeasurementModel]] = {
 }
 
 
-def model_for(dataset, label: str) -> MeasurementModel:
-    """The measurement model of ``dataset``'s kind, with placement names under ``label``."""
+def model_class(kind: str, *, file=None) -> type[MeasurementModel]:
+    """The measurement model class of a dataset ``kind`` (``file``: named in the error)."""
     from ..errors import InputError
 
-    if dataset.kind not in MODELS:
-        raise InputError(f"no measurement model for kind {dataset.kind!r}", file=dataset.path,
-                         where="kind")
-    return MODELS[dataset.kind](dataset, label)
+    if kind not in MODELS:
+        raise InputError(f"no measurement model for kind {kind!r}; known kinds: "
+                         f"{', '.join(MODELS)}", file=file, where="kind")
+    return MODELS[kind]
+
+
+def model_for(dataset, label: str) -> MeasurementModel:
+    """The measurement model of ``dataset``'s kind, with placement names under ``label``."""
+    return model_class(dataset.kind, file=dataset.path)(dataset, label)
 
 
 __all__ = ["ArtifactModel", "CrossBarModel", "MODELS", "MeasurementModel", "SphereLaserModel",
-           "TrackerModel", "model_for"]
+           "TrackerModel", "model_class", "model_for"]

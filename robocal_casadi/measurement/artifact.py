@@ -18,7 +18,7 @@ one perpendicularity: exactly the bar residuals ``|AC| - L``, ``|BD| - L``, ``AC
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -39,8 +39,20 @@ class ArtifactModel(MeasurementModel):
     """Residuals of touch data; see the module docstring."""
 
     kind = "artifact_touches"
+    table = "touches.csv"
+    reach = "sockets"
+    unit_name = "placements"
+    error_title = "artifact error"
+    placement_shared = False
+    pool_size = (120, 6)
+    cross = False
+    """True: four sockets A, C and B, D at the ends of two equal perpendicular arms, each
+    touched once per placement in one orientation."""
+    size_key = "artifact.distances"
+    """The dataset file's key that sets the artifact's size."""
     invisible_reason = "it moves no touched point relative to the others"
-    absorbed_reason = "absorbed by the unknown socket positions (touch data carry no absolute position)"
+    absorbed_reason = ("absorbed by the unknown socket positions (touch data carry no "
+                       "absolute position)")
 
     def __init__(self, dataset, label: str):
         super().__init__(dataset, label)
@@ -90,8 +102,6 @@ class ArtifactModel(MeasurementModel):
         """The dataset with every repeated touch moved onto its socket (joint-space Newton)."""
         if not any(s.unknown_index is not None for s in self.sockets):
             return None
-        from dataclasses import replace
-
         joints = np.array(self.dataset.joints, dtype=float)
         for socket in self.sockets:
             if socket.unknown_index is None:
@@ -201,10 +211,42 @@ class ArtifactModel(MeasurementModel):
     def error_rows(self) -> np.ndarray:
         return self._layout()[0]
 
+    # ------------------------------------------------------------------ planning
+
+    def nominal_mounted(self) -> np.ndarray:
+        return np.asarray(self.dataset.probe, dtype=float).copy()
+
+    def nominal_placement(self, sockets=None) -> np.ndarray:
+        """The placement vector with every socket touched more than once at its position
+        in ``sockets`` (name -> world position [m]; one placed artifact)."""
+        values = np.zeros(len(self._placement))
+        for socket in self.sockets:
+            if socket.unknown_index is not None:
+                k = socket.unknown_index
+                values[k:k + 3] = np.asarray(sockets[socket.name], dtype=float)
+        return values
+
+    @classmethod
+    def plan_columns(cls, joints):
+        return ["pose", "point"] + list(joints) + ["socket_x", "socket_y", "socket_z"]
+
+    @classmethod
+    def plan_row(cls, pose, joints, point, socket):
+        return [pose, point] + list(joints) + list(socket)
+
+    @classmethod
+    def planned_dataset(cls, dataset, joints, kinematics, *, pose=None, point=(), distance=None):
+        """The touches asked for: placement ids ``pose`` and socket names ``point``."""
+        return replace(dataset, joints=np.asarray(joints, dtype=float),
+                       pose=np.asarray(pose, dtype=int), point=tuple(point), extras={})
+
 
 class CrossBarModel(ArtifactModel):
     """The cross-shaped bar: an artifact whose four sockets are touched once per pose."""
 
     kind = "cross_bar"
+    error_title = "bar error"
+    cross = True
+    size_key = "bar.length"
     invisible_reason = ("bar data carry no absolute position: a rigid motion of all touched "
                         "points changes no bar length and no angle")

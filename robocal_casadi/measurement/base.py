@@ -9,6 +9,13 @@ minimum is the calibration. Its unknowns besides the robot are of two sorts:
   frame, the sphere centre). Per dataset (names carry the dataset label) and fitted
   again on validation data.
 
+Each model class is also the one home of what its instrument means to the rest of the
+toolkit (``MODELS`` in ``__init__`` maps a dataset kind to its class; nothing else
+switches on the kind): the name of its data table, how the robot takes one reading
+(``reach``), what a planned or simulated unit is (``unit_name``), its plan-table
+columns, how a planned dataset is filled with nominal readings, the minimal coordinates
+of its mounted unknowns the planner varies, and the name of its error in the report.
+
 The engine hands the model ``points(offsets)``: world positions [m] (3 x N, one column
 per data row) of flange-frame points ``offsets`` (3 x 1 or 3 x N) [m], with the robot
 and effect parameters already inside. ``residual`` returns an MX column; ``errors``
@@ -19,7 +26,7 @@ taken over.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Callable, ClassVar
+from typing import Callable, ClassVar, Mapping
 
 import casadi as ca
 import numpy as np
@@ -33,6 +40,26 @@ class MeasurementModel(ABC):
     """Residuals of one dataset; see the module docstring for the unknowns."""
 
     kind: ClassVar[str]
+    table: ClassVar[str]
+    """File name of the data table the simulator writes (``points.csv`` ...)."""
+    reach: ClassVar[str]
+    """How the robot takes one reading: ``"configuration"`` (any configuration in which
+    the instrument sees the target), ``"sockets"`` (the probe seated in the sockets of a
+    placed artifact) or ``"beam"`` (the laser aimed at a surface)."""
+    unit_name: ClassVar[str] = "readings"
+    """What one planned candidate (and one simulated ``--rows``) is, plural."""
+    error_title: ClassVar[str]
+    """What one entry of ``errors`` is called in the report."""
+    measured_columns: ClassVar[tuple[str, ...]] = ()
+    """Table columns the operator fills in when running a plan."""
+    placement_shared: ClassVar[bool] = True
+    """True: the placement unknowns are common to all rows; False: each unit of data
+    (``residual_groups``) has its own, and the planner projects them out per candidate."""
+    separable: ClassVar[bool] = False
+    """True: the residual is exactly ``row_residual`` of every row, in row order, so the
+    engine may evaluate it row by row in compiled code."""
+    pool_size: ClassVar[tuple[int, int]] = (300, 10)
+    """Feasible candidates the planner draws for a plan of ``count``: ``max(a, b count)``."""
 
     def __init__(self, dataset, label: str):
         self.dataset = dataset
@@ -105,12 +132,14 @@ class MeasurementModel(ABC):
 
         return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
 
-    # A model whose residual splits into the same few entries per data row (each row's
-    # entries depending on that row's point only) may say so; the engine then evaluates
-    # residual and Jacobian row by row in compiled code. ``row_residual`` returns None
-    # for models that are not separable. The compiled code is cached by its source, so
-    # numbers that depend on the data must come in as ``data`` or ``constants``, never
-    # as literals: a literal makes every new dataset compile anew.
+    # A model whose residual has the same few entries per data row (each row's entries
+    # depending on that row's point only) gives them by ``row_residual``; the planner
+    # builds its Jacobian rows from it, and when the residual has nothing else
+    # (``separable``) the engine evaluates residual and Jacobian row by row in compiled
+    # code. ``row_residual`` returns None for models without such entries. The compiled
+    # code is cached by its source, so numbers that depend on the data must come in as
+    # ``data`` or ``constants``, never as literals: a literal makes every new dataset
+    # compile anew.
 
     def row_residual(self, point, data, mounted, placement, constants):
         """One row's residual entries from its world point ``point`` [m] (CasADi SX).
@@ -148,3 +177,42 @@ class MeasurementModel(ABC):
     def uses_robot(self) -> bool:
         """False when the data carries its own flange poses (pendant readings)."""
         return True
+
+    # ------------------------------------------------------------------ planning
+
+    @abstractmethod
+    def nominal_mounted(self) -> np.ndarray:
+        """The mounted values the dataset file gives (no fit) [SI]: where a plan is judged."""
+
+    def nominal_placement(self, sockets: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """The placement values where a plan is judged [SI]; ``sockets``: socket name ->
+        world position [m] of one placed artifact, for models that touch sockets."""
+        return np.zeros(len(self.placement))
+
+    def mounted_chart(self, nominal: np.ndarray):
+        """``(names, chart)``: minimal coordinates ``delta`` of the mounted unknowns about
+        ``nominal``, ``chart(delta)`` the mounted vector (CasADi), ``delta = 0`` at
+        ``nominal``. Default: the mounted unknowns themselves."""
+        nominal = ca.DM(np.asarray(nominal, float).reshape(-1, 1))
+        return self.mounted.names, lambda delta: nominal + delta
+
+    @classmethod
+    def plan_columns(cls, joints: list[str]) -> list[str]:
+        """Columns of the table a plan is written as (joint columns given)."""
+        return list(joints) + list(cls.measured_columns)
+
+    @classmethod
+    def plan_row(cls, pose: int, joints: list[float], point: str | None,
+                 socket: np.ndarray | None) -> list:
+        """One plan-table row: joints in the file's units, measured columns empty
+        (``pose``, ``point``, ``socket`` [file length unit] for models that touch sockets)."""
+        return list(joints) + [np.nan] * len(cls.measured_columns)
+
+    @classmethod
+    @abstractmethod
+    def planned_dataset(cls, dataset, joints: np.ndarray, kinematics, *,
+                        pose: np.ndarray | None = None, point: tuple[str, ...] = (),
+                        distance: np.ndarray | None = None):
+        """``dataset`` with the rows ``joints`` (N x dof) [rad or m] and the readings the
+        nominal robot ``kinematics`` would give (``pose``, ``point``: placement and socket
+        per row; ``distance`` [m]: the laser readings aimed at)."""

@@ -14,19 +14,22 @@ Residual per reading ``i`` [m], the distance of the laser point from the sphere 
 of pendant poses (``x, y, z, qw, qx, qy, qz``), the pose as read (the robot then plays no
 part, ``uses_robot`` is False).
 
-Unit beam direction: the engine treats mounted values as free unknowns, so the model
-uses ``n = v / |v|`` (any direction, no pole, no sign choice) and adds one last residual
-``(|v| - 1) * 1 m``. The distance residuals do not change with ``|v|``, so that row is
-zero at the solution and only fixes the length of ``v``: the estimate of ``v`` is a unit
-vector, its covariance is that of the constrained direction, and the Jacobian has full
-rank. ``errors`` leaves that row out.
+Unit beam direction (``robocal_casadi.beam``): the engine treats mounted values as free
+unknowns, so the model uses ``n = beam_direction(v) = v / |v|`` (any direction, no pole,
+no sign choice) and adds one last residual ``(|v| - 1) * 1 m``. The distance residuals
+do not change with ``|v|``, so that row is zero at the solution and only fixes the
+length of ``v``: the estimate of ``v`` is a unit vector, its covariance is that of the
+constrained direction, and the Jacobian has full rank. ``errors`` leaves that row out.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 
+from ..beam import beam_direction, tangent_basis
 from ..errors import InputError
 from ..parameters import ParameterRegistry
 from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
@@ -40,6 +43,10 @@ class SphereLaserModel(MeasurementModel):
     """Residuals of point-laser readings of a sphere; see the module docstring."""
 
     kind = "sphere_laser"
+    table = "scan.csv"
+    reach = "beam"
+    error_title = "distance from the sphere surface"
+    measured_columns = ("distance",)
     invisible_reason = "has no effect on the laser points' distances from the sphere centre"
     absorbed_reason = ("absorbed by the unknown sphere centre (distances from one point do not "
                        "change when the whole robot moves or turns about it)")
@@ -102,8 +109,6 @@ class SphereLaserModel(MeasurementModel):
         ``|w + l d|^2 = R^2`` (``w = T_i p0 - c``, ``d = R_i n``) nearest the measured
         distance; a beam that misses takes its closest approach.
         """
-        from dataclasses import replace
-
         origin, direction = laser_of(mounted)
         scan = self._scan
         if scan is None:
@@ -127,7 +132,7 @@ class SphereLaserModel(MeasurementModel):
     def residual(self, points: PointsFunction, mounted, placement) -> ca.MX:
         origin, v, centre = mounted[0:3], mounted[3:6], placement[0:3]
         length = ca.sqrt(ca.sumsqr(v))
-        n = v / length
+        n = beam_direction(v)
         distance = ca.DM(self.dataset.distance.reshape(1, -1))
         offsets = ca.repmat(origin, 1, self.count) + ca.mtimes(n, distance)  # 3 x N
         if self.uses_robot:
@@ -141,6 +146,21 @@ class SphereLaserModel(MeasurementModel):
         surface = ca.sqrt(ca.sum1(w * w)) - self.dataset.radius
         return ca.vertcat(surface.T, GAUGE_LENGTH * (length - 1.0))
 
+    def row_offset(self, data, mounted):
+        """The laser point ``p0 + l n`` [m] of a reading ``data = [l]`` (flange frame)."""
+        return mounted[0:3] + data[0] * beam_direction(mounted[3:6])
+
+    def row_residual(self, point, data, mounted, placement, constants):
+        """``|point - c| - R`` [m] for one reading (``constants = [R]``); the gauge row
+        ``|v| - 1`` is not a row's, so the model is not ``separable``."""
+        return ca.norm_2(point - placement[0:3]) - constants[0]
+
+    def row_data(self) -> np.ndarray:
+        return np.asarray(self.dataset.distance, dtype=float).reshape(-1, 1)
+
+    def row_constants(self) -> np.ndarray:
+        return np.array([float(self.dataset.radius)])
+
     def errors(self, residual: np.ndarray) -> np.ndarray:
         """|distance of each laser point from the sphere surface| [m] (gauge row left out)."""
         return np.abs(np.asarray(residual, float).ravel()[:self.count])
@@ -148,8 +168,41 @@ class SphereLaserModel(MeasurementModel):
     def error_rows(self) -> np.ndarray:
         return np.arange(self.count)
 
+    # ------------------------------------------------------------------ planning
+
+    def nominal_mounted(self) -> np.ndarray:
+        """``[p0 [m], n]`` from the file's guesses (``n`` made unit)."""
+        return np.concatenate([np.asarray(self.dataset.origin_guess, float),
+                               beam_direction(np.asarray(self.dataset.direction_guess, float))])
+
+    def nominal_placement(self, sockets=None) -> np.ndarray:
+        """The file's sphere centre guess [m]."""
+        return np.asarray(self.dataset.centre_guess, dtype=float).copy()
+
+    def mounted_chart(self, nominal):
+        """``[p0 + d(0:3), n0 + E(n0) d(3:5)]``: the beam moved in its tangent plane
+        (``robocal_casadi.beam``), two coordinates ``laser_n1, laser_n2`` instead of the
+        engine's three with their length fixed by a residual."""
+        nominal = np.asarray(nominal, float)
+        n0 = beam_direction(nominal[3:6])
+        basis = tangent_basis(n0)
+        names = ("laser_x", "laser_y", "laser_z", "laser_n1", "laser_n2")
+
+        def chart(delta):
+            return ca.vertcat(ca.DM(nominal[0:3]) + delta[0:3],
+                              ca.DM(n0) + ca.mtimes(ca.DM(basis), delta[3:5]))
+
+        return names, chart
+
+    @classmethod
+    def planned_dataset(cls, dataset, joints, kinematics, *, pose=None, point=(), distance=None):
+        """The laser readings the planner aimed at, joint readings (no pendant poses)."""
+        return replace(dataset, joints=np.asarray(joints, dtype=float),
+                       distance=np.asarray(distance, dtype=float).ravel(), flange_poses=None,
+                       extras={})
+
 
 def laser_of(mounted) -> tuple[np.ndarray, np.ndarray]:
     """``(p0 [m], unit n)`` from mounted values ``[x, y, z, nx, ny, nz]`` (flange frame)."""
     mounted = np.asarray(mounted, float)
-    return mounted[0:3], mounted[3:6] / np.linalg.norm(mounted[3:6])
+    return mounted[0:3], beam_direction(mounted[3:6])

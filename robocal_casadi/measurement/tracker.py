@@ -13,6 +13,8 @@ frame; the error of a point is the length of that 3-vector.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 
@@ -35,6 +37,11 @@ class TrackerModel(MeasurementModel):
     """Residuals of absolute position data; see the module docstring."""
 
     kind = "tracker_points"
+    table = "points.csv"
+    reach = "configuration"
+    error_title = "position error"
+    measured_columns = ("x", "y", "z")
+    separable = True
     invisible_reason = "has no effect on the measured positions"
     absorbed_reason = "absorbed by the unknown instrument frame (tracker data fix no robot base)"
 
@@ -95,6 +102,17 @@ class TrackerModel(MeasurementModel):
 
     def errors(self, residual: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.asarray(residual, float).reshape(-1, 3), axis=1)
+
+    def nominal_mounted(self) -> np.ndarray:
+        return np.asarray(self.dataset.target, dtype=float).copy()
+
+    @classmethod
+    def planned_dataset(cls, dataset, joints, kinematics, *, pose=None, point=(), distance=None):
+        """The nominal robot's target positions as the measurements, the instrument frame
+        being the world frame (``nominal_placement`` zero, ``R0`` the identity)."""
+        joints = np.asarray(joints, dtype=float)
+        return replace(dataset, joints=joints, measured=kinematics.points(joints, dataset.target),
+                       extras={})
 
     def error_rows(self) -> np.ndarray:
         return np.arange(self.dataset.rows)
