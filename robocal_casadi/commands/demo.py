@@ -2,9 +2,9 @@
 
 Two cases, each calibrated on part of the data and validated on the rest:
 
-* a UR10 measured with a laser tracker (tracker_points): three quarters of series D
-  fit, every fourth pose held out;
-* a Franka Panda seated in the sockets of a plate (artifact_touches): seven plate
+* a UR10 measured with a laser tracker (absolute target positions): three quarters of
+  series D fit, every fourth pose held out;
+* a Franka Panda seated in the sockets of a plate (touches of an artifact): seven plate
   placements fit, two whole placements held out.
 
 Each case writes result.json, robot_calibrated.yaml and report.html (plus a screenshot

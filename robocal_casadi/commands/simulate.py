@@ -11,10 +11,10 @@ controller reports; the measurements come from the true robot at the true joints
 Lengths and angles on the command line are in the robot file's units (the example
 robots: industrial_6r, ur_type, prismatic_rrp in mm/deg, panda_7dof in m/rad).
 
---rows N counts readings (tracker_points, sphere_laser) or placements of the bar or
-artifact (cross_bar: 4 touches each; artifact_touches: --sockets x --touches each).
---noise STD: tracker_points, per measured coordinate; cross_bar and artifact_touches,
-per coordinate of the probe's seat in its socket; sphere_laser, of the laser distance.
+--rows N counts readings (tracker, laser) or placements of the bar or artifact (the
+cross bar: 4 touches each; an artifact plate: --sockets x --touches each).
+--noise STD: tracker, per measured coordinate; touches, per coordinate of the probe's
+seat in its socket; laser, of the laser distance.
 
 --effect NAME[:SPEC], repeatable (values in SI, joints 1-based; without values the
 typical magnitudes shown in brackets are used):
@@ -29,7 +29,7 @@ typical magnitudes shown in brackets are used):
       temperature column is written (see --temperature, --reference-temperature)
 
 Example:
-  robocal simulate --example industrial_6r --kind tracker_points --rows 500 \\
+  robocal simulate --example industrial_6r --kind {tracker} --rows 500 \\
       --noise 0.01 --errors 0.5,0.05 --effect joint_compliance:2,3 --seed 1 --out sim
 """
 
@@ -42,6 +42,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..fields import check_magnitude
 from ..examples import ROBOTS
+from ..measurement import MODELS, TrackerModel
 from ..robot import Robot, load_robot
 from ..simulate import EFFECT_NAMES, READINGS, simulate
 from ..units import Units, parse_units
@@ -49,7 +50,9 @@ from .arguments import output_folder
 
 DEFAULTS = {"joint_compliance": 1e-6, "joint_cyclic": (2e-4, 1e-4, 1e-4, 5e-5),
             "joint_scale": 5e-4, "thermal_drift": 1.2e-5}
-KIND_CHOICES = ("tracker_points", "cross_bar", "artifact_touches", "sphere_laser")
+KIND_CHOICES = tuple(MODELS)
+# the example names its kind through the registry, the one place kind strings are spelled
+__doc__ = __doc__.replace("{tracker}", TrackerModel.kind)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -82,17 +85,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-temperature", type=float, default=20.0, metavar="C",
                         help="T_ref of thermal drift [C] (default 20)")
     parser.add_argument("--readings", choices=READINGS, default="joints",
-                        help="sphere_laser: joint readings or pendant poses (default joints)")
+                        help="laser: joint readings or pendant poses (default joints)")
     parser.add_argument("--bar-length", type=float, metavar="L",
-                        help="cross_bar arm length |AC| = |BD| (default 400 mm)")
+                        help="cross bar: arm length |AC| = |BD| (default 400 mm)")
     parser.add_argument("--socket-distance", type=float, metavar="D",
-                        help="artifact_touches: distance of neighbouring sockets (default 50 mm)")
+                        help="artifact plate: distance of neighbouring sockets (default 50 mm)")
     parser.add_argument("--sockets", type=int, default=2,
-                        help="artifact_touches: sockets on the plate (default 2)")
+                        help="artifact plate: sockets on the plate (default 2)")
     parser.add_argument("--touches", type=int, default=5,
-                        help="artifact_touches: touches per socket and placement (default 5)")
+                        help="artifact plate: touches per socket and placement (default 5)")
     parser.add_argument("--sphere-radius", type=float, metavar="R",
-                        help="sphere_laser: sphere radius (default 25 mm)")
+                        help="laser: sphere radius (default 25 mm)")
     parser.add_argument("--units", metavar="LENGTH,ANGLE",
                         help="units of the dataset file and table, e.g. mm,deg (default: the "
                         "robot file's)")

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..measurement import MODELS as MEASUREMENT_MODELS
 from ..results import DatasetResiduals
 from ..robot import Robot
 from ..units import Units
@@ -20,12 +21,7 @@ MODELS = ("nominal", "geometric", "final")
 MODEL_TITLES = {"nominal": "nominal robot", "geometric": "geometric calibration",
                 "final": "with effects"}
 
-ERROR_NOUN = {
-    "tracker_points": "position error",
-    "sphere_laser": "distance from the sphere surface",
-    "artifact_touches": "artifact error",
-    "cross_bar": "bar error",
-}
+ERROR_NOUN = {kind: model.error_title for kind, model in MEASUREMENT_MODELS.items()}
 
 
 def format_number(value: float | None, digits: int = 4) -> str:

@@ -13,6 +13,7 @@ from functools import partial
 
 import numpy as np
 
+from ..measurement import MODELS, SphereLaserModel
 from ..results import CalibrationResult
 from ..units import Units
 from . import figures
@@ -342,7 +343,7 @@ def diagnosis_table(diagnosis: tuple, units: Units, *, name: str = "diagnosis",
 
 def sphere_section(result: CalibrationResult) -> Section | None:
     spheres = [r for r in result.residuals + result.validation_residuals
-               if r.kind == "sphere_laser"]
+               if MODELS.get(r.kind) is SphereLaserModel]
     if not spheres:
         return None
     units = result.units

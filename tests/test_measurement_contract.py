@@ -1,0 +1,175 @@
+"""The contract every registered measurement model keeps, checked on simulated truth.
+
+Parametrised over ``robocal_casadi.measurement.MODELS``: a model added to the registry
+is checked here too (and fails until the truth file's values for its unknowns are read
+below). Each kind is simulated without noise; the residual evaluated by the engine at the
+true values written to ``truth.yaml`` must vanish, the engine's Jacobian must match
+central differences of its residual, and shapes and units must agree with what the
+model declares.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_casadi.calibration import Problem
+from robocal_casadi.examples import industrial_6r
+from robocal_casadi.measurement import MODELS, MeasurementModel, model_for
+from robocal_casadi.simulate import simulate
+from robocal_casadi.transforms import invert, pose_from_xyz_rpy
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZES = {"rows": 6, "sockets": 2, "touches": 3}  # small: readings or placements
+
+
+def _length(truth: dict, values) -> np.ndarray:
+    scale = {"mm": 1e-3, "m": 1.0}[truth["units"]["length"]]
+    return np.asarray(values, float) * scale
+
+
+def _angle(truth: dict, values) -> np.ndarray:
+    scale = {"deg": np.pi / 180, "rad": 1.0}[truth["units"]["angle"]]
+    return np.asarray(values, float) * scale
+
+
+# The truth file's mounted and placement values in each model's unknowns (SI), read here
+# independently of the models: (mounted vector, placement vector).
+
+def _tracker_truth(truth, model):
+    T_world_instrument = pose_from_xyz_rpy(_length(truth, truth["placement"]["instrument"]["xyz"]),
+                                           _angle(truth, truth["placement"]["instrument"]["rpy"]))
+    T = invert(T_world_instrument)
+    model.R0 = T[:3, :3]  # the instrument frame's rotation, angles zero about it
+    return (_length(truth, truth["mounted"]["target"]),
+            np.concatenate([T[:3, 3], np.zeros(3)]))
+
+
+def _touch_truth(truth, model):
+    sockets = truth["placement"]["sockets"]
+    placement = np.zeros(len(model.placement))
+    for name in model.placement.names:  # <label>/pose<k>/<socket>_<axis>
+        pose, socket, axis = re.fullmatch(r".*/pose(\d+)/(.+)_([xyz])", name).groups()
+        placement[model.placement.index(name)] = _length(
+            truth, sockets[int(pose)][socket])["xyz".index(axis)]
+    return _length(truth, truth["mounted"]["probe"]), placement
+
+
+def _laser_truth(truth, model):
+    mounted = np.concatenate([_length(truth, truth["mounted"]["laser_origin"]),
+                              truth["mounted"]["laser_direction"]])
+    return mounted, _length(truth, truth["placement"]["sphere_centre"])
+
+
+TRUTH = {"tracker_points": _tracker_truth, "cross_bar": _touch_truth,
+         "artifact_touches": _touch_truth, "sphere_laser": _laser_truth}
+
+
+@pytest.fixture(scope="module", params=sorted(MODELS))
+def case(request, tmp_path_factory):
+    """(model, problem, true x) for a noise-free simulation of one registered kind."""
+    kind = request.param
+    assert kind in TRUTH, f"no truth reader for the registered kind {kind!r}"
+    rows = 16 if MODELS[kind].unit_name == "readings" else 3
+    sim = simulate(industrial_6r(), kind, out_dir=tmp_path_factory.mktemp(kind), rows=rows,
+                   noise=0.0, geometric_errors=(5e-4, 1e-3), seed=3, progress=False,
+                   sockets=SIZES["sockets"], touches=SIZES["touches"])
+    dataset = sim.load()
+    model = model_for(dataset, "d")
+    problem = Problem(dataset.robot, [model])
+    truth = yaml.safe_load(sim.truth_path.read_text())
+    x = problem.initial().copy()
+    registry = dataset.robot.parameters()
+    for name, value in truth["robot"].items():
+        scale = {"length": _length(truth, 1.0), "angle": _angle(truth, 1.0)}.get(
+            registry.quantity(name), 1.0)
+        x[problem.unknowns.index(name)] = float(value) * float(scale)
+    mounted, placement = TRUTH[kind](truth, model)
+    x[problem.mounted_indices(model)] = mounted
+    x[problem.placement_indices(model)] = placement
+    return model, problem, x
+
+
+def test_every_registered_model_says_what_the_toolkit_asks():
+    for kind, model in MODELS.items():
+        assert issubclass(model, MeasurementModel) and model.kind == kind
+        assert model.reach in ("configuration", "sockets", "beam")
+        assert model.table.endswith(".csv") and model.error_title and model.unit_name
+
+
+def test_residual_vanishes_at_the_simulated_truth(case):
+    model, problem, x = case
+    r = problem.residual(x)
+    # touches are seated by inverse kinematics to 1e-9 m; the rest is exact geometry
+    assert np.max(np.abs(r)) < 1e-8, f"{model.kind}: largest residual {np.max(np.abs(r)):.3g} m"
+    off = x.copy()
+    off[problem.slices["robot"]] += 1e-4  # 0.1 mm and 0.1 mrad off: the data see it
+    assert np.max(np.abs(problem.residual(off))) > 1e-6
+
+
+def test_jacobian_matches_central_differences(case):
+    model, problem, x = case
+    rng = np.random.default_rng(0)
+    x = x + 1e-5 * rng.normal(size=len(x))  # off the truth: no special point
+    J = problem.jacobian(x)
+    step = 1e-6
+    numeric = np.empty_like(J)
+    for j in range(len(x)):
+        e = np.zeros(len(x))
+        e[j] = step
+        numeric[:, j] = (problem.residual(x + e) - problem.residual(x - e)) / (2 * step)
+    scale = max(np.max(np.abs(J)), 1.0)
+    assert np.max(np.abs(J - numeric)) < 1e-6 * scale, model.kind
+
+
+def test_shapes_agree_with_the_declarations(case):
+    model, problem, x = case
+    r = problem.residual(x)
+    assert r.shape == (model.residual_size(),)
+    assert problem.jacobian(x).shape == (model.residual_size(), len(x))
+    errors = model.errors(r)
+    assert errors.shape == model.error_rows().shape
+    assert np.all(model.errors(np.ones_like(r)) > 0)
+    assert model.residual_groups().shape == (model.residual_size(),)
+    assert len(model.nominal_mounted()) == len(model.mounted)
+    assert len(model.nominal_placement({s: np.zeros(3) for s in
+                                        getattr(model.dataset, "point", ())})) == \
+        len(model.placement)
+    names, chart = model.mounted_chart(model.nominal_mounted())
+    assert np.allclose(np.asarray(chart(np.zeros(len(names)))).ravel(), model.nominal_mounted())
+    if model.separable:  # the residual is exactly the rows' entries
+        assert model.row_data().shape[0] == model.dataset.rows
+
+
+def test_units_residual_in_metres_per_metre_of_placement(case):
+    """Residuals and length unknowns share one SI unit: moving the instrument by 1 um
+    changes the residual by about 1 um (a column of a length placement unknown has
+    entries of order one), and the errors are lengths of the residual's parts."""
+    model, problem, x = case
+    J = problem.jacobian(x)
+    columns = problem.placement_indices(model)
+    for name, column in zip(model.placement.names, columns):
+        if model.placement.quantity(name) == "length":
+            assert 0.5 < np.max(np.abs(J[:, column])) <= 1.0 + 1e-9, name
+    r = problem.residual(x) + 1e-6
+    assert np.all(model.errors(r) < 2e-6)
+
+
+def test_kind_strings_live_only_in_the_registry():
+    """Only the measurement package and the dataset reader spell a dataset kind; the
+    planner, simulator, report and commands ask the measurement model."""
+    spelled = re.compile("|".join(sorted(MODELS)))
+    allowed = {ROOT / "robocal_casadi" / "datasets.py"}
+    found = []
+    for folder in (ROOT / "robocal_casadi", ROOT / "planning"):
+        for path in sorted(folder.rglob("*.py")):
+            if path in allowed or (ROOT / "robocal_casadi" / "measurement") in path.parents:
+                continue
+            for number, line in enumerate(path.read_text().splitlines(), start=1):
+                if spelled.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "dataset kinds spelled outside the registry:\n" + "\n".join(found)
