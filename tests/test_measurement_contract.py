@@ -173,3 +173,58 @@ def test_kind_strings_live_only_in_the_registry():
                 if spelled.search(line):
                     found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
     assert not found, "dataset kinds spelled outside the registry:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("kind", sorted(MODELS))
+def test_planner_rows_are_the_engine_jacobian_of_the_planned_data(kind, tmp_path):
+    """The planner's Jacobian rows of a candidate are the engine's Jacobian of the
+    dataset made of that candidate, at the nominal robot and instrument: the mounted
+    columns through the model's chart (the beam in its tangent plane), local placement
+    unknowns projected out, shared ones kept."""
+    from planning.candidates import generate
+    from planning.planned import planned_dataset
+    from planning.reach import Workspace
+    from planning.rows import RowModel
+    from planning.setup import setup_from_dataset
+    from robocal_casadi.datasets import load_dataset
+    from robocal_casadi.kinematics import Kinematics
+
+    sim = simulate(industrial_6r(), kind, out_dir=tmp_path / kind, rows=2, seed=1,
+                   progress=False, sockets=2, touches=2)
+    dataset = load_dataset(sim.dataset_path, require_data=False)
+    setup = setup_from_dataset(dataset)
+    kinematics = Kinematics(setup.robot)
+    workspace = Workspace(kinematics, table_height=setup.table_height)
+    candidates = generate(setup, workspace, 10, np.random.default_rng(0))
+    if not setup.model.placement_shared:
+        candidates = candidates[:1]  # one placement: its sockets are the local unknowns
+    block = np.vstack([b.X for b in RowModel(setup, kinematics).blocks(candidates)])
+
+    model = model_for(planned_dataset(dataset, candidates, kinematics), "plan")
+    problem = Problem(dataset.robot, [model])
+    if hasattr(model, "R0"):
+        model.R0 = np.eye(3)  # the planner's instrument frame is the world frame
+    x = problem.initial().copy()
+    x[problem.slices["robot"]] = kinematics.nominal
+    x[problem.mounted_indices(model)] = model.nominal_mounted()
+    x[problem.placement_indices(model)] = model.nominal_placement(candidates[0].sockets)
+    J = problem.jacobian(x)
+    nominal = model.nominal_mounted()
+    names, chart = model.mounted_chart(nominal)
+    chart_jacobian = np.column_stack([  # d mounted / d chart coordinates (chart is affine)
+        np.asarray(chart(np.eye(len(names))[:, k])).ravel() - nominal
+        for k in range(len(names))])
+    G = np.hstack([J[:, problem.slices["robot"]],
+                   J[:, problem.mounted_indices(model)] @ chart_jacobian])
+    S = J[:, problem.placement_indices(model)]
+    if model.placement_shared:
+        engine = np.hstack([G, S])
+    else:
+        U, s, _ = np.linalg.svd(S, full_matrices=False) if S.shape[1] else (
+            np.zeros((len(G), 0)), np.zeros(0), None)
+        U = U[:, s > 1e-12 * max(s.max(initial=0.0), 1e-300)]
+        engine = G - U @ (U.T @ G)
+    engine = engine[np.abs(engine).sum(axis=1) > 0]  # the laser's gauge row has no chart part
+    assert engine.shape == block.shape
+    assert np.allclose(engine.T @ engine, block.T @ block, rtol=1e-9,
+                       atol=1e-9 * np.max(np.abs(block.T @ block)))
