@@ -62,7 +62,7 @@ class RowModel:
         self.mounted, self._chart = template.mounted_chart(self.nominal)
         self.parameters = tuple(kinematics.registry.names) + tuple(self.mounted)
         self.shared = len(template.placement) if self.instrument.placement_shared else 0
-        self._per_row = type(template).row_residual is not MeasurementModel.row_residual
+        self._per_row = template.per_row
         self._template = template
         self._functions: dict[tuple[str, ...], tuple[ca.Function, MeasurementModel]] = {}
         if self._per_row:

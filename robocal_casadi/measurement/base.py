@@ -141,6 +141,11 @@ class MeasurementModel(ABC):
     # ``data`` or ``constants``, never as literals: a literal makes every new dataset
     # compile anew.
 
+    @property
+    def per_row(self) -> bool:
+        """True when the model gives its residual's entries row by row (``row_residual``)."""
+        return type(self).row_residual is not MeasurementModel.row_residual
+
     def row_residual(self, point, data, mounted, placement, constants):
         """One row's residual entries from its world point ``point`` [m] (CasADi SX).
 
