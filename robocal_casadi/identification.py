@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .degeneracy import check_dataset, check_finite
 from .effects.base import Effect
 from .errors import InputError, SolverError
 from .identifiability import PRACTICAL_TOLERANCE, analyse
@@ -83,7 +84,9 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
                                  for m in problem.models}))
-    return analyse(problem.jacobian(x), names, candidate_index, placement,
+    jacobian = problem.jacobian(x)
+    check_finite(problem.models, problem.residual(x), jacobian, "the fitted placement")
+    return analyse(jacobian, names, candidate_index, placement,
                    invisible_reason=invisible, absorbed_reason=absorbed, tolerance=tolerance)
 
 
@@ -158,6 +161,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     if not datasets:
         raise InputError("no dataset given")
     _check_same_robot(datasets + list(validation))
+    for dataset in datasets + list(validation):
+        check_dataset(dataset)
     robot = datasets[0].robot
     models = models_for(datasets)
     problem = Problem(robot, models, effects)
