@@ -325,44 +325,59 @@ class Tracker:
                 ) -> tuple[tuple[np.ndarray, float, float] | None, int]:
         """Joints meeting ``goal`` within the joint limits (no step bound), smallest move
         from ``previous`` near where they were found: ``((q, position_error,
-        angle_error) or None, iterations)``."""
+        angle_error) or None, iterations)``.
+
+        First the warm start without the step bound (when there is one), then inverse
+        kinematics of the goal pose and of it turned half about its z axis, each refined
+        by the tracking solver towards the smallest move (kept as found where the
+        refinement does not verify, e.g. a redundant arm stopped by a limit).
+        """
         iterations = 0
-        starts = []
         if self.max_step is not None:
-            starts.append(None)  # the warm start without the step bound
-        if self.seed_from_ik:
-            starts.append("ik")
-        for seed in starts:
-            if seed == "ik":
-                seed = self._ik_seed(previous, goal)
-                if seed is None:
-                    continue
-            outcome = self.solver.solve(previous, goal, self.lower, self.upper, start=seed)
+            outcome = self.solver.solve(previous, goal, self.lower, self.upper)
             iterations += outcome.iterations
             q, position_error, angle_error, verified = self._settle(
                 outcome, previous, goal, self.lower, self.upper)
             if verified:
                 return (q, position_error, angle_error), iterations
-        return None, iterations
+        if not self.seed_from_ik:
+            return None, iterations
+        found = []
+        for seed in self._ik_solutions(previous, goal):
+            outcome = self.solver.solve(previous, goal, self.lower, self.upper, start=seed)
+            iterations += outcome.iterations
+            settled = self._settle(outcome, previous, goal, self.lower, self.upper)
+            if not settled[3]:
+                errors = self.problem.errors(seed, goal, self.up, self.p)
+                as_found = SolveOutcome(seed, True, False, 0, float(errors[0]),
+                                        float(errors[1]))
+                settled = self._settle(as_found, previous, goal, self.lower, self.upper)
+            if settled[3]:
+                found.append(settled[:3])
+        if not found:
+            return None, iterations
+        return min(found, key=lambda f: float(self.weights @ (f[0] - previous) ** 2)), iterations
 
-    def _ik_seed(self, previous: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
-        """Inverse kinematics of the goal pose ``A''`` within the joint limits, started
-        from ``previous``, then from random joints (fixed seed: repeatable)."""
+    def _ik_solutions(self, previous: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+        """Inverse kinematics within the joint limits of the goal pose ``A''`` and of
+        ``A'' Rz(pi)`` (the level x axis the other way), started from ``previous``, then
+        from random joints (fixed seed: repeatable)."""
         from ..ik import inverse_kinematics
 
         pose = np.eye(4)
         pose[:3, 3] = goal[0:3]
         pose[:3, 0], pose[:3, 1], pose[:3, 2] = goal[3:6], goal[6:9], goal[9:12]
+        flipped = pose.copy()
+        flipped[:3, 0:2] *= -1.0
         solver = inverse_kinematics(self.problem.kinematics, "pose")
-        result = solver.solve(pose, seed=previous, p=self.p, restarts=IK_RESTARTS, rng=0,
-                              position_tolerance=POSITION_TOLERANCE * 1e-3,
-                              orientation_tolerance=ANGLE_TOLERANCE * 1e-3)
-        return result.q if result.success else None
-
-    def _refuse(self, status: str, start: float) -> TrackStep:
-        assert self._previous is not None  # set by ``step`` before any refusal
-        return TrackStep(self._previous, status, (time.perf_counter() - start) * 1e3,
-                         math.nan)
+        out = []
+        for target in (pose, flipped):
+            result = solver.solve(target, seed=previous, p=self.p, restarts=IK_RESTARTS, rng=0,
+                                  position_tolerance=POSITION_TOLERANCE * 1e-3,
+                                  orientation_tolerance=ANGLE_TOLERANCE * 1e-3)
+            if result.success:
+                out.append(result.q)
+        return out
 
     def _nearest_branch(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
                         upper: np.ndarray, goal: np.ndarray) -> np.ndarray:
