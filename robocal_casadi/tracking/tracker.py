@@ -22,6 +22,9 @@ import numpy as np
 from ..errors import InputError
 from ..robot import Robot
 from .problem import TrackingProblem
+from ..checks import choice, rotation_matrix
+from .conventions import (MARKER_CONVENTIONS, MarkerConvention, method_observation,
+                          observation_rotation)
 from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
 
 #: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
@@ -118,7 +121,11 @@ class Tracker:
     QP solver of ``sqpmethod`` (``qrqp`` or ``qpoases``); ``compiled`` runs the per-cycle
     CasADi functions as machine code (compiled once per robot structure and cached on
     disk, see ``codegen``); ``problem`` a ``TrackingProblem`` of the same robot structure
-    to share; ``seed_from_ik`` lets a cycle that the warm start cannot solve start again
+    to share; ``camera_rotation`` (3x3) the camera axes in the end frame (hand-eye; default
+    parallel to it); ``marker_convention`` how an observation's orientation reads:
+    ``method`` ``(x, y, z [m], roll, pitch, yaw [rad])`` of the target frame, or
+    ``opencv`` ``(tvec [m], rvec [rad])`` of an OpenCV/ArUco marker
+    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot solve start again
     from inverse kinematics of the goal pose (a first capture far from the answer, a
     target that jumped).
 
@@ -143,7 +150,9 @@ class Tracker:
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
                  method: str = "gauss_newton", qpsol: str = "qrqp", compiled: bool = True,
-                 problem: TrackingProblem | None = None, seed_from_ik: bool = True):
+                 problem: TrackingProblem | None = None, seed_from_ik: bool = True,
+                 camera_rotation: Sequence[Sequence[float]] | None = None,
+                 marker_convention: MarkerConvention = "method"):
         if robot.dof < 6:
             raise InputError(f"tracking needs at least 6 joints (three position and three "
                              f"orientation conditions); robot {robot.name!r} has {robot.dof}")
@@ -162,6 +171,13 @@ class Tracker:
                              where="standoff")
         self.standoff = standoff
         self.up = unit_up(up)
+        self.marker_convention = choice(marker_convention, MARKER_CONVENTIONS,
+                                        "marker_convention")
+        self.camera_rotation = (np.eye(3) if camera_rotation is None
+                                else rotation_matrix(camera_rotation, "camera_rotation"))
+        # The method's own description needs no conversion per cycle.
+        self._converts = (self.marker_convention != "method"
+                          or not np.array_equal(self.camera_rotation, np.eye(3)))
         self.max_step = None
         if max_step is not None:
             try:
@@ -237,6 +253,11 @@ class Tracker:
         return pose
 
     def _goal_vector(self, q_capture: np.ndarray, observation: np.ndarray) -> np.ndarray:
+        if self._converts:
+            observation = method_observation(
+                self.camera_xyz, self.camera_rotation, observation[:3],
+                observation_rotation(observation, self.marker_convention),
+                self.marker_convention)
         self._goal_in[0][:] = q_capture
         self._goal_in[1][:] = observation
         self._goal_evaluate()
@@ -378,6 +399,11 @@ class Tracker:
             if result.success:
                 out.append(result.q)
         return out
+
+    def _refuse(self, status: str, start: float) -> TrackStep:
+        assert self._previous is not None  # set by ``step`` before any refusal
+        return TrackStep(self._previous, status, (time.perf_counter() - start) * 1e3,
+                         math.nan)
 
     def _nearest_branch(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
                         upper: np.ndarray, goal: np.ndarray) -> np.ndarray:
