@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 
@@ -35,7 +35,10 @@ IK_RESTARTS = 4
 #: How far outside a bound [rad or m] a verified answer may sit (rounding) before clipping.
 BOUND_TOLERANCE = 1e-12
 STATUSES = ("ok", "limited", "unreachable", "failed")
-METHODS = ("gauss_newton", "sqpmethod", "ipopt")
+TrackingMethod = Literal["gauss_newton", "sqpmethod", "ipopt"]
+QpSolver = Literal["qrqp", "qpoases"]
+METHODS: tuple[str, ...] = ("gauss_newton", "sqpmethod", "ipopt")
+QPSOLS: tuple[str, ...] = ("qrqp", "qpoases")
 
 
 @dataclass(frozen=True)
@@ -149,16 +152,16 @@ class Tracker:
                  up: Sequence[float] = (0.0, 0.0, 1.0),
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
-                 method: str = "gauss_newton", qpsol: str = "qrqp", compiled: bool = True,
+                 method: TrackingMethod = "gauss_newton", qpsol: QpSolver = "qrqp",
+                 compiled: bool = True,
                  problem: TrackingProblem | None = None, seed_from_ik: bool = True,
                  camera_rotation: Sequence[Sequence[float]] | None = None,
                  marker_convention: MarkerConvention = "method"):
         if robot.dof < 6:
             raise InputError(f"tracking needs at least 6 joints (three position and three "
                              f"orientation conditions); robot {robot.name!r} has {robot.dof}")
-        if method not in METHODS:
-            raise InputError(f"unknown method {method!r}; expected one of {list(METHODS)}",
-                             where="method")
+        method = choice(method, METHODS, "method")
+        qpsol = choice(qpsol, QPSOLS, "qpsol")
         self.robot = robot
         self.problem = problem if problem is not None else TrackingProblem(robot)
         n = robot.dof
