@@ -16,10 +16,10 @@ from robocal_casadi import Tracker, calibrate, compensate, load_dataset, simulat
 from robocal_casadi.checks import choice, count, positive, rotation_matrix
 from robocal_casadi.errors import ArgumentError, RobocalError
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.identification import Problem, models_for
+from robocal_casadi.calibration import Problem, models_for
 from robocal_casadi.ik import InverseKinematics
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.solver import solve
+from robocal_casadi.calibration.solver import solve
 from planning import design_plan
 from planning.indices import canonical
 

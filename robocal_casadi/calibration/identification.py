@@ -19,16 +19,16 @@ from typing import Sequence
 
 import numpy as np
 
-from .checks import choice, count, positive
-from .datasets import DatasetBase
+from ..checks import choice, count, positive
+from ..datasets import DatasetBase
+from ..effects.base import Effect
+from ..errors import ArgumentError, InputError, SolverError
+from ..measurement import model_for
+from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
+                       RmsSummary)
 from .degeneracy import check_dataset, check_finite
-from .effects.base import Effect
-from .errors import ArgumentError, InputError, SolverError
 from .identifiability import PRACTICAL_TOLERANCE, analyse
-from .measurement import model_for
 from .problem import Problem
-from .results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
-                      RmsSummary)
 from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]

@@ -24,8 +24,8 @@ from typing import Literal
 import casadi as ca
 import numpy as np
 
-from .checks import array, choice, count, positive
-from .errors import ArgumentError, SolverError
+from ..checks import array, choice, count, positive
+from ..errors import ArgumentError, SolverError
 from .problem import Problem
 
 Method = Literal["lm", "ipopt", "linearised", "two_stage"]
