@@ -23,8 +23,8 @@ import numpy as np
 from ..datasets import joint_readings as checked_joint_readings
 from ..datasets import referenced_robot
 from ..errors import InputError
-from ..fields import (check_keys, check_magnitude, file_name, load_yaml, mapping, quantities,
-                      quantity, require, units_of, vector)
+from ..fields import (check_keys, check_magnitude, cut, load_yaml, mapping, quantities,
+                      quantity, referenced_file, require, units_of, vector)
 from ..robot import Robot
 from ..table import read_table
 from ..units import Units
@@ -65,7 +65,8 @@ class TrackingJob:
                 f"up={list(self.up)})")
 
 
-def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> TrackingJob:
+def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
+                      allow_outside_data: bool = False) -> TrackingJob:
     """Read and check a tracking job and its observation table.
 
     ``robot`` replaces the robot file the job names (e.g. a calibrated robot). Every
@@ -75,7 +76,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
     content = load_yaml(path, what="tracking job")
     kind = require(content, "kind", file=path)
     if kind != "tracking":
-        raise InputError(f"expected kind 'tracking', got {kind!r}", file=path, where="kind")
+        raise InputError(f"expected kind 'tracking', got {cut(kind)}", file=path, where="kind")
     check_keys(content, KEYS, file=path)
     units = units_of(content, file=path)
     L = units.length_scale
@@ -98,8 +99,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
                          where="up"))
     largest = float(np.abs(up).max())
     up = unit_up(up / largest if largest > 0 else up, file=path)  # scaled first: no overflow
-    data_path = path.parent / file_name(require(content, "data", file=path), file=path,
-                                        where="data")
+    data_path = referenced_file(content, "data", file=path, allow_outside=allow_outside_data)
     if not data_path.is_file():
         raise InputError(f"observation table {data_path} not found", file=path, where="data")
     table = read_table(data_path, required=("time", *OBSERVATION_COLUMNS))
