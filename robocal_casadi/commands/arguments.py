@@ -15,6 +15,7 @@ a long computation:
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import stat
 from pathlib import Path
@@ -145,12 +146,17 @@ def add_allow_outside_data(parser: argparse.ArgumentParser) -> None:
 
 
 def input_file(path: str | Path, what: str) -> Path:
-    """A file to read: it exists and is not a folder."""
+    """A file to read: it exists and is not a folder (nor a loop of links)."""
     path = Path(path)
-    if path.is_dir():
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", file=path) from None
+    except OSError as error:
+        reason = "a loop of symbolic links" if error.errno == errno.ELOOP else error.strerror
+        raise InputError(f"cannot read the {what} ({reason})", file=path) from None
+    if stat.S_ISDIR(mode):
         raise InputError(f"expected a {what}, found a folder", file=path)
-    if not path.exists():
-        raise InputError(f"{what} not found", file=path)
     return path
 
 

@@ -241,7 +241,8 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed, units=units if isinstance(units, Units) else None,
         mounted_error=mounted_error, payload=payload, payload_com=payload_com,
         temperature=temperature, reference_temperature=args.reference_temperature,
-        readings=args.readings, sockets=args.sockets, touches=args.touches, **options)
+        readings=args.readings, sockets=args.sockets, touches=args.touches, force=args.force,
+        **options)
     print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
           f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
     return 0
