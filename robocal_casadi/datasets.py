@@ -158,7 +158,7 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if data_path is not None:
         if data_path.is_dir():
             raise InputError(f"the data table {data_path} is a folder", file=path, where="data")
-        if not data_path.exists() and require_data:
+        if not data_path.exists() and not data_path.is_symlink() and require_data:
             raise InputError(f"data table {data_path} not found", file=path, where="data")
         # Planning describes a set-up: its table may be missing or an unmeasured plan.
         if require_data:
@@ -220,7 +220,7 @@ def referenced_robot(content: dict, path: Path, robot: Robot | None = None
     if robot is None:
         if robot_path.is_dir():
             raise InputError(f"robot file {robot_path} is a folder", file=path, where="robot")
-        if not robot_path.is_file():
+        if not robot_path.is_file() and not robot_path.is_symlink():  # a loop: named below
             raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
         robot = load_robot(robot_path)
     return robot_path, robot

@@ -100,7 +100,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
     largest = float(np.abs(up).max())
     up = unit_up(up / largest if largest > 0 else up, file=path)  # scaled first: no overflow
     data_path = referenced_file(content, "data", file=path, allow_outside=allow_outside_data)
-    if not data_path.is_file():
+    if not data_path.is_file() and not data_path.is_symlink():  # a loop: named below
         raise InputError(f"observation table {data_path} not found", file=path, where="data")
     table = read_table(data_path, required=("time", *OBSERVATION_COLUMNS))
     joints = checked_joint_readings(table, robot, units, set(), robot_path)
