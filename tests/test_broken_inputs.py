@@ -788,7 +788,7 @@ def test_a_bad_command_line_is_one_line_too(capsys):
         assert "--help" in err
 
 
-# ----------------------------------------------------------------------------- outputs never destroy
+# --------------------------------------------------------------------- outputs never destroy
 
 
 def _one_line(capsys, *fragments) -> str:
@@ -1007,7 +1007,7 @@ def test_a_bad_seed_is_one_line(capsys, verb_line, seed):
     _one_line(capsys, "--seed")
 
 
-# ----------------------------------------------------------------------------- YAML and data references
+# ---------------------------------------------------------------- YAML and data references
 
 
 def test_merge_keys_are_read_as_yaml_defines_them(templates, tmp_path):
