@@ -266,7 +266,7 @@ class Problem:
         key = ("separable", id(model))
         if key in self._maps:
             return self._maps[key]
-        if not model.separable:
+        if not (model.separable and model.per_row):
             self._maps[key] = None
             return None
         row = self._row[0]
