@@ -127,7 +127,7 @@ def test_printed_pages_keep_tables_whole_and_figures_with_captions(tmp_path, pri
     figure's caption is on a page that holds an image."""
     from robocal_casadi.report import build_document
 
-    result = synthetic_result(validation=True, effects=False, bar=True)
+    result = synthetic_result(validation=False, effects=False)
     path = write_report(result, tmp_path / "report.html", pdf=True, printer=printer)
     pdf = path.with_suffix(".pdf")
     pages = _page_texts(pdf)
