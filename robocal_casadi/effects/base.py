@@ -197,11 +197,11 @@ class Effect(ABC):
                 out.append(Implausible(parameter, value, unit, limits, math.inf,
                                        f"{parameter} = {value} is not a finite number"))
             elif limits.sign and value * limits.sign < 0:
-                direction = "negative" if limits.sign > 0 else "positive"
+                found, expected = ("negative", "positive") if limits.sign > 0 else \
+                    ("positive", "negative")
                 out.append(Implausible(parameter, value, unit, limits, math.inf,
-                                       f"{parameter} = {value:.3g} {unit} is {direction}; on "
-                                       f"real robots it is {'positive' if limits.sign > 0 else 'negative'}"
-                                       f" ({limits.basis})"))
+                                       f"{parameter} = {value:.3g} {unit} is {found}; on real "
+                                       f"robots it is {expected} ({limits.basis})"))
             elif magnitude > limits.maximum:
                 factor = magnitude / limits.maximum
                 out.append(Implausible(parameter, value, unit, limits, factor,

@@ -17,8 +17,9 @@ Which it is, and its title, come from the effect's class (``Effect.plot_variable
 evaluation (``Effect.contribution``, the same ``delta`` the identification used) with
 the values of the result (``result.effect_models``, ``result.effect_values``, SI), on
 the calibrated geometry: the joint correction ``dq_j`` [rad or m] for joint effects, the
-relative length change ``k (T - T_ref)`` [1] for thermal drift. Everything returned here is in display units
-(the robot file's length and angle units; torques in N m, forces in N).
+relative length change ``k (T - T_ref)`` [1] for thermal drift. Everything returned here
+is in display units (the robot file's length and angle units; torques in N m, forces in
+N).
 """
 
 from __future__ import annotations
