@@ -12,11 +12,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from robocal_casadi import diagnosis
+from robocal_casadi.calibration import calibrate, diagnosis
 from robocal_casadi.effects import EFFECTS, Effect, Plausible, RowContext, TrueWorld
 from robocal_casadi.effects.motion import direction_column
 from robocal_casadi.examples import ROBOTS
-from robocal_casadi.identification import calibrate
 from robocal_casadi.simulate import simulate
 from robocal_casadi.units import Units
 

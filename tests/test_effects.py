@@ -402,7 +402,7 @@ def test_data_selection_keeps_the_directions_of_the_full_table():
     from dataclasses import dataclass
 
     from robocal_casadi.effects.motion import direction_values, directions_of_motion
-    from robocal_casadi.selection import dataset_rows
+    from robocal_casadi.calibration.selection import dataset_rows
 
     rng = np.random.default_rng(2)
     Q = rng.normal(size=(12, 3))

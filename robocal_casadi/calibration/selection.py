@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .effects.motion import with_directions
+from ..effects.motion import with_directions
 from .problem import Problem
 
 
