@@ -187,7 +187,8 @@ def test_plausible_range_check_names_the_parameter_and_the_factor(name):
     target = names[-1]
     limits = effect.plausible(target)
     too_big = {**inside, target: 10 * limits.maximum}
-    (finding,) = effect.check_plausible(too_big)
+    # (a sine and cosine pair is also too large as a whole: that is its own entry)
+    (finding,) = [f for f in effect.check_plausible(too_big) if f.parameter == target]
     assert finding.parameter == target and finding.factor == pytest.approx(10.0)
     assert target in finding.message and "10 times" in finding.message
     if limits.sign:
@@ -198,6 +199,25 @@ def test_plausible_range_check_names_the_parameter_and_the_factor(name):
     if limits.minimum > 0:
         (finding,) = effect.check_plausible({**inside, target: limits.minimum / 4})
         assert finding.factor == pytest.approx(4.0) and "smallest" in finding.message
+
+
+def test_harmonic_amplitudes_and_the_refusal_text():
+    """A sine and cosine pair each within range but together too large is caught; a small
+    compliance is weak, not absurd; a large one is refused in words."""
+    deg = np.pi / 180
+    cyclic = EFFECTS["joint_cyclic"]((2,))
+    (finding,) = cyclic.check_plausible({"a1_2": 0.04 * deg, "b1_2": 0.04 * deg})
+    assert finding.parameter == "a1_2/b1_2"
+    assert finding.factor == pytest.approx(np.hypot(0.04, 0.04) / 0.05)
+    coupling = EFFECTS["joint_coupling"]((4,), (6,))
+    assert coupling.check_plausible({"sin4_q6": 0.03 * deg, "cos4_q6": 0.03 * deg}) == ()
+    assert "amplitude" in coupling.implausibility({"sin4_q6": 0.04 * deg,
+                                                   "cos4_q6": 0.04 * deg})
+    compliance = EFFECTS["joint_compliance"]((2,))
+    assert compliance.implausibility({"c2": 1e-8}) == ""
+    assert len(compliance.check_plausible({"c2": 1e-8})) == 1
+    assert "c2 = 0.001" in compliance.implausibility({"c2": 1e-3})
+    assert "negative" in compliance.implausibility({"c2": -1e-6})
 
 
 def test_the_stated_ranges_of_real_robots():

@@ -103,6 +103,24 @@ class Implausible:
     message: str
 
 
+def amplitude_check(effect: "Effect", pairs, values: Mapping[str, float],
+                    limits: Plausible) -> tuple[Implausible, ...]:
+    """``Implausible`` for each (sine, cosine) parameter pair whose amplitude
+    ``hypot(sine, cosine)`` exceeds ``limits.maximum``, named ``sine/cosine``."""
+    out = []
+    for sine, cosine in pairs:
+        if sine not in values and cosine not in values:
+            continue
+        amplitude = math.hypot(float(values.get(sine, 0.0)), float(values.get(cosine, 0.0)))
+        if amplitude > limits.maximum:
+            factor = amplitude / limits.maximum
+            out.append(Implausible(f"{sine}/{cosine}", amplitude, effect.unit, limits, factor,
+                                   f"the amplitude of {sine} and {cosine}, {amplitude:.3g} "
+                                   f"{effect.unit}, is {factor:.3g} times the largest plausible "
+                                   f"{limits.maximum:.3g} {effect.unit} ({limits.basis})"))
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class Contribution:
     """An effect evaluated on N rows: ``dq`` (N x dof) [rad or m] and ``dp`` (N x number of
@@ -214,7 +232,22 @@ class Effect(ABC):
                                        f"{parameter} = {value:.3g} {unit} is {factor:.3g} times "
                                        f"smaller than the smallest seen on real robots, "
                                        f"{limits.minimum:.3g} {unit} ({limits.basis})"))
-        return tuple(out)
+        return tuple(out) + self._check_amplitudes(values)
+
+    def _check_amplitudes(self, values: Mapping[str, float]) -> tuple[Implausible, ...]:
+        """Ranges on combinations of parameters (e.g. the amplitude of a sine and cosine
+        pair); none by default."""
+        return ()
+
+    def implausibility(self, values: Mapping[str, float]) -> str:
+        """'' when no estimate in ``values`` is absurd, else why, in words.
+
+        Absurd means beyond the largest magnitude or of the wrong sign; a value smaller
+        than real robots show is weak, not absurd, and is left to the evidence tests
+        (``check_plausible`` reports it too).
+        """
+        return "; ".join(f.message for f in self.check_plausible(values)
+                         if f.value == 0 or abs(f.value) > f.plausible.minimum)
 
     def parameter_unit(self, parameter: str) -> str:
         """The unit of one parameter (``unit`` unless a subclass mixes units)."""

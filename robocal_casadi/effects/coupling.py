@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..robot import Robot
 from ..units import Units
-from .base import Effect, Plausible, RowContext, TrueWorld
+from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import column
 
 AMPLITUDE = Plausible(math.radians(0.05), basis="coupling through gear trains stays below "
@@ -78,6 +78,10 @@ class JointCoupling(Effect):
 
     def plausible(self, parameter: str) -> Plausible:
         return AMPLITUDE
+
+    def _check_amplitudes(self, values) -> tuple:
+        return amplitude_check(self, [(f"sin{j}_q{k}", f"cos{j}_q{k}") for j, k in self.pairs],
+                               values, AMPLITUDE)
 
     def _check(self, robot: Robot) -> None:
         for j, k in self.pairs:

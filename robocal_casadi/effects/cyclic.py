@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from ..units import Units
-from .base import Effect, Plausible, RowContext, TrueWorld
+from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import check_joints, column
 
 HARMONICS = ("a1", "b1", "a2", "b2")
@@ -45,6 +45,10 @@ class JointCyclic(Effect):
 
     def plausible(self, parameter: str) -> Plausible:
         return AMPLITUDE
+
+    def _check_amplitudes(self, values) -> tuple:
+        return amplitude_check(self, [(f"a{h}_{j}", f"b{h}_{j}") for j in self.joints
+                                      for h in (1, 2)], values, AMPLITUDE)
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot, revolute_only=True)

@@ -9,8 +9,9 @@ tool are left alone: they belong to the mounting, not to the arm's links. ``dq =
 
 Plausible on real robots: the expansion coefficients of the metals arms are made of
 (steel about 11.5e-6/K, aluminium about 23e-6/K), so ``k_T`` is positive and below about
-3e-5/K. Against ``time``, a robot warming up or cooling down changes by at most about
-12 K per hour, so ``|k_t|`` stays below 3e-5/K x 12 K / 3600 s = 1e-7/s, of either sign.
+3e-5/K. Against ``time``, the drift may be of either sign (a robot warming up or cooling
+down); the joints next to the motors warm by up to about 2 K per minute just after a
+start, so ``|k_t|`` stays below 3e-5/K x 2 K / 60 s = 1e-6/s.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ COLUMNS = {"temperature": ("k_T", "1/K"), "time": ("k_t", "1/s")}
 PLAUSIBLE = {
     "k_T": Plausible(3e-5, sign=+1, basis="metals expand when warmed: steel 11.5e-6/K, "
                      "aluminium 23e-6/K"),
-    "k_t": Plausible(1e-7, basis="3e-5/K at a warming or cooling of up to 12 K per hour"),
+    "k_t": Plausible(1e-6, basis="3e-5/K at a warming or cooling of up to 2 K per minute"),
 }
 
 
