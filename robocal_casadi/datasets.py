@@ -18,7 +18,7 @@ to the fit and is refused as a likely misspelling.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Union
 
@@ -117,6 +117,19 @@ class TrackerPoints(DatasetBase):
 
 
 Dataset = Union[ArtifactTouches, SphereLaser, TrackerPoints]
+
+
+def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
+    """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
+    mask = np.asarray(mask, dtype=bool)
+    changes = {"extras": {k: np.asarray(v)[mask] for k, v in dataset.extras.items()}}
+    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
+        value = getattr(dataset, name, None)
+        if value is not None:
+            changes[name] = np.asarray(value)[mask]
+    if getattr(dataset, "point", None):
+        changes["point"] = tuple(p for p, keep in zip(dataset.point, mask) if keep)
+    return replace(dataset, **changes)
 
 
 # ----------------------------------------------------------------------------- loading

@@ -14,6 +14,7 @@ from typing import Any
 import yaml
 
 from .errors import InputError
+from .units import ANGLE_SCALE, LENGTH_SCALE, parse_units
 
 _FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
@@ -154,8 +155,6 @@ def file_name(value: Any, *, file: str | Path | None, where: str) -> str:
 
 def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
     """The file's ``units`` mapping as ``Units``; wrong types and unknown keys refused."""
-    from .units import ANGLE_SCALE, LENGTH_SCALE, parse_units
-
     value = mapping(require(content, key, file=file), file=file, where=key,
                     hint="like {length: mm, angle: deg}")
     check_keys(value, ("length", "angle"), file=file, where=key)

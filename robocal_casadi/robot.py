@@ -25,7 +25,9 @@ import yaml
 
 from .errors import InputError
 from .fields import (check_keys, load_yaml, mapping, number, quantities, quantity, require,
-                     vector)
+                     units_of, vector)
+from .parameters import ParameterRegistry
+from .transforms import pose_from_xyz_rpy
 from .units import SI, Units
 
 JOINT_TYPES = ("revolute", "prismatic")
@@ -64,8 +66,6 @@ class Frame:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def matrix(self) -> np.ndarray:
-        from .transforms import pose_from_xyz_rpy
-
         return pose_from_xyz_rpy(self.xyz, self.rpy)
 
 
@@ -109,10 +109,8 @@ class Robot:
             [self.units.angle_scale if j.revolute else self.units.length_scale for j in self.joints]
         )
 
-    def parameters(self):
+    def parameters(self) -> ParameterRegistry:
         """The parameter registry of this robot (see ``parameters.ParameterRegistry``)."""
-        from .parameters import ParameterRegistry
-
         return ParameterRegistry.for_robot(self)
 
     def parameter_vector(self) -> np.ndarray:
@@ -145,8 +143,6 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     key written with no value (``tool:``) counts as absent. A joint's ``mass`` and ``com``
     go together.
     """
-    from .fields import units_of
-
     check_keys(content, ROBOT_KEYS, file=file, expected="a robot file")
     convention = require(content, "convention", file=file)
     if not isinstance(convention, str) or convention not in CONVENTIONS:

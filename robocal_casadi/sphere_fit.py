@@ -34,6 +34,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import InputError, SolverError
+from .kinematics import Kinematics
 
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order
@@ -444,8 +445,6 @@ def fit_dataset(dataset, *, method: str = "lm", robot=None) -> SensorFit:
     """
     poses = dataset.flange_poses
     if poses is None:
-        from .kinematics import Kinematics
-
         poses = Kinematics(robot or dataset.robot).flange_poses(dataset.joints)
     try:
         return fit_sensor(poses, dataset.distance, dataset.radius,

@@ -24,6 +24,8 @@ rank. ``errors`` leaves that row out.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 
@@ -102,8 +104,6 @@ class SphereLaserModel(MeasurementModel):
         ``|w + l d|^2 = R^2`` (``w = T_i p0 - c``, ``d = R_i n``) nearest the measured
         distance; a beam that misses takes its closest approach.
         """
-        from dataclasses import replace
-
         origin, direction = laser_of(mounted)
         scan = self._scan
         if scan is None:
