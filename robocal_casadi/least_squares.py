@@ -183,29 +183,18 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
         stop = _stop_before_step(J, r, state.cost, tolerances, history)
         if stop is not None:
             return _result(state, iteration, stop)
-        free = np.ones(J.shape[1], dtype=bool)
-        if bounds is not None:
-            gradient = J.T @ r
-            free = ~(((state.x <= bounds[0]) & (gradient > 0))
-                     | ((state.x >= bounds[1]) & (gradient < 0)))
-            if not free.any():
-                return _result(state, iteration, -2)
+        free = _free_unknowns(state.x, J, r, bounds)
+        if not free.any():
+            return _result(state, iteration, -2)
         scale = column_scale(J[:, free]) if damping is None or damping.scaling == "marquardt" \
             else np.ones(int(free.sum()))
         Js = J[:, free] / scale
         while True:
             step = np.zeros(J.shape[1])
             step[free] = damped_step(Js, r, mu) / scale
-            x_trial = retract(state.x, step)
-            clipped = False
-            if bounds is not None:
-                x_trial = np.clip(x_trial, *bounds)
-                clipped = not np.array_equal(x_trial - state.x, step)
-                step = x_trial - state.x
+            x_trial, step, clipped = _moved(state.x, step, retract, bounds)
             r_trial, J_trial = evaluate(x_trial, False)
             cost_trial = _cost(r_trial, weights)
-            if not np.isfinite(cost_trial):
-                cost_trial = np.inf
             # A step the bounds cut short must lower the cost, or a shorter one is tried.
             if damping is None or cost_trial < state.cost or (
                     cost_trial == state.cost and not clipped):
@@ -229,7 +218,29 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
 
 
 def _cost(r: np.ndarray, weights: np.ndarray | None) -> float:
-    return 0.5 * float(r @ r if weights is None else np.sum(weights * r**2))
+    """``0.5 |w r|^2``; a non-finite value counts as infinite."""
+    cost = 0.5 * float(r @ r if weights is None else np.sum(weights * r**2))
+    return cost if np.isfinite(cost) else np.inf
+
+
+def _free_unknowns(x, J: np.ndarray, r: np.ndarray,
+                   bounds: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """All unknowns but those at a bound whose descent direction points outwards."""
+    if bounds is None:
+        return np.ones(J.shape[1], dtype=bool)
+    gradient = J.T @ r
+    return ~(((x <= bounds[0]) & (gradient > 0)) | ((x >= bounds[1]) & (gradient < 0)))
+
+
+def _moved(x, step: np.ndarray, retract, bounds) -> tuple[Any, np.ndarray, bool]:
+    """The state after ``step`` (clipped onto the bounds), the step taken, and whether the
+    bounds cut it short."""
+    moved = retract(x, step)
+    if bounds is None:
+        return moved, step, False
+    moved = np.clip(moved, *bounds)
+    taken = moved - x
+    return moved, taken, not np.array_equal(taken, step)
 
 
 def _weighted(J: np.ndarray, r: np.ndarray, weights: np.ndarray | None):
