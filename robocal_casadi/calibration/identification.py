@@ -19,17 +19,19 @@ from typing import Sequence
 
 import numpy as np
 
-from . import unexplained
+from ..checks import choice, count, positive
+from ..datasets import DatasetBase
 from ..effects.base import Effect
-from ..errors import InputError, SolverError
+from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
 from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
                        RmsSummary)
-from . import diagnosis
+from . import diagnosis, unexplained
+from .degeneracy import check_dataset, check_finite
 from .identifiability import PRACTICAL_TOLERANCE, analyse
 from .problem import Problem
 from .selection import select_by_condition
-from .solver import Solution, solve
+from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
 
@@ -86,13 +88,29 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
                                  for m in problem.models}))
-    return analyse(problem.jacobian(x), names, candidate_index, placement,
+    jacobian = problem.jacobian(x)
+    check_finite(problem.models, problem.residual(x), jacobian, "the fitted placement")
+    return analyse(jacobian, names, candidate_index, placement,
                    invisible_reason=invisible, absorbed_reason=absorbed, tolerance=tolerance)
 
 
 def find_unexplained(problem: Problem, x: np.ndarray, free: np.ndarray):
     """The structured residual ``problem`` leaves at ``x``, or None (see ``unexplained``)."""
     return unexplained.find(problem, x, free)
+
+
+def _datasets(value, argument: str) -> list:
+    """``value`` as a list of loaded datasets (a path or a single dataset is refused)."""
+    if isinstance(value, (str, Path)) or not isinstance(value, (list, tuple)):
+        hint = " (load it with load_dataset and pass a list)" if isinstance(
+            value, (str, Path, DatasetBase)) else ""
+        raise ArgumentError(f"expected a list of datasets, got a {type(value).__name__}{hint}",
+                            argument=argument)
+    wrong = [type(d).__name__ for d in value if not isinstance(d, DatasetBase)]
+    if wrong:
+        raise ArgumentError(f"expected datasets from load_dataset, got {', '.join(wrong[:3])}",
+                            argument=argument)
+    return list(value)
 
 
 def _check_same_robot(datasets: Sequence) -> None:
@@ -112,14 +130,29 @@ def _free_mask(problem: Problem, identifiability: Identifiability) -> np.ndarray
 
 def _residuals(problem: Problem, x_nominal, x_geometric, x_final) -> list[DatasetResiduals]:
     out = []
+    stages = [(problem, x) for x in (x_nominal, x_geometric, x_final)]
     errors = [problem.errors(x) for x in (x_nominal, x_geometric, x_final)]
+    parts = _components(stages)
     for k, model in enumerate(problem.models):
         dataset = model.dataset
         out.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
-            payload_com=dataset.payload_com))
+            payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
+            frame=model.component_frame))
+    return out
+
+
+def _components(stages) -> list[dict[str, np.ndarray]]:
+    """Per dataset, the signed error parts (N x 3) [m] under nominal, geometric, final."""
+    out: list[dict[str, np.ndarray]] = []
+    for name, (problem, x) in zip(("nominal", "geometric", "final"), stages):
+        pieces = problem.split(problem.residual(x))
+        for k, (model, r) in enumerate(zip(problem.models, pieces)):
+            if len(out) <= k:
+                out.append({})
+            out[k][name] = model.error_components(r)
     return out
 
 
@@ -150,7 +183,7 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
-              diagnose: bool = True, method: str = "lm", loss: str = "linear",
+              diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
               progress: bool = False) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
@@ -161,11 +194,30 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
     than that fraction are dropped first, as in the bar patent (``selection``); what was
     dropped is in ``result.selection``.
+
+    Arguments are checked at the door (``ArgumentError``, a ``ValueError``): ``method`` one
+    of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
+    closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
+    ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
+    a number >= 0.
     """
-    datasets = list(datasets)
+    method = choice(method, METHODS, "method")
+    loss = choice(loss, LOSSES, "loss")
+    max_iterations = count(max_iterations, "max_iterations")
+    if select_growth is not None:
+        select_growth = positive(select_growth, "select_growth", allow_zero=True)
+    datasets = _datasets(datasets, "datasets")
+    validation = _datasets(validation, "validation")
+    if not all(isinstance(e, Effect) for e in effects):
+        raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
+                            + ", ".join(sorted({type(e).__name__ for e in effects
+                                                if not isinstance(e, Effect)})),
+                            argument="effects")
     if not datasets:
         raise InputError("no dataset given")
     _check_same_robot(datasets + list(validation))
+    for dataset in datasets + list(validation):
+        check_dataset(dataset)
     robot = datasets[0].robot
     models = models_for(datasets)
     problem = Problem(robot, models, effects)
@@ -362,13 +414,15 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
     errors = [p.errors(x) for p, x in stages]
     summary = RmsSummary(*(_rms(e) for e in errors))
     residuals = []
+    parts = _components(stages)
     for k, model in enumerate(stages[-1][0].models):
         dataset = model.dataset
         residuals.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
-            payload_com=dataset.payload_com))
+            payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
+            frame=model.component_frame))
     return summary, residuals
 
 

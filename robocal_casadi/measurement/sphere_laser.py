@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
 from .base import MeasurementModel, PointsFunction
 
@@ -147,6 +148,16 @@ class SphereLaserModel(MeasurementModel):
 
     def error_rows(self) -> np.ndarray:
         return np.arange(self.count)
+
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Signed distance of each laser point from the sphere surface [m] (outside
+        positive) in column 0, NaN after."""
+        out = np.full((self.count, 3), np.nan)
+        out[:, 0] = np.asarray(residual, float).ravel()[:self.count]
+        return out
+
+    def error_terms(self) -> tuple:
+        return (ErrorTerm("surface"),) * self.count
 
 
 def laser_of(mounted) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from ..transforms import pose_from_xyz_rpy
 from .base import MeasurementModel, PointsFunction
 
@@ -98,3 +99,12 @@ class TrackerModel(MeasurementModel):
 
     def error_rows(self) -> np.ndarray:
         return np.arange(self.dataset.rows)
+
+    component_frame = "instrument"
+
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Measured minus predicted x, y, z of each point (N x 3) [m], instrument frame."""
+        return np.asarray(residual, float).reshape(-1, 3).copy()
+
+    def error_terms(self) -> tuple:
+        return (ErrorTerm("position"),) * self.dataset.rows
