@@ -24,6 +24,7 @@ from typing import Any, Union
 
 import numpy as np
 
+from .effects.motion import with_directions
 from .errors import InputError
 from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, cut, file_kind,
                      file_name, load_yaml, mapping, quantities, quantity, referenced_file,
@@ -123,7 +124,9 @@ Dataset = Union[ArtifactTouches, SphereLaser, TrackerPoints]
 def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
     """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
     mask = np.asarray(mask, dtype=bool)
-    changes = {"extras": {k: np.asarray(v)[mask] for k, v in dataset.extras.items()}}
+    # the directions of motion belong to the full table's order: computed before cutting
+    extras = with_directions(dataset.joints, dataset.extras)
+    changes = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
     for name in ("joints", "measured", "distance", "flange_poses", "pose"):
         value = getattr(dataset, name, None)
         if value is not None:
