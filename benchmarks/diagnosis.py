@@ -27,9 +27,8 @@ import numpy as np
 
 from robocal_casadi.calibration import (Problem, analyse_identifiability, calibrate, diagnosis,
                                         models_for, solve)
+from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.calibration.selection import dataset_rows
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m]

@@ -26,7 +26,9 @@ import yaml
 from .errors import InputError
 from .fields import (check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
                      vector)
-from .units import SI, Units
+from .parameters import ParameterRegistry
+from .transforms import pose_from_xyz_rpy
+from .units import SI, Units, units_of
 
 JOINT_TYPES = ("revolute", "prismatic")
 CONVENTIONS = ("dh", "mdh")
@@ -70,8 +72,6 @@ class Frame:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def matrix(self) -> np.ndarray:
-        from .transforms import pose_from_xyz_rpy
-
         return pose_from_xyz_rpy(self.xyz, self.rpy)
 
 
@@ -115,10 +115,8 @@ class Robot:
             [self.units.angle_scale if j.revolute else self.units.length_scale for j in self.joints]
         )
 
-    def parameters(self):
+    def parameters(self) -> ParameterRegistry:
         """The parameter registry of this robot (see ``parameters.ParameterRegistry``)."""
-        from .parameters import ParameterRegistry
-
         return ParameterRegistry.for_robot(self)
 
     def parameter_vector(self) -> np.ndarray:
@@ -151,8 +149,6 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     key written with no value (``tool:``) counts as absent. A joint's ``mass`` and ``com``
     go together.
     """
-    from .fields import units_of
-
     check_keys(content, ROBOT_KEYS, file=file, expected="a robot file")
     convention = require(content, "convention", file=file)
     if not isinstance(convention, str) or convention not in CONVENTIONS:

@@ -26,10 +26,11 @@ from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
 from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
                        RmsSummary)
-from . import unexplained
+from . import diagnosis, unexplained
 from .degeneracy import check_dataset, check_finite
 from .identifiability import PRACTICAL_TOLERANCE, analyse
 from .problem import Problem
+from .selection import select_by_condition
 from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
@@ -226,8 +227,6 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     identifiability = analyse_identifiability(problem, nominal.x)
     selection = None
     if select_growth is not None and identifiability.identifiable:
-        from .selection import select_by_condition
-
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
                                         growth=select_growth)
         if any(selection.dropped.values()):
@@ -268,8 +267,6 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
 
     final_problem, final, findings, tested = problem, geometric, (), ()
     if diagnose:
-        from . import diagnosis  # the diagnosis builds on this module
-
         # An effect must also be usable on the held-out data: columns they all carry.
         available = None
         if validation:
