@@ -26,7 +26,7 @@ from .errors import InputError, SolverError
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
 from .measurement import model_for
 from .prior import (DOMINATED_SHARE, SIGMA_ITERATIONS, SIGMA_SETTLED, Posterior, Prior,
-                    PriorProblem, duplicate_rows, posterior, tolerance_of)
+                    PriorProblem, copy_weights, duplicate_rows, posterior, tolerance_of)
 from .problem import Problem
 from .results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
                       PriorSummary, RmsSummary, SphereEstimate)
@@ -236,9 +236,14 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         noise = posterior(problem.jacobian(geometric.x, geometric.free),
                           problem.residual(geometric.x), np.flatnonzero(geometric.free), None,
                           rows=distinct).sigma
+        determined = identifiability
         identifiability, geometric, prior = _map_geometric(
             problem, nominal.x, geometric.x, noise, distinct, method=method, loss=loss,
             max_iterations=max_iterations)
+        # The condition number describes the data: that of the parameters with a fair share
+        # of their effect their own (the weak ones lean on the prior, not on the data).
+        identifiability = replace(identifiability,
+                                  condition_number=determined.condition_number)
         free = geometric.free
         if geometric.status != "converged":
             raise SolverError(
@@ -411,8 +416,8 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
                *, method: str, loss: str, max_iterations: int):
     """MAP estimate over ``x[free]``; the noise level re-estimated until it settles."""
     for _ in range(SIGMA_ITERATIONS):
-        solution = solve(PriorProblem(problem, prior), x, free, method=method, loss=loss,
-                         max_iterations=max_iterations)
+        solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
+                         method=method, loss=loss, max_iterations=max_iterations)
         x = solution.x
         r = problem.residual(x)
         statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,

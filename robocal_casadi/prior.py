@@ -99,9 +99,11 @@ class PriorProblem:
     so the solvers run on it unchanged.
     """
 
-    def __init__(self, problem, prior: Prior):
+    def __init__(self, problem, prior: Prior, row_weights: np.ndarray | None = None):
         self.problem = problem
         self.prior = prior
+        # sqrt of each data entry's weight: a reading recorded k times counts 1/k per copy
+        self.root_weights = None if row_weights is None else np.sqrt(row_weights)
 
     def __getattr__(self, name):
         return getattr(self.problem, name)
@@ -111,10 +113,15 @@ class PriorProblem:
         return p.weights * (np.asarray(x, float)[p.index] - p.centre)
 
     def residual(self, x: np.ndarray) -> np.ndarray:
-        return np.concatenate([self.problem.residual(x), self.prior_rows(x)])
+        r = self.problem.residual(x)
+        if self.root_weights is not None:
+            r = r * self.root_weights
+        return np.concatenate([r, self.prior_rows(x)])
 
     def jacobian(self, x: np.ndarray, columns=None) -> np.ndarray:
         J = self.problem.jacobian(x, columns)
+        if self.root_weights is not None:
+            J = J * self.root_weights[:, None]
         n = len(self.problem.unknowns)
         if columns is None:
             columns = np.arange(n)
@@ -134,7 +141,10 @@ class PriorProblem:
         p = self.prior
         extra = [float(w) * (x[int(i)] - float(c))
                  for i, c, w in zip(p.index, p.centre, p.weights)]
-        return ca.vertcat(self.problem.symbolic_residual(x), *extra)
+        r = self.problem.symbolic_residual(x)
+        if self.root_weights is not None:
+            r = r * ca.DM(self.root_weights)
+        return ca.vertcat(r, *extra)
 
 
 @dataclass(frozen=True)
@@ -200,11 +210,15 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     scale = sigma_new**2
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
     covariance[sub] = scale * inverse
+    # Data share: the diagonal of the resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e.
+    # 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2 with the noise s the prior was weighed with.
     share = np.full(len(prior_position), np.nan)
-    if prior is not None and len(prior_position):
+    if prior is not None and len(prior_position) and sigma_prior is not None:
+        diagonal = np.full(n, np.nan)
+        diagonal[reached] = np.diag(inverse)
         for k, position in enumerate(prior_position):
-            if position >= 0 and np.isfinite(covariance[position, position]):
-                share[k] = 1.0 - covariance[position, position] * precision_prior[position]
+            if position >= 0 and np.isfinite(diagonal[position]):
+                share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
     return Posterior(covariance, share, sigma_new, dof)
 
 
@@ -216,25 +230,58 @@ def duplicate_rows(problem) -> tuple[np.ndarray, int, int]:
     information: its residual entries are left out (False). Returns the mask over the
     stacked residual, the number of repeated units and the number of units.
     """
-    keep = []
+    copies = repeated_copies(problem)
+    first = copies > 0
+    units = repeated = 0
+    for model, groups in _groups(problem):
+        keys = {}
+        for g, c in zip(groups, copies[_span(problem, model)]):
+            if g >= 0:
+                keys.setdefault(int(g), c)
+        units += len(keys)
+        repeated += sum(1 for c in keys.values() if c < 0)
+    return first, repeated, units
+
+
+def repeated_copies(problem) -> np.ndarray:
+    """Per residual entry, how often its unit's readings occur (negative: a later copy)."""
+    out = []
+    count: dict[bytes, int] = {}
+    keys = []
+    for model, groups in _groups(problem):
+        key_of = {int(g): model.dataset.kind.encode() + _unit_bytes(model.dataset, int(g))
+                  for g in dict.fromkeys(groups.tolist()) if g >= 0}
+        for key in key_of.values():
+            count[key] = count.get(key, 0) + 1
+        keys.append((groups, key_of))
     seen: set[bytes] = set()
-    repeated = units = 0
-    for model in problem.models:
-        groups = np.asarray(model.residual_groups())
-        signature = {}
-        for group in dict.fromkeys(int(g) for g in groups if g >= 0):
-            units += 1
-            key = model.dataset.kind.encode() + _unit_bytes(model.dataset, group)
-            if key in seen:
-                repeated += 1
-                signature[group] = False
-            else:
-                seen.add(key)
-                signature[group] = True
-        keep.append(np.array([signature.get(int(g), True) for g in groups], dtype=bool)
-                    if len(groups) else np.ones(0, bool))
-    mask = np.concatenate(keep) if keep else np.ones(0, bool)
-    return mask, repeated, units
+    for groups, key_of in keys:
+        sign = {}
+        for g, key in key_of.items():
+            sign[g] = -1 if key in seen else 1
+            seen.add(key)
+        out.append(np.array([sign[int(g)] * count[key_of[int(g)]] if g >= 0 else 1
+                             for g in groups], dtype=int))
+    return np.concatenate(out) if out else np.zeros(0, int)
+
+
+def copy_weights(problem) -> np.ndarray:
+    """Per residual entry ``1 / copies``: repeated readings count once in all."""
+    return 1.0 / np.abs(repeated_copies(problem))
+
+
+def _groups(problem):
+    return [(model, np.asarray(model.residual_groups(), int)) for model in problem.models]
+
+
+def _span(problem, model) -> slice:
+    start = 0
+    for other in problem.models:
+        size = other.residual_size()
+        if other is model:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(model)
 
 
 def _unit_bytes(dataset, group: int) -> bytes:
