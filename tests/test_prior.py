@@ -139,7 +139,8 @@ def test_result_json_carries_sphere_percentiles_and_noise(tmp_path):
     # The same sphere seen by held-out readings through the calibrated robot.
     np.testing.assert_allclose(spheres["validation"]["centre"], spheres["fit"]["centre"],
                                atol=0.05)  # 30 held-out readings, 0.008 mm noise
-    assert all(0 < s < 0.05 for s in spheres["fit"]["centre_std"])
+    # Standard errors of the centre: tens of micrometres (it shares the robot's errors).
+    assert all(0.001 < s < 0.2 for s in spheres["fit"]["centre_std"])
     for block, residuals in (("fit", result.residuals), ("validation",
                                                          result.validation_residuals)):
         (entry,) = content[block]["datasets"]
