@@ -49,7 +49,9 @@ CASES = (
     ("artifact_touches", "joints", 40, 10e-6, (0.5e-3, math.radians(0.05))),
     ("tracker_points", "joints", 400, 10e-6, (0.5e-3, math.radians(0.05))),
     ("sphere_laser", "joints", 400, 8e-6, (0.5e-3, math.radians(0.05))),
-    ("sphere_laser", "pendant", 400, 8e-6, (0.5e-3, math.radians(0.05))),
+    # Pendant poses are the controller's: with robot errors they carry those errors, which
+    # the true laser does not explain, so the true model would be no floor; none here.
+    ("sphere_laser", "pendant", 400, 8e-6, None),
 )
 
 

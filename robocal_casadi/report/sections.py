@@ -147,6 +147,10 @@ def parameters_section(result: CalibrationResult) -> Section:
             change_text = "+" + change_text
         status = "identified" if p.identifiable else \
             f"held at nominal: {p.reason or 'not identifiable'}"
+        if p.identifiable and result.prior is not None and p.name in result.prior.dominated:
+            share = result.prior.data_share[p.name]
+            status = (f"identified, prior-dominated: the data give {100 * share:.0f}% of the "
+                      f"estimate, the tolerance the rest")
         rows.append((p.name, units.unit_name(p.quantity) or "-",
                      format_fixed(p.nominal / scale, decimals),
                      format_fixed(p.estimate / scale, decimals), change_text,
@@ -155,8 +159,10 @@ def parameters_section(result: CalibrationResult) -> Section:
     table = Table("parameters", "Geometric parameters", ("parameter", "unit", "nominal",
                   "estimate", "change", "standard error", "status"), tuple(rows), tuple(muted),
                   (False, False, True, True, True, True, False))
-    note = Paragraph("Standard errors come from the covariance of the least-squares fit; "
-                     "grey rows were not identifiable and keep their nominal values.", "note")
+    note = Paragraph("Standard errors come from the posterior covariance of the fit (each "
+                     "parameter weighed against its tolerance), counting repeated readings "
+                     "once; grey rows were not identifiable and keep their nominal values.",
+                     "note")
     return Section("parameters", "Parameters", (table, note))
 
 
