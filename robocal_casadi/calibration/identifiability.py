@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .results import Identifiability
+from ..results import Identifiability
 
 RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
 EXACT_TOLERANCE = 10 * RANK_TOLERANCE  # hold only what is exactly undeterminable
