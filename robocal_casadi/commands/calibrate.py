@@ -14,23 +14,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import sys
 from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from ..calibration import calibrate
+from ..calibration import METHODS, calibrate
 from ..output import atomic_directory
 from ..results import CalibrationResult
 from ..robot import save_robot
-from ..calibration import METHODS
-from .arguments import not_replacing_inputs, output_folder
+from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("datasets", nargs="+", type=Path, metavar="DATASET.yaml")
-    parser.add_argument("--validate", nargs="+", type=Path, default=[], metavar="VAL.yaml",
-                        help="held-out datasets evaluated with the calibrated model")
+    parser.add_argument("--validate", nargs="+", action="extend", type=Path, default=[],
+                        metavar="VAL.yaml",
+                        help="held-out datasets evaluated with the calibrated model "
+                        "(repeatable; every file given is kept)")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="output folder (replaced as a whole when the run succeeds)")
     parser.add_argument("--no-diagnose", action="store_true",
@@ -47,6 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="iterations allowed to the geometric fit (default 200)")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
+    add_force(parser)
+    add_allow_outside_data(parser)
 
 
 def _clean(value):
@@ -61,9 +65,13 @@ def _clean(value):
 
 
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
-                  pdf: bool = False) -> None:
-    """Write the contract's three files into ``out`` atomically."""
+                  pdf: bool = False, keep: tuple[str, ...] = ()) -> None:
+    """Write the contract's three files into ``out`` atomically; the files named in
+    ``keep`` that ``out`` already holds are carried over into the new folder."""
     with atomic_directory(out) as staging:
+        for name in keep:
+            if (out / name).is_file() and not (out / name).is_symlink():
+                shutil.copy2(out / name, staging / name)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
         if report:
@@ -108,7 +116,7 @@ def summary(result: CalibrationResult) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out)
+    output_folder(args.out, force=args.force, inputs=[*args.datasets, *args.validate])
     if args.max_iterations < 1:
         raise InputError(f"expected a positive count, got {args.max_iterations}",
                          where="--max-iterations")
@@ -116,8 +124,9 @@ def run(args: argparse.Namespace) -> int:
                                                and args.select_growth > 0):
         raise InputError(f"expected a positive fraction, got {args.select_growth}",
                          where="--select-growth")
-    datasets = [load_dataset(p) for p in args.datasets]
-    validation = [load_dataset(p) for p in args.validate]
+    outside = args.allow_outside_data
+    datasets = [load_dataset(p, allow_outside_data=outside) for p in args.datasets]
+    validation = [load_dataset(p, allow_outside_data=outside) for p in args.validate]
     seen: dict = {}
     for dataset in datasets + validation:
         key = dataset.path.resolve()

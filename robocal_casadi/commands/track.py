@@ -6,8 +6,10 @@ camera observations time,q1..qn,x,y,z,roll,pitch,yaw. For each row it solves one
 NLP (target at (0, 0, Z) in the end frame, end z axis on the target, end x axis level,
 joint limits, smallest move from the previous answer) and writes JOINTS.csv:
 time,q1..qn,status,solve_ms with the joints in the job's units. `status` is ok,
-unreachable or failed; a row that is not ok keeps the last safe joints (the first row's
-capture joints before any answer). Rows are solved in order, as a controller would.
+limited (with --max-step: a bounded step towards a reachable goal), unreachable or
+failed; an unreachable or failed row keeps the last safe joints (the first row's capture
+joints before any answer). Rows are solved in order, as a controller would; a row the
+previous joints cannot reach smoothly is seeded from inverse kinematics.
 
 With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml.
 """
@@ -24,8 +26,8 @@ from ..output import atomic_file
 from ..progress import Progress
 from ..table import write_table
 from ..tracking.job import load_tracking_job
-from ..tracking.tracker import Tracker
-from .arguments import output_file
+from ..tracking.tracker import STATUSES, Tracker
+from .arguments import add_allow_outside_data, output_file
 from .fk import calibrated_robot
 
 
@@ -37,18 +39,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use DIR/robot_calibrated.yaml instead of the job's robot file")
     parser.add_argument("--max-step", type=float, metavar="STEP",
                         help="largest joint move per row, in the job's angle unit (length "
-                        "unit for prismatic joints); a target needing more is unreachable")
+                        "unit for prismatic joints); a target needing more is approached "
+                        "by steps of this size (status limited)")
+    add_allow_outside_data(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     job_path = Path(args.job)
-    output_file(args.out)
+    output_file(args.out, inputs=[job_path])
     if args.max_step is not None and not (np.isfinite(args.max_step) and args.max_step > 0):
         raise InputError(f"expected a positive number, got {args.max_step}", where="--max-step")
-    job = load_tracking_job(job_path)
+    outside = args.allow_outside_data
+    job = load_tracking_job(job_path, allow_outside_data=outside)
+    output_file(args.out, inputs=[job.data_path, job.robot_path])
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), job.robot, job.robot_path)
-        job = load_tracking_job(job_path, robot=robot)
+        output_file(args.out, inputs=[Path(args.calibrated) / "robot_calibrated.yaml"])
+        job = load_tracking_job(job_path, robot=robot, allow_outside_data=outside)
     scales = np.array([job.units.angle_scale if j.revolute else job.units.length_scale
                        for j in job.robot.joints])
     max_step = None
@@ -59,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         max_step = scales * args.max_step
     tracker = Tracker(job.robot, job.camera_xyz, job.standoff, up=job.up, max_step=max_step)
     rows = []
-    counts = {"ok": 0, "unreachable": 0, "failed": 0}
+    counts = dict.fromkeys(STATUSES, 0)
     with Progress("track", total=job.rows) as bar:
         for i in range(job.rows):
             step = tracker.step(job.joints[i], job.observations[i])
@@ -70,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(args.out) as staging:
         write_table(staging, columns, rows)
     times = np.array([r[-1] for r in rows])
-    print(f"{job.rows} rows: {counts['ok']} ok, {counts['unreachable']} unreachable, "
-          f"{counts['failed']} failed; solve time median {np.median(times):.3f} ms, "
+    tally = ", ".join(f"{counts[s]} {s}" for s in STATUSES)
+    print(f"{job.rows} rows: {tally}; solve time median {np.median(times):.3f} ms, "
           f"max {times.max():.3f} ms -> {args.out}")
     return 0
