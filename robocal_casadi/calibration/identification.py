@@ -485,11 +485,14 @@ def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray,
                                  max_iterations=max_iterations)
     revised = analyse_identifiability(problem, solution.x, tolerance=EXACT_TOLERANCE)
     if set(revised.identifiable) > set(identifiability.identifiable):
-        identifiability = revised
-        free = _free_mask(problem, identifiability)
-        solution, prior = _map_solve(problem, solution.x, free,
-                                     _prior_of(problem, free, prior.sigma), distinct,
-                                     method=method, loss=loss, max_iterations=max_iterations)
+        free = _free_mask(problem, revised)
+        candidate, candidate_prior = _map_solve(
+            problem, solution.x, free, _prior_of(problem, free, prior.sigma), distinct,
+            method=method, loss=loss, max_iterations=max_iterations)
+        # Released at the estimate but barely there: where the fit with them does not
+        # settle (a few placements, noise-sized dependencies), they stay held.
+        if candidate.status == "converged":
+            identifiability, solution, prior = revised, candidate, candidate_prior
     return identifiability, solution, prior
 
 
