@@ -132,12 +132,15 @@ def test_recommendation_follows_the_held_out_data():
 
 
 def test_a_link_that_sags_with_its_angle_is_left_unexplained_and_named(tmp_path):
-    """a2 shortens with cos(q2) by 0.3 mm: no effect in the library describes it."""
+    """The offset d3 along joint 3's axis shifts with cos(q2) by 0.3 mm: no effect in the
+    library describes it. (A change of a2 with cos(q2) would not do: up to a constant it
+    equals joint 2 turning by a sin(q2) with joint 3 turning back, which joint_cyclic and
+    joint_coupling describe; joint rotations cannot move the arm along joint 3's axis.)"""
     robot = ROBOTS["industrial_6r"]()
-    a2 = Kinematics(robot).registry.index("a2")
+    d3 = Kinematics(robot).registry.index("d3")
 
     def sag(q, p, k):
-        p[a2] += 3e-4 * math.cos(q[1])
+        p[d3] += 3e-4 * math.cos(q[1])
         return p
 
     fit = tracker_with_row_geometry(tmp_path / "fit", robot, 300, 1, sag)
