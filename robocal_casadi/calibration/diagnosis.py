@@ -110,6 +110,7 @@ class CandidateTest(Mapping):
     extrapolation: float = float("nan")  # held-out SSE after / before, extrapolating folds
     worst_region: str = ""  # the extrapolating scheme the candidate helps least
     estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
+    label: str = ""  # the candidate as the effect names it (e.g. a coupling's driver)
 
     def __getitem__(self, key: str):
         if key not in self._keys():
@@ -422,37 +423,14 @@ class _Screening:
 
 def _implausible(effect: Effect, values: dict[str, float]) -> str:
     """'' when ``values`` (SI) are what real robots show for ``effect``, else why not."""
-    check = getattr(effect, "implausibility", None)
-    if check is not None:
-        return check(values) or ""
-    return _fallback_implausibility(effect.name, values)
+    return effect.implausibility(values) or ""
 
 
-def _fallback_implausibility(name: str, values: dict[str, float]) -> str:
-    degree = math.pi / 180
-    if name == "joint_compliance":
-        for key, value in values.items():
-            if key.startswith("c") and key[1:].isdigit() and not 0 < value <= 1e-4:
-                return f"{key} = {value:.3g} rad/Nm outside (0, 1e-4] rad/Nm"
-    if name == "joint_cyclic":
-        joints = sorted({key.split("_")[1] for key in values})
-        for j in joints:
-            for harmonic in ("1", "2"):
-                amplitude = math.hypot(values.get(f"a{harmonic}_{j}", 0.0),
-                                       values.get(f"b{harmonic}_{j}", 0.0))
-                if amplitude > 0.05 * degree:
-                    return (f"joint {j} harmonic {harmonic}: {amplitude / degree:.3g} deg "
-                            f"above 0.05 deg")
-    if name == "joint_scale":
-        for key, value in values.items():
-            if abs(value) > 2e-3:
-                return f"{key} = {value:.3g} beyond +-0.2%"
-    if name == "thermal_drift":
-        for key, value in values.items():
-            limit = 3e-5 if key == "k_T" else 1e-6
-            if abs(value) > limit:
-                return f"{key} = {value:.3g} beyond {limit:.0e}"
-    return ""
+def _label(candidate: _Candidate) -> str:
+    """The candidate as its effect names it (a coupling shows its driving joint)."""
+    if candidate.unit is not None:
+        return candidate.unit.label
+    return f"{candidate.effect}{list(candidate.joints)}"
 
 
 def _total(held_out: Sequence[float]) -> float:
@@ -536,8 +514,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                           and screening.overlap(s, t) > CONFOUNDED
                           and screening.overlap(t, s) > CONFOUNDED]
                 if rivals:
-                    names = ", ".join(f"{t.candidate.effect}{list(t.candidate.joints)}"
-                                      for t in rivals)
+                    names = ", ".join(_label(t.candidate) for t in rivals)
                     decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
                     continue
                 trial_free = free | _mask_of(big, s.kept)
@@ -572,7 +549,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
                     rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
                     cv_rms_after=after, decision=decisions[id(s)] or "not supported",
-                    extrapolation=total, worst_region=worst, estimate=s.values))
+                    extrapolation=total, worst_region=worst, estimate=s.values,
+                    label=_label(s.candidate)))
             if accepted is None:
                 break
             s, solution, r_new, J_new, trial_free, bic, after = accepted
