@@ -18,9 +18,9 @@ from robocal_casadi import load_dataset
 from robocal_casadi.calibration import Problem, calibrate, models_for, solve
 from robocal_casadi.calibration.folds import fold_schemes
 from robocal_casadi.calibration.identification import recommend
-from robocal_casadi.calibration.selection import dataset_rows
 from robocal_casadi.calibration.unexplained import find
 from robocal_casadi.commands.calibrate import summary
+from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model
@@ -210,6 +210,8 @@ def test_an_implausibly_large_periodic_error_is_not_named(tmp_path):
     rejected = [t for t in result.diagnosis
                 if t["effect"] == "joint_cyclic" and t["joints"] == (3,)]
     assert any("implausible" in t["decision"] for t in rejected)
+    stand_in = [line for line in summary(result).splitlines() if "stand in for" in line]
+    assert stand_in and "joint_cyclic[3]" in stand_in[0]
     assert result.unexplained is not None and "q3" in result.unexplained.variables[:2]
 
 

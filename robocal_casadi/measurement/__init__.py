@@ -7,6 +7,7 @@ never the kind string.
 
 from __future__ import annotations
 
+from ..errors import InputError
 from .artifact import ArtifactModel, CrossBarModel
 from .base import MeasurementModel
 from .sphere_laser import SphereLaserModel
@@ -22,8 +23,6 @@ MODELS: dict[str, type[MeasurementModel]] = {
 
 def model_class(kind: str, *, file=None) -> type[MeasurementModel]:
     """The measurement model class of a dataset ``kind`` (``file``: named in the error)."""
-    from ..errors import InputError
-
     if kind not in MODELS:
         raise InputError(f"no measurement model for kind {kind!r}; known kinds: "
                          f"{', '.join(MODELS)}", file=file, where="kind")

@@ -23,7 +23,9 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
+from ..datasets import dataset_rows
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from .base import MeasurementModel, PointsFunction
 
 
@@ -194,8 +196,6 @@ class ArtifactModel(MeasurementModel):
 
     def subset(self, groups: np.ndarray):
         """The dataset with only the placements (pose ids) in ``groups``."""
-        from ..calibration.selection import dataset_rows
-
         return dataset_rows(self.dataset, np.isin(self.dataset.pose, groups))
 
     def errors(self, residual: np.ndarray) -> np.ndarray:
@@ -256,8 +256,6 @@ class ArtifactModel(MeasurementModel):
 
     def error_terms(self) -> tuple:
         """``position`` per touch, then per placement its distances and perpendiculars."""
-        from ..results import ErrorTerm
-
         terms = [ErrorTerm("position", socket.pose, (socket.name,))
                  for socket in self.sockets if socket.unknown_index is not None
                  for _ in socket.rows]

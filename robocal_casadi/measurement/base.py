@@ -31,7 +31,9 @@ from typing import Callable, ClassVar, Mapping
 import casadi as ca
 import numpy as np
 
+from ..datasets import dataset_rows
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 
 PointsFunction = Callable[[ca.MX], ca.MX]
 
@@ -116,8 +118,6 @@ class MeasurementModel(ABC):
 
     def error_terms(self) -> tuple:
         """What each entry of ``errors`` is (``results.ErrorTerm``)."""
-        from ..results import ErrorTerm
-
         return (ErrorTerm("error"),) * len(self.error_rows())
 
     @abstractmethod
@@ -144,8 +144,6 @@ class MeasurementModel(ABC):
 
     def subset(self, groups: np.ndarray):
         """A copy of the dataset with only the given units (see ``residual_groups``)."""
-        from ..calibration.selection import dataset_rows
-
         return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
 
     # A model whose residual has the same few entries per data row (each row's entries

@@ -32,6 +32,7 @@ import numpy as np
 from ..beam import beam_direction, tangent_basis
 from ..errors import InputError
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
 from .base import MeasurementModel, PointsFunction
 
@@ -209,8 +210,6 @@ class SphereLaserModel(MeasurementModel):
         return out
 
     def error_terms(self) -> tuple:
-        from ..results import ErrorTerm
-
         return (ErrorTerm("surface"),) * self.count
 
 
