@@ -5,8 +5,9 @@ Methods:
 * ``lm``: Levenberg-Marquardt on the exact Jacobian, column-scaled, with a QR solve of
   the damped system (the default: it exploits the least-squares structure);
 * ``ipopt``: the same objective ``0.5 |r|^2`` handed to IPOPT through CasADi;
-* ``linearised``: the patent's iterated ``A dx = b`` (undamped Gauss-Newton steps);
-* ``two_stage``: the patent's scheme: angles with lengths held, then lengths with angles
+* ``linearised``: the published cross-bar method's iterated ``A dx = b`` (undamped
+  Gauss-Newton steps; docs/methods.md#cross-bar-calibration);
+* ``two_stage``: that method's scheme: angles with lengths held, then lengths with angles
   held, each stage iterated, repeated until the update is small; a last joint
   linearised pass over all free unknowns settles what the alternation leaves.
 

@@ -10,7 +10,8 @@ import pytest
 from robocal_casadi import examples
 from robocal_casadi.robot import Robot, load_robot
 
-DATA = Path("/work/shared/data")
+# The real robot files shipped with the package (robocal_casadi/data/*/robot.yaml).
+DATA = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data"
 REAL_ROBOT_FILES = sorted(DATA.glob("*/robot.yaml")) if DATA.is_dir() else []
 ROBOT_IDS = list(examples.ROBOTS) + [f"file:{p.parent.name}" for p in REAL_ROBOT_FILES]
 

@@ -62,7 +62,7 @@ def _clean(value):
 
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                   pdf: bool = False) -> None:
-    """Write the contract's three files into ``out`` atomically."""
+    """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out`` atomically."""
     with atomic_directory(out) as staging:
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")

@@ -1,6 +1,6 @@
 """Effects the DH model lacks, each a small ``Effect`` subclass.
 
-``EFFECTS`` maps the contract's effect names to their classes; ``make_effect`` builds one
+``EFFECTS`` maps the effect names of ``result.json`` to their classes; ``make_effect`` builds one
 for a robot and the fit data (lumped compliance without masses, a thermal reference
 from the data's mean).
 """

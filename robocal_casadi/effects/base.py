@@ -48,7 +48,7 @@ class RowContext:
 class Effect(ABC):
     """One effect with named parameters ``theta``; see the module docstring."""
 
-    name: ClassVar[str]  # contract name, e.g. "joint_compliance"
+    name: ClassVar[str]  # name in result.json, e.g. "joint_compliance"
     unit: ClassVar[str]  # unit of the parameters in result.json, e.g. "rad/Nm"
 
     def __init__(self, joints: tuple[int, ...]):
