@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal_casadi.calibration import (Problem, analyse_identifiability, calibrate, diagnosis,
+                                        models_for, solve)
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi import diagnosis
-from robocal_casadi.identification import (Problem, analyse_identifiability, calibrate,
-                                            models_for, solve)
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m]

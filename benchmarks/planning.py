@@ -41,7 +41,7 @@ from planning.reach import Workspace  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
 from robocal_casadi.examples import industrial_6r, panda_7dof  # noqa: E402
-from robocal_casadi.identification import calibrate  # noqa: E402
+from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.kinematics import Kinematics  # noqa: E402
 from robocal_casadi.measurement.tracker import rigid_registration  # noqa: E402
 from robocal_casadi.robot import save_robot  # noqa: E402

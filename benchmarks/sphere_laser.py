@@ -36,7 +36,7 @@ from test_sphere_laser import (NOISE, RADIUS, joint_scan, noise_floor,  # noqa: 
                                patent_truth, tilting_scan)
 
 from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.identification import (Problem, analyse_identifiability,  # noqa: E402
+from robocal_casadi.calibration import (Problem, analyse_identifiability,  # noqa: E402
                                            calibrate, models_for, solve)
 from robocal_casadi.sphere_fit import (Scan, _ipopt, _ipopt_solver,  # noqa: E402
                                        _levenberg_marquardt, algebraic_start, fit_sensor)

@@ -6,7 +6,7 @@ to unit norm. Its singular values come exactly from an SVD (``spectrum``) or, fo
 thousands of trial designs of a search, from the eigenvalues of the Schur complement of
 the summed information ``sum X^T X`` (``spectra``, batched): the same numbers, squared.
 The identifiable parameters are judged once on the whole pool of candidates by the
-engine's rule (``robocal_casadi.identifiability.analyse``), so a plan is scored over the
+engine's rule (``robocal_casadi.calibration.identifiability.analyse``), so a plan is scored over the
 same parameters the calibration will estimate.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal_casadi.identifiability import analyse
+from robocal_casadi.calibration.identifiability import analyse
 
 from .rows import Block
 

@@ -1,5 +1,5 @@
 """A plan as a dataset: the readings it asks for with the values the nominal robot would
-give, so the calibration engine (``robocal_casadi.identification``) can judge it.
+give, so the calibration engine (``robocal_casadi.calibration``) can judge it.
 
 For tracker points the instrument frame is taken as the world frame; for the sphere, the
 laser readings are the nominal stand-offs the planner aimed at.
@@ -36,7 +36,7 @@ def planned_dataset(dataset: Dataset, candidates, kinematics: Kinematics | None 
 def engine_identifiability(dataset: Dataset, candidates, names=None):
     """The engine's ``Identifiability`` of the plan made of ``candidates`` at the nominal
     robot (``names``: the parameters to judge; default all robot and mounted ones)."""
-    from robocal_casadi.identification import Problem, analyse_identifiability
+    from robocal_casadi.calibration import Problem, analyse_identifiability
     from robocal_casadi.measurement import model_for
 
     planned = planned_dataset(dataset, candidates)

@@ -6,7 +6,7 @@ The public API is re-exported here; see the README for a worked example.
 from .compensation import compensate
 from .datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
 from .errors import InputError, RobocalError, SolverError
-from .identification import calibrate
+from .calibration import calibrate
 from .ik import inverse_kinematics
 from .kinematics import Kinematics
 from .parameters import ParameterRegistry

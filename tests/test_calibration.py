@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
-from robocal_casadi.identification import calibrate, evaluate
+from robocal_casadi.calibration import calibrate, evaluate
 from robocal_casadi.simulate import simulate
 
 NOISE = 10e-6  # [m]
@@ -122,7 +122,7 @@ def test_parallel_axes_need_hayati_beta(tmp_path):
 def test_patent_rules_are_special_cases():
     """The published cross-bar method's rules (docs/methods.md#cross-bar-calibration):
     all-zero columns are dropped; of two identical columns one is kept."""
-    from robocal_casadi.identifiability import analyse
+    from robocal_casadi.calibration.identifiability import analyse
 
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=20), rng.normal(size=20)
@@ -179,8 +179,8 @@ def test_condition_number_selection_drops_what_hurts(tmp_path):
     """A bar placement repeated many times adds no new direction: selection drops copies."""
     from dataclasses import replace
 
-    from robocal_casadi.selection import select_by_condition
-    from robocal_casadi.identification import Problem, analyse_identifiability, models_for, solve
+    from robocal_casadi.calibration.selection import select_by_condition
+    from robocal_casadi.calibration import Problem, analyse_identifiability, models_for, solve
 
     robot = industrial_6r()
     data = simulate(robot, "cross_bar", out_dir=tmp_path / "bar", rows=40, noise=NOISE,

@@ -9,9 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal_casadi import diagnosis
+from robocal_casadi.calibration import Problem, calibrate, diagnosis, models_for, solve
 from robocal_casadi.examples import ROBOTS
-from robocal_casadi.identification import Problem, calibrate, models_for, solve
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m] per tracker coordinate
@@ -163,7 +162,7 @@ def test_compliance_on_artifact_touches_folds_whole_placements(tmp_path):
 
 def _geometric(problem):
     """Nominal fit, identifiability and geometric fit, as ``calibrate`` does them."""
-    from robocal_casadi.identification import analyse_identifiability
+    from robocal_casadi.calibration import analyse_identifiability
 
     x0 = problem.initial()
     nominal = solve(problem, x0, problem.mask("placement"))
@@ -242,7 +241,7 @@ def test_two_effects_each_credited_with_its_own_share(tmp_path):
 def test_undeclared_effect_in_cross_bar_data(tmp_path, effect, joint, truth):
     """Bar data carry no absolute position, yet a joint error still shows in the lengths."""
     from robocal_casadi.effects import make_effect
-    from robocal_casadi.identification import evaluate
+    from robocal_casadi.calibration import evaluate
 
     robot = ROBOTS["industrial_6r"]()
     values = tuple(truth.values())

@@ -405,7 +405,7 @@ def test_bad_arguments(tmp_path):
 
 
 def _engine():
-    identification = pytest.importorskip("robocal_casadi.identification")
+    identification = pytest.importorskip("robocal_casadi.calibration")
     simulate = pytest.importorskip("robocal_casadi.simulate")
     return identification.calibrate, simulate.simulate
 

@@ -553,7 +553,7 @@ def joint_scan(folder: Path, rng, count: int = 300):
 
 
 def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
-    from robocal_casadi.identification import calibrate
+    from robocal_casadi.calibration import calibrate
 
     path, truth, p0, n, centre, incidence = joint_scan(tmp_path, np.random.default_rng(4))
     dataset = load_dataset(path)
@@ -584,7 +584,7 @@ def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
 
 
 def test_joint_model_jacobian_through_the_problem_matches_finite_differences(tmp_path):
-    from robocal_casadi.identification import Problem, models_for
+    from robocal_casadi.calibration import Problem, models_for
     from robocal_casadi.kinematics import Kinematics
 
     path, truth, p0, n, centre, _ = joint_scan(tmp_path, np.random.default_rng(9), count=30)

@@ -19,11 +19,11 @@ from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from ..identification import calibrate
+from ..calibration import calibrate
 from ..output import atomic_directory
 from ..results import CalibrationResult
 from ..robot import save_robot
-from ..solver import METHODS
+from ..calibration import METHODS
 from .arguments import not_replacing_inputs, output_folder
 
 

@@ -19,7 +19,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..datasets import load_dataset
-from ..identification import calibrate
+from ..calibration import calibrate
 from .arguments import output_folder
 from .calibrate import summary, write_outputs
 

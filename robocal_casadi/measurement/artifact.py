@@ -180,7 +180,7 @@ class ArtifactModel(MeasurementModel):
 
     def subset(self, groups: np.ndarray):
         """The dataset with only the placements (pose ids) in ``groups``."""
-        from ..selection import dataset_rows
+        from ..calibration.selection import dataset_rows
 
         return dataset_rows(self.dataset, np.isin(self.dataset.pose, groups))
 

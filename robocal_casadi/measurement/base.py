@@ -97,7 +97,7 @@ class MeasurementModel(ABC):
 
     def subset(self, groups: np.ndarray):
         """A copy of the dataset with only the given units (see ``residual_groups``)."""
-        from ..selection import dataset_rows
+        from ..calibration.selection import dataset_rows
 
         return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
 

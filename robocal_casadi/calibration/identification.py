@@ -19,13 +19,13 @@ from typing import Sequence
 
 import numpy as np
 
-from .effects.base import Effect
-from .errors import InputError, SolverError
+from ..effects.base import Effect
+from ..errors import InputError, SolverError
+from ..measurement import model_for
+from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
+                       RmsSummary)
 from .identifiability import PRACTICAL_TOLERANCE, analyse
-from .measurement import model_for
 from .problem import Problem
-from .results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
-                      RmsSummary)
 from .solver import Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]

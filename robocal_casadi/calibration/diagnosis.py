@@ -46,11 +46,11 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .effects import make_effect
-from .effects.base import Effect
+from ..effects import make_effect
+from ..effects.base import Effect
+from ..progress import Progress
+from ..results import EffectFinding, Identifiability
 from .problem import Problem
-from .progress import Progress
-from .results import EffectFinding, Identifiability
 from .solver import Solution, solve
 
 BIC_THRESHOLD = 10.0

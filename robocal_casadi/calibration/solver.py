@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .errors import SolverError
+from ..errors import SolverError
 from .problem import Problem
 
 METHODS = ("lm", "ipopt", "linearised", "two_stage")

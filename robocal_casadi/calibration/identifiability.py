@@ -30,7 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .results import Identifiability
+from ..results import Identifiability
 
 RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
 PRACTICAL_TOLERANCE = 1e-2  # own part below which the data cannot determine a parameter

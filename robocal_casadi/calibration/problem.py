@@ -20,12 +20,12 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from .effects.base import Effect, RowContext
-from .errors import InputError
-from .kinematics import Kinematics
-from .measurement.base import MeasurementModel
-from .parameters import ParameterRegistry
-from .robot import Robot
+from ..effects.base import Effect, RowContext
+from ..errors import InputError
+from ..kinematics import Kinematics
+from ..measurement.base import MeasurementModel
+from ..parameters import ParameterRegistry
+from ..robot import Robot
 
 
 def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Sequence[str]):
@@ -249,13 +249,13 @@ class Problem:
 
     @cached_property
     def _point_batch(self):
-        from .codegen import BatchFunction
+        from ..codegen import BatchFunction
 
         return BatchFunction(self._row[0], per_row=("q", "extras", "offset"), chunk=256)
 
     @cached_property
     def _row_batch(self):
-        from .codegen import BatchFunction
+        from ..codegen import BatchFunction
 
         rows = max((m.dataset.rows for m in self.models), default=0)
         return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
@@ -278,7 +278,7 @@ class Problem:
         point = row(q, extras, p, theta, model.row_offset(data, mounted), payload_com,
                     effect_constants)
         r = model.row_residual(point, data, mounted, placement, constants)
-        from .codegen import BatchFunction
+        from ..codegen import BatchFunction
 
         unknowns = ca.vertcat(p, theta, mounted, placement)
         inputs = [q, extras, data, p, theta, mounted, placement, payload_com, constants,
