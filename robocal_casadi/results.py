@@ -146,6 +146,21 @@ class CalibrationResult:
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
+    parameters_geometric: tuple[ParameterEstimate, ...] = ()  # the geometric fit's estimates
+    unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
+    recommended: str = "final"  # "final" | "geometric": the model held-out data support
+    recommendation: str = ""  # why, in words
+
+    @property
+    def warning(self) -> str:
+        """The first thing a person must read, or '' (held-out data reject the effects)."""
+        if self.recommended != "geometric" or self.validation is None:
+            return ""
+        s, unit = self.units.length_scale, self.units.length
+        v = self.validation
+        return (f"the held-out data show the model with effects WORSE than the geometric one "
+                f"(validation RMS {v.rms_final / s:.4g} vs {v.rms_geometric / s:.4g} {unit}): "
+                f"the geometric model is recommended and is what robot_calibrated.yaml holds")
 
     @property
     def units(self) -> Units:
@@ -185,6 +200,10 @@ class CalibrationResult:
         }
         out["solver"] = {k: v for k, v in self.solver.items()
                          if isinstance(v, (int, float, str, bool))}
+        out["recommended"] = self.recommended
+        out["parameters_geometric"] = [p.to_json(units) for p in self.parameters_geometric]
+        out["unexplained"] = (None if self.unexplained is None else
+                              self.unexplained.to_json(units.length_scale, units.length))
         if self.selection:
             out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
         return out
@@ -194,6 +213,7 @@ class CalibrationResult:
         s = u.length_scale
         lines = [
             f"CalibrationResult({', '.join(self.datasets)})",
+            *([f"  WARNING: {self.warning}"] if self.warning else []),
             f"  identifiable parameters: {len(self.identifiability.identifiable)} of "
             f"{len(self.identifiability.candidates)}, condition number {self.condition_number:.4g}",
             f"  fit RMS [{u.length}]: nominal {self.fit.rms_nominal / s:.6g}, geometric "
@@ -205,4 +225,7 @@ class CalibrationResult:
                          f"geometric {v.rms_geometric / s:.6g}, final {v.rms_final / s:.6g}")
         for effect in self.effects:
             lines.append(f"  effect {effect.name} joints {list(effect.joints)}: {effect.summary}")
+        lines.append(f"  recommended model: {self.recommended}")
+        if self.unexplained is not None:
+            lines.append("  unexplained: " + self.unexplained.sentence(s, u.length))
         return "\n".join(lines)

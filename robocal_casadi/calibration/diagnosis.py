@@ -13,20 +13,35 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
 3. Supported? From the Gauss-Newton linearisation at the current solution: the residual
    sum of squares with the effect's remaining columns added gives the drop of the
    Bayesian information criterion ``BIC = n log(RSS/n) + k log n`` (n residuals, k
-   parameters added), and K-fold cross-validation gives the held-out RMS before and
-   after: folds of data rows (tracker, sphere) or of whole placements (artifacts,
-   bars); the fold's own placement unknowns (socket positions) are fitted on the held-out
-   data, as in validation. Both come from per-fold Gram matrices, so testing every
-   candidate costs one Jacobian.
+   parameters added), and cross-validation gives the held-out error before and after on
+   every fold scheme of ``folds``: units dealt at random (data rows; whole placements for
+   artifacts and bars, whose own socket positions are fitted on the held-out part, as in
+   validation), and the extrapolating schemes that hold out contiguous ranges of each
+   joint, clusters of configurations and whole datasets. All come from per-fold Gram
+   matrices, so testing every candidate costs one Jacobian.
+4. Does it extrapolate? The held-out squared error summed over the extrapolating schemes
+   must drop, and no single scheme may grow it by more than ``EXTRAPOLATION_TOLERANCE``:
+   an effect that only fits the region it was fitted in (a periodic term bending to the
+   shape of a residual over a short range of its joint) fails here.
+5. Plausible? The estimate must lie in the range real robots show (``_implausible``):
+   a compliance is positive and below 1e-4 rad/Nm, a periodic error below about 0.05 deg,
+   a gear-ratio error below 0.2%, a thermal coefficient that of a metal. An estimate
+   outside stands in for something the library does not name; it is reported, not added.
+6. Separable? A candidate whose columns the geometry nearly imitates (relative remaining
+   norm below ``IMITATED``) is not added; nor is one that a rival of another type explains
+   just as well (each explains more than ``CONFOUNDED`` of the other's share, with a
+   held-out error within ``RIVAL_MARGIN``): the data cannot tell which is the cause, and
+   the decision names both.
 
-The candidate with the largest BIC drop among those with a BIC drop above 10 and a
-lower held-out RMS is then added and everything is re-identified jointly with the
-nonlinear solver; it is kept if the refitted model still passes both tests. This repeats
-until no candidate is supported. All effects of one type found over the rounds form one
-finding (e.g. ``joint_compliance`` on joints 2 and 3). Its evidence (``rms_drop``
-relative, ``bic_drop``, ``cv_rms_before``/``cv_rms_after`` [m]) is what it adds to the
-final model: with several types found, each is left out of the final model in turn and
-the rest re-identified, so no effect is credited with what another one explains.
+The candidate with the largest BIC drop among those passing 3-6 is added and everything
+is re-identified jointly with the nonlinear solver; it is kept if the refitted model still
+passes. This repeats until no candidate is supported. All effects of one type found over
+the rounds form one finding (e.g. ``joint_compliance`` on joints 2 and 3). Its evidence
+(``rms_drop`` relative, ``bic_drop``, ``cv_rms_before``/``cv_rms_after`` [m]) is what it
+adds to the final model: with several types found, each is left out of the final model in
+turn and the rest re-identified, so no effect is credited with what another one explains.
+
+What no candidate explains is tested for structure afterwards (``unexplained``).
 
 The screening is unweighted least squares even when the refits use ``loss='huber'``.
 Data that carry their own flange poses (pendant readings) see no joint effect and are
@@ -50,6 +65,7 @@ from ..effects import make_effect
 from ..effects.base import Effect
 from ..progress import Progress
 from ..results import EffectFinding, Identifiability
+from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
 from .solver import Solution, solve
 
@@ -57,6 +73,10 @@ BIC_THRESHOLD = 10.0
 ABSORBED = 1e-3  # relative remaining column norm below which the geometry holds the effect
 INVISIBLE = 1e-9  # [m] RMS change of a typical-size effect below which the data do not see it
 FOLDS = 5
+IMITATED = 0.01  # relative remaining norm below which the geometry nearly imitates a column
+CONFOUNDED = 0.9  # share of each other's explained residual two rival effects both explain
+RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
+EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
 EFFECT_TYPES = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift")
 THERMAL_COLUMNS = ("temperature", "time")
@@ -88,6 +108,9 @@ class CandidateTest(Mapping):
     cv_rms_before: float
     cv_rms_after: float
     decision: str
+    extrapolation: float = float("nan")  # held-out SSE after / before, extrapolating folds
+    worst_region: str = ""  # the extrapolating scheme the candidate helps least
+    estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
 
     def __getitem__(self, key: str):
         if key not in self._keys():
@@ -107,7 +130,8 @@ class CandidateTest(Mapping):
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "
                 f"k={self.parameters}, bic_drop={self.bic_drop:.4g}, cv_rms "
-                f"{self.cv_rms_before:.4g} -> {self.cv_rms_after:.4g} m: {self.decision})")
+                f"{self.cv_rms_before:.4g} -> {self.cv_rms_after:.4g} m, extrapolating folds "
+                f"x{self.extrapolation:.3g}: {self.decision})")
 
 
 @dataclass(frozen=True)
@@ -252,54 +276,6 @@ def residual_groups(model) -> np.ndarray:
     return np.asarray(model.residual_groups())
 
 
-def fold_of_entries(problem: Problem, folds: int, seed: int) -> np.ndarray:
-    """Fold number of every residual entry (-1 when there are too few groups to fold)."""
-    keys = []
-    for k, model in enumerate(problem.models):
-        groups = residual_groups(model)
-        keys += [(k, int(g)) for g in groups]
-    unique = sorted(set(keys))
-    if len(unique) < 3:
-        return np.full(len(keys), -1)
-    count = min(folds, len(unique))
-    order = np.random.default_rng(seed).permutation(len(unique))
-    fold_of_group = {unique[i]: rank % count for rank, i in enumerate(order)}
-    return np.array([fold_of_group[key] for key in keys])
-
-
-class _FoldGrams:
-    """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation."""
-
-    def __init__(self, Z: np.ndarray, fold: np.ndarray):
-        self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
-        self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
-        self.total = Z.T @ Z
-        self.r = Z.shape[1] - 1
-
-    def held_out_sse(self, columns: Sequence[int]) -> float:
-        """Sum over folds of the held-out squared residual after fitting ``columns``.
-
-        Columns with no weight in a fold's training rows (that fold's own placement) are
-        fitted on its held-out rows instead.
-        """
-        if not self.count:
-            return float("nan")
-        S = np.asarray(columns, dtype=int)
-        r = self.r
-        total = 0.0
-        for Gf in self.parts:
-            Gt = self.total - Gf
-            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
-            shared, own = S[~local], S[local]
-            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
-            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
-            if own.size:
-                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
-                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
-            total += max(float(sse), 0.0)
-        return total
-
-
 # ----------------------------------------------------------------------------- screening
 
 
@@ -313,6 +289,9 @@ class _Screen:
     bic_drop: float
     cv_after: float
     decision: str
+    held_out: tuple[float, ...] = ()  # per fold scheme, held-out SSE after
+    values: tuple[tuple[str, float], ...] = ()  # estimated parameters (SI)
+    P: np.ndarray | None = None  # the kept columns, unit-scaled and projected
 
 
 def _pivoted(columns: np.ndarray, threshold: float) -> tuple[list[int], list[float]]:
@@ -337,7 +316,8 @@ class _Screening:
     """Everything one round needs from one residual and Jacobian."""
 
     def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray, free: np.ndarray,
-                 candidates: Sequence[_Candidate], fold: np.ndarray, n_errors: int):
+                 candidates: Sequence[_Candidate], schemes: Sequence[FoldScheme],
+                 n_errors: int):
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
@@ -357,8 +337,12 @@ class _Screening:
         self.E = E / E_norms
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
         Z = np.column_stack([self.A, self.E, r])
-        self.grams = _FoldGrams(Z, fold)
-        self.cv_before = self._cv(range(len(self.free_index)))
+        total = Z.T @ Z
+        self.schemes = list(schemes)
+        self.grams = [FoldGrams(Z, scheme.fold, total) for scheme in self.schemes]
+        self.base = list(range(len(self.free_index)))
+        self.held_out_before = self.held_out(self.base)
+        self.cv_before = self._cv(self.held_out_before)
         self.r_perp = self.project(r)
 
     def project(self, columns: np.ndarray) -> np.ndarray:
@@ -369,12 +353,30 @@ class _Screening:
         coefficients = np.linalg.solve(self.gram_A, self.A.T @ columns)
         return columns - self.A @ coefficients
 
-    def _cv(self, columns) -> float:
-        sse = self.grams.held_out_sse(list(columns))
-        return math.sqrt(sse / self.n_errors) if np.isfinite(sse) else float("nan")
+    def held_out(self, columns) -> tuple[float, ...]:
+        """Held-out SSE [m^2] of every fold scheme after fitting ``columns``."""
+        return tuple(g.held_out_sse(list(columns)) for g in self.grams)
+
+    def _cv(self, held_out: Sequence[float]) -> float:
+        """Held-out RMS [m] of the per-measurement errors on the random (``units``) folds."""
+        for scheme, sse in zip(self.schemes, held_out):
+            if not scheme.extrapolating and np.isfinite(sse):
+                return math.sqrt(sse / self.n_errors)
+        return float("nan")
 
     def bic_drop(self, rss_after: float, k: int) -> float:
         return self.n * math.log(self.rss / max(rss_after, 1e-300)) - k * math.log(self.n)
+
+    def extrapolation(self, after: Sequence[float]) -> tuple[float, str, float]:
+        """(total ratio, worst scheme, its ratio) of held-out SSE after/before over the
+        extrapolating schemes; (nan, "", nan) when the data allow none."""
+        pairs = [(s.name, b, a) for s, b, a in zip(self.schemes, self.held_out_before, after)
+                 if s.extrapolating and np.isfinite(a) and b > 0]
+        if not pairs:
+            return float("nan"), "", float("nan")
+        total = sum(a for _, _, a in pairs) / sum(b for _, b, _ in pairs)
+        name, b, a = max(pairs, key=lambda p: p[2] / p[1])
+        return total, name, a / b
 
     def screen(self, candidate: _Candidate) -> _Screen:
         names = candidate.names
@@ -395,14 +397,82 @@ class _Screening:
         coefficients = np.linalg.lstsq(P, self.r_perp, rcond=None)[0]
         after = self.r_perp - P @ coefficients
         rss_after = float(after @ after) + float(self.rss - self.r_perp @ self.r_perp)
-        cv_after = self._cv(list(range(len(self.free_index))) + [self.column_of[n] for n in kept])
+        held_out = self.held_out(self.base + [self.column_of[n] for n in kept])
         bic = self.bic_drop(rss_after, len(kept))
+        # A Gauss-Newton step moves the parameters against the residual's regression.
+        values = tuple((n, float(-c / self.raw_norm[n])) for n, c in zip(kept, coefficients))
+        decision = ""
+        if min(remaining) < IMITATED:
+            decision = "imitated by the geometry on these data"
         return _Screen(candidate, kept, held, min(remaining), 1 - rss_after / self.rss, bic,
-                       cv_after, "")
+                       self._cv(held_out), decision, held_out, values, P)
 
-    def supported(self, bic: float, cv_after: float, threshold: float) -> bool:
-        better = not np.isfinite(self.cv_before) or cv_after < self.cv_before
-        return bic > threshold and better
+    def verdict(self, bic: float, held_out: Sequence[float], threshold: float) -> str:
+        """'' when the numbers support the candidate, else the reason they do not."""
+        if not bic > threshold:
+            return "not supported"
+        after = self._cv(held_out)
+        if np.isfinite(self.cv_before) and not after < self.cv_before:
+            return "not supported"
+        total, worst, ratio = self.extrapolation(held_out)
+        if np.isfinite(total) and (total >= 1.0 or ratio > 1.0 + EXTRAPOLATION_TOLERANCE):
+            return (f"does not extrapolate (held out {worst}: squared error x{ratio:.3g}; "
+                    f"all extrapolating folds x{total:.3g})")
+        return ""
+
+    def overlap(self, first: _Screen, second: _Screen) -> float:
+        """Share of ``second``'s explained residual that ``first`` explains as well (0..1)."""
+        if first.P is None or second.P is None:
+            return 0.0
+        Q, _ = np.linalg.qr(first.P)
+        rest = second.P - Q @ (Q.T @ second.P)
+        alone = float(second.rss_drop) * self.rss
+        if alone <= 0:
+            return 1.0
+        coefficients = np.linalg.lstsq(rest, self.r_perp - Q @ (Q.T @ self.r_perp),
+                                       rcond=None)[0]
+        extra = float(np.sum((rest @ coefficients) ** 2))
+        return float(np.clip(1.0 - extra / alone, 0.0, 1.0))
+
+
+def _implausible(effect: Effect, values: dict[str, float]) -> str:
+    """'' when ``values`` (SI) are what real robots show for ``effect``, else why not."""
+    check = getattr(effect, "implausibility", None)
+    if check is not None:
+        return check(values) or ""
+    return _fallback_implausibility(effect.name, values)
+
+
+def _fallback_implausibility(name: str, values: dict[str, float]) -> str:
+    degree = math.pi / 180
+    if name == "joint_compliance":
+        for key, value in values.items():
+            if key.startswith("c") and key[1:].isdigit() and not 0 < value <= 1e-4:
+                return f"{key} = {value:.3g} rad/Nm outside (0, 1e-4] rad/Nm"
+    if name == "joint_cyclic":
+        joints = sorted({key.split("_")[1] for key in values})
+        for j in joints:
+            for harmonic in ("1", "2"):
+                amplitude = math.hypot(values.get(f"a{harmonic}_{j}", 0.0),
+                                       values.get(f"b{harmonic}_{j}", 0.0))
+                if amplitude > 0.05 * degree:
+                    return (f"joint {j} harmonic {harmonic}: {amplitude / degree:.3g} deg "
+                            f"above 0.05 deg")
+    if name == "joint_scale":
+        for key, value in values.items():
+            if abs(value) > 2e-3:
+                return f"{key} = {value:.3g} beyond +-0.2%"
+    if name == "thermal_drift":
+        for key, value in values.items():
+            limit = 3e-5 if key == "k_T" else 1e-6
+            if abs(value) > limit:
+                return f"{key} = {value:.3g} beyond {limit:.0e}"
+    return ""
+
+
+def _total(held_out: Sequence[float]) -> float:
+    """Held-out SSE [m^2] summed over the fold schemes (nan-free)."""
+    return float(sum(v for v in held_out if np.isfinite(v)))
 
 
 # ----------------------------------------------------------------------------- the loop
@@ -446,10 +516,12 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
 
     big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
+    effect_of = {c: next(e for e in candidate_effects if set(c.names) <= set(e.parameter_names()))
+                 for c in candidates}
     x = embed(problem, geometric.x, big)
     free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
     n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
-    fold = fold_of_entries(big, folds, seed)
+    schemes = fold_schemes(big, folds, seed)
     remaining = list(candidates)
     r, J = _residual_and_jacobian(big, x)
     rounds = 0
@@ -457,35 +529,65 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         for rounds in range(1, max_rounds + 1):
             if progress:
                 bar.update(rounds - 1, f"{len(steps)} effect(s) added")
-            screening = _Screening(big, r, J, free, remaining, fold, n_errors)
+            screening = _Screening(big, r, J, free, remaining, schemes, n_errors)
             screens = [screening.screen(c) for c in remaining]
-            passing = sorted((s for s in screens if not s.decision and screening.supported(
-                s.bic_drop, s.cv_after, bic_threshold)), key=lambda s: -s.bic_drop)
-            decisions = {id(s): s.decision or "not supported" for s in screens}
-            for s in passing:
-                decisions[id(s)] = "supported, weaker than the one added"
-            numbers = {id(s): (s.rss_drop, s.bic_drop, s.cv_after) for s in screens}
+            decisions: dict[int, str] = {}
+            for s in screens:
+                decisions[id(s)] = s.decision or screening.verdict(
+                    s.bic_drop, s.held_out, bic_threshold)
+                if not decisions[id(s)]:
+                    reason = _implausible(effect_of[s.candidate], dict(s.values))
+                    if reason:
+                        decisions[id(s)] = f"implausible ({reason}): stands in for something else"
+            passing = sorted((s for s in screens if not decisions[id(s)]),
+                             key=lambda s: -s.bic_drop)
+            numbers = {id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out) for s in screens}
             accepted = None
             for s in passing:
+                rivals = [t for t in screens if t is not s and t.P is not None
+                          and t.candidate.effect != s.candidate.effect
+                          and t.bic_drop > bic_threshold
+                          and _total(t.held_out) <= RIVAL_MARGIN * _total(s.held_out)
+                          and screening.overlap(s, t) > CONFOUNDED
+                          and screening.overlap(t, s) > CONFOUNDED]
+                if rivals:
+                    names = ", ".join(f"{t.candidate.effect}{list(t.candidate.joints)}"
+                                      for t in rivals)
+                    decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
+                    continue
                 trial_free = free | _mask_of(big, s.kept)
                 solution = solve(big, x, trial_free, method=method, loss=loss)
                 r_new, J_new = _residual_and_jacobian(big, solution.x)
                 rss_new = float(r_new @ r_new)
                 bic = screening.bic_drop(rss_new, len(s.kept))
-                after = _Screening(big, r_new, J_new, trial_free, [], fold, n_errors).cv_before
-                numbers[id(s)] = (1 - rss_new / screening.rss, bic, after)
-                if screening.supported(bic, after, bic_threshold):
+                # The refit's own held-out numbers, on the same folds.
+                refit = _Screening(big, r_new, J_new, trial_free, [], schemes, n_errors)
+                numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
+                                  refit.held_out_before)
+                verdict = screening.verdict(bic, refit.held_out_before, bic_threshold)
+                if not verdict:
+                    values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
+                    reason = _implausible(effect_of[s.candidate], values)
+                    if reason:
+                        verdict = f"implausible after refit ({reason}): stands in for something else"
+                if not verdict:
                     decisions[id(s)] = "added"
-                    accepted = (s, solution, r_new, J_new, trial_free, bic, after)
+                    accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)
                     break
-                decisions[id(s)] = "rejected after refit"
+                decisions[id(s)] = f"rejected after refit: {verdict}"
+            for s in passing:
+                if not decisions[id(s)]:
+                    decisions[id(s)] = "supported, weaker than the one added"
             for s in screens:
-                rss_drop, bic, after = numbers[id(s)]
+                rss_drop, bic, after, held_out = numbers[id(s)]
+                total, worst, _ = screening.extrapolation(held_out) if held_out else (
+                    float("nan"), "", float("nan"))
                 tested.append(CandidateTest(
                     round=rounds, effect=s.candidate.effect, joints=s.candidate.joints,
                     parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
                     rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
-                    cv_rms_after=after, decision=decisions[id(s)]))
+                    cv_rms_after=after, decision=decisions[id(s)] or "not supported",
+                    extrapolation=total, worst_region=worst, estimate=s.values))
             if accepted is None:
                 break
             s, solution, r_new, J_new, trial_free, bic, after = accepted
@@ -501,7 +603,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                          time.perf_counter() - start)
     final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
     groups = _groups(steps)
-    evidence = _evidence(final, solution, groups, fold, n_errors, method, loss)
+    evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
     findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)
@@ -537,7 +639,7 @@ def _groups(steps: list[_Step]) -> dict[tuple[str, str | None], list[_Step]]:
     return groups
 
 
-def _evidence(final: Problem, solution: Solution, groups: dict, fold: np.ndarray,
+def _evidence(final: Problem, solution: Solution, groups: dict, schemes,
               n_errors: int, method: str, loss: str) -> dict:
     """Per effect type: what it adds to the final model with everything else in it.
 
@@ -553,7 +655,7 @@ def _evidence(final: Problem, solution: Solution, groups: dict, fold: np.ndarray
                       "bic_drop": float(sum(s.bic_drop for s in group)),
                       "cv_rms_before": first.cv_before, "cv_rms_after": last.cv_after}}
     r = solution.residual
-    cv_final = _Screening(final, r, final.jacobian(solution.x), solution.free, [], fold,
+    cv_final = _Screening(final, r, final.jacobian(solution.x), solution.free, [], schemes,
                           n_errors).cv_before
     rms_final, rss_final = final.rms(solution.x), float(r @ r)
     for key, group in groups.items():
@@ -562,7 +664,7 @@ def _evidence(final: Problem, solution: Solution, groups: dict, fold: np.ndarray
         x[kept] = 0.0
         without = solve(final, x, solution.free & ~kept, method=method, loss=loss)
         cv_without = _Screening(final, without.residual, final.jacobian(without.x),
-                                without.free, [], fold, n_errors).cv_before
+                                without.free, [], schemes, n_errors).cv_before
         rss_without = float(without.residual @ without.residual)
         n = len(r)
         out[key] = {"rms_drop": 1.0 - rms_final / final.rms(without.x),

@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from . import unexplained
 from ..effects.base import Effect
 from ..errors import InputError, SolverError
 from ..measurement import model_for
@@ -85,6 +86,11 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
                                  for m in problem.models}))
     return analyse(problem.jacobian(x), names, candidate_index, placement,
                    invisible_reason=invisible, absorbed_reason=absorbed, tolerance=tolerance)
+
+
+def find_unexplained(problem: Problem, x: np.ndarray, free: np.ndarray):
+    """The structured residual ``problem`` leaves at ``x``, or None (see ``unexplained``)."""
+    return unexplained.find(problem, x, free)
 
 
 def _check_same_robot(datasets: Sequence) -> None:
@@ -234,22 +240,18 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
 
     std = final.std
     names = final_problem.unknowns.names
-    nominal_vector = problem.kinematics.nominal
-    parameters = []
-    for i, name in enumerate(problem.kinematics.registry.names):
-        identified = name in identifiability.identifiable
-        parameters.append(ParameterEstimate(
-            name=name, quantity=problem.kinematics.registry.quantities[i],
-            nominal=float(nominal_vector[i]), estimate=float(final.x[i]),
-            std=float(std[i]) if identified else None, identifiable=identified,
-            reason=identifiability.unidentifiable.get(name)))
+    parameters = _estimates(problem, identifiability, final.x, std)
+    parameters_geometric = _estimates(problem, identifiability, geometric.x, geometric.std)
+    unexplained = find_unexplained(final_problem, final.x, final.free)
+    recommended, recommendation = recommend(fit, validation_summary, bool(findings))
     mounted_slice = final_problem.slices["mounted"]
     mounted = {names[i]: (float(final.x[i]), float(std[i]) if np.isfinite(std[i]) else None)
                for i in range(mounted_slice.start, mounted_slice.stop)}
     placement_slice = final_problem.slices["placement"]
     placement = {names[i]: float(final.x[i])
                  for i in range(placement_slice.start, placement_slice.stop)}
-    calibrated = robot.with_parameters(final.x[problem.slices["robot"]])
+    chosen = final.x if recommended == "final" else geometric.x
+    calibrated = robot.with_parameters(chosen[problem.slices["robot"]])
     return CalibrationResult(
         datasets=tuple(d.path.name for d in datasets),
         robot_nominal=robot,
@@ -272,7 +274,45 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         effect_values=final.x[final_problem.slices["effects"]].copy(),
         diagnosis=tuple(tested),
         selection={} if selection is None else {k: v for k, v in selection.dropped.items()},
+        parameters_geometric=tuple(parameters_geometric),
+        unexplained=unexplained,
+        recommended=recommended,
+        recommendation=recommendation,
     )
+
+
+def _estimates(problem: Problem, identifiability: Identifiability, x: np.ndarray,
+               std: np.ndarray) -> list[ParameterEstimate]:
+    """One row per geometric parameter of ``problem``'s robot at ``x`` (SI)."""
+    nominal_vector = problem.kinematics.nominal
+    rows = []
+    for i, name in enumerate(problem.kinematics.registry.names):
+        identified = name in identifiability.identifiable
+        rows.append(ParameterEstimate(
+            name=name, quantity=problem.kinematics.registry.quantities[i],
+            nominal=float(nominal_vector[i]), estimate=float(x[i]),
+            std=float(std[i]) if identified else None, identifiable=identified,
+            reason=identifiability.unidentifiable.get(name)))
+    return rows
+
+
+def recommend(fit: RmsSummary, validation: RmsSummary | None,
+              added: bool) -> tuple[str, str]:
+    """``("final" | "geometric", why)``: which model the user should take.
+
+    The held-out data decide: when they show the model with the added effects worse
+    than the geometric one, the geometric model is recommended (and written as the
+    calibrated robot), whatever the fit data say.
+    """
+    if not added:
+        return "final", "diagnosis added no effect: the final model is the geometric one"
+    if validation is None:
+        return "final", ("the added effects passed the cross-validation of the fit data; "
+                         "no held-out data were given to confirm them")
+    if validation.rms_final > validation.rms_geometric:
+        return "geometric", ("the held-out data show the model with effects worse than the "
+                             "geometric one")
+    return "final", "the held-out data confirm the added effects"
 
 
 UNDETERMINED_STD = {"length": 0.1, "angle": 0.1, "none": 0.1}  # [m], [rad], [1]

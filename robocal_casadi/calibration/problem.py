@@ -397,6 +397,66 @@ class Problem:
                  for e in self._compiled]
         return np.vstack(parts)
 
+    def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int]):
+        """How each residual entry moves when a geometric parameter changes in one row only.
+
+        For a parameter ``p_c`` (indices into the robot slice of ``x``) that took another
+        value in data row ``k`` alone, residual entry ``i`` moves by
+        ``S_c[i, k] = dr_i/dP_k . dP_k/dp_c`` [m per unit of p_c], with ``P_k`` the row's
+        world point. Returned sparse as ``(entries, rows, values)``: entry indices into the
+        stacked residual, row indices into the stacked data rows of all models (in model
+        order), and one value per parameter (nnz x len(parameters)). Rows of models that
+        carry their own flange poses have no such sensitivity.
+        """
+        x = np.asarray(x, float)
+        parameters = np.asarray(parameters, dtype=int)
+        robot_columns = np.arange(self.slices["robot"].start, self.slices["robot"].stop)
+        entries, rows, values = [], [], []
+        entry_offset = row_offset = 0
+        for entry in self._compiled:
+            model = entry["model"]
+            size, n_rows = model.residual_size(), model.dataset.rows
+            if entry["uses_points"] and model.uses_robot:
+                if self._separable(model) is not None:
+                    J = self._model_residual(entry, x, True, robot_columns[parameters])[1]
+                    per_row = size // max(n_rows, 1)
+                    index = np.arange(per_row * n_rows)
+                    entries.append(entry_offset + index)
+                    rows.append(row_offset + index // per_row)
+                    values.append(J[index])
+                else:
+                    i, k, v = self._point_sensitivities(entry, x, parameters)
+                    entries.append(entry_offset + i)
+                    rows.append(row_offset + k)
+                    values.append(v)
+            entry_offset += size
+            row_offset += n_rows
+        if not entries:
+            return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(parameters)))
+        return np.concatenate(entries), np.concatenate(rows), np.vstack(values)
+
+    def _point_sensitivities(self, entry: dict, x: np.ndarray, parameters: np.ndarray):
+        """``row_sensitivities`` of one non-separable model, by the chain rule."""
+        model = entry["model"]
+        n_rows = model.dataset.rows
+        offsets = np.asarray(entry["offsets"](x)[0])
+        Q, extras, payload_com = self._data(model)
+        p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
+        per_row_offsets = np.broadcast_to(offsets.T, (n_rows, 3)) if offsets.shape[1] == 1 \
+            else offsets.T
+        P, J_p, _, _ = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
+                                       self._effect_constants())
+        J_p = J_p.reshape(n_rows, 3, -1)[:, :, parameters]
+        g_P = np.array(entry["g"](P.ravel(), x)[0].nonzeros())
+        rows_P, cols_P = entry["g_P_pattern"]
+        row, axis = cols_P // 3, cols_P % 3
+        contributions = g_P[:, None] * J_p[row, axis]
+        key = rows_P.astype(np.int64) * n_rows + row
+        unique, inverse = np.unique(key, return_inverse=True)
+        summed = np.zeros((len(unique), len(parameters)))
+        np.add.at(summed, inverse, contributions)
+        return unique // n_rows, unique % n_rows, summed
+
     def symbolic_residual(self, x: ca.MX) -> ca.MX:
         """The residual as one CasADi MX expression of ``x`` (for IPOPT)."""
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]

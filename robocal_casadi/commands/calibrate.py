@@ -78,7 +78,8 @@ def summary(result: CalibrationResult) -> str:
     s = units.length_scale
     ident = result.identifiability
     rows = sum(len(r.errors_final) for r in result.residuals)
-    lines = [f"{rows} measurements from {', '.join(result.datasets)}; "
+    lines = [f"WARNING: {result.warning}"] if result.warning else []
+    lines += [f"{rows} measurements from {', '.join(result.datasets)}; "
              f"{len(ident.identifiable)} of {len(ident.candidates)} parameters identifiable "
              f"(condition number {result.condition_number:.4g})"]
     fit = result.fit
@@ -97,6 +98,12 @@ def summary(result: CalibrationResult) -> str:
             lines.append(f"effect: {effect.summary or effect.name}")
     else:
         lines.append("effects: none added")
+    if result.effects:
+        lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
+    if result.unexplained is not None:
+        lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
+    else:
+        lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
 
 

@@ -178,6 +178,10 @@ class ArtifactModel(MeasurementModel):
             groups += [pose] * (len(self._distances(pose)) + len(self._perpendiculars(pose)))
         return np.array(groups, dtype=int)
 
+    def row_units(self) -> np.ndarray:
+        """The placement (pose id) of every data row."""
+        return np.asarray(self.dataset.pose, dtype=int)
+
     def subset(self, groups: np.ndarray):
         """The dataset with only the placements (pose ids) in ``groups``."""
         from ..calibration.selection import dataset_rows

@@ -95,6 +95,10 @@ class MeasurementModel(ABC):
         groups[:rows * per_row] = np.repeat(np.arange(rows), per_row)
         return groups
 
+    def row_units(self) -> np.ndarray:
+        """For each data row, the unit of data it belongs to (see ``residual_groups``)."""
+        return np.arange(self.dataset.rows)
+
     def subset(self, groups: np.ndarray):
         """A copy of the dataset with only the given units (see ``residual_groups``)."""
         from ..calibration.selection import dataset_rows

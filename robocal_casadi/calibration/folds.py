@@ -1,0 +1,195 @@
+"""Ways of holding data out: the fold schemes diagnosis judges candidate effects on.
+
+A fold scheme gives every residual entry of a problem a fold number; cross-validation
+fits on all folds but one and measures the error on the one held out. The unit held out
+together is the one a model's ``residual_groups`` names (a data row; a whole placement
+for artifacts and bars, whose socket positions belong to the placement).
+
+* ``units``: the units dealt at random into folds. It tests whether an effect describes
+  data like the fit data, nothing more.
+* ``q<j> ranges``: contiguous ranges of joint j (by the mean reading of the unit), each
+  held out in turn. The fit never sees the range it is judged on, so an effect must
+  extrapolate along that joint, as it must when the robot later works elsewhere.
+* ``clusters``: groups of nearby configurations (k-means over all joint readings), each
+  held out in turn: regions of the workspace rather than ranges of one joint.
+* ``datasets``: each dataset held out in turn, when there are several (another
+  placement of the instrument, another day).
+
+The last three are *extrapolating* schemes. Residual entries that belong to no unit
+(fold -1) always stay in the training part.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+RANGES = 4  # contiguous ranges per joint
+CLUSTERS = 5
+MIN_UNITS_PER_FOLD = 3  # a scheme needs at least this many units in every fold
+MIN_SPAN = {True: 0.05, False: 0.005}  # [rad] revolute, [m] prismatic: below, a joint is still
+
+
+@dataclass(frozen=True)
+class FoldScheme:
+    """Fold number per residual entry (-1: always trained on) and what it holds out."""
+
+    name: str
+    fold: np.ndarray
+    extrapolating: bool
+
+    @property
+    def count(self) -> int:
+        return int(self.fold.max()) + 1 if self.fold.size and self.fold.max() >= 0 else 0
+
+    def __repr__(self) -> str:
+        return f"FoldScheme({self.name!r}, {self.count} folds)"
+
+
+@dataclass(frozen=True)
+class _Units:
+    """The units of a problem: one key per residual entry and mean joints per unit."""
+
+    entry_unit: np.ndarray  # index into ``joints`` per residual entry, -1 for none
+    joints: np.ndarray  # (units x dof) mean joint readings [rad or m]
+    dataset: np.ndarray  # dataset index per unit
+
+
+def _units(problem) -> _Units:
+    entry_unit: list[np.ndarray] = []
+    joints: list[np.ndarray] = []
+    dataset: list[int] = []
+    for k, model in enumerate(problem.models):
+        groups = np.asarray(model.residual_groups())
+        row_units = np.asarray(model.row_units())
+        readings = model.dataset.joints
+        ids = np.unique(groups[groups >= 0])
+        start = len(joints)
+        if readings is not None and len(row_units):
+            # Mean joint readings of each unit's rows.
+            index = np.searchsorted(ids, row_units)
+            inside = (index < len(ids)) & (ids[np.minimum(index, len(ids) - 1)] == row_units)
+            sums = np.zeros((len(ids), readings.shape[1]))
+            np.add.at(sums, index[inside], readings[inside])
+            counts = np.bincount(index[inside], minlength=len(ids))[:, None]
+            means = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+        else:
+            means = np.full((len(ids), problem.robot.dof), np.nan)
+        joints.extend(means)
+        dataset.extend([k] * len(ids))
+        index = np.searchsorted(ids, groups)
+        unit = np.full(len(groups), -1)
+        valid = groups >= 0
+        unit[valid] = start + index[valid]
+        entry_unit.append(unit)
+    dof = problem.robot.dof
+    return _Units(np.concatenate(entry_unit) if entry_unit else np.zeros(0, int),
+                  np.array(joints).reshape(-1, dof), np.array(dataset, dtype=int))
+
+
+def _entry_folds(units: _Units, unit_fold: np.ndarray) -> np.ndarray:
+    fold = np.full(len(units.entry_unit), -1)
+    has = units.entry_unit >= 0
+    fold[has] = unit_fold[units.entry_unit[has]]
+    return fold
+
+
+def _enough(unit_fold: np.ndarray, count: int) -> bool:
+    sizes = np.bincount(unit_fold[unit_fold >= 0], minlength=count)
+    return count >= 2 and bool(np.all(sizes >= MIN_UNITS_PER_FOLD))
+
+
+def _kmeans(points: np.ndarray, count: int, seed: int, iterations: int = 30) -> np.ndarray:
+    """Cluster labels of ``points`` (k-means, k-means++ start, fixed seed)."""
+    rng = np.random.default_rng(seed)
+    centres = [points[rng.integers(len(points))]]
+    for _ in range(1, count):
+        distance = np.min([np.sum((points - c) ** 2, axis=1) for c in centres], axis=0)
+        total = distance.sum()
+        if total <= 0:
+            break
+        centres.append(points[rng.choice(len(points), p=distance / total)])
+    centres_array = np.array(centres)
+    labels = np.zeros(len(points), dtype=int)
+    for _ in range(iterations):
+        distance = ((points[:, None, :] - centres_array[None]) ** 2).sum(axis=2)
+        labels = np.argmin(distance, axis=1)
+        moved = np.array([points[labels == c].mean(axis=0) if np.any(labels == c)
+                          else centres_array[c] for c in range(len(centres_array))])
+        if np.allclose(moved, centres_array):
+            break
+        centres_array = moved
+    return labels
+
+
+def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
+    """Every fold scheme the problem's data allow (see the module docstring)."""
+    units = _units(problem)
+    n_units = len(units.joints)
+    schemes: list[FoldScheme] = []
+    if n_units >= 3:
+        count = min(folds, n_units)
+        order = np.random.default_rng(seed).permutation(n_units)
+        unit_fold = np.empty(n_units, dtype=int)
+        unit_fold[order] = np.arange(n_units) % count
+        schemes.append(FoldScheme("units", _entry_folds(units, unit_fold), False))
+    finite = np.all(np.isfinite(units.joints), axis=1)
+    if n_units >= RANGES * MIN_UNITS_PER_FOLD and finite.all():
+        for j, joint in enumerate(problem.robot.joints):
+            values = units.joints[:, j]
+            if np.ptp(values) < MIN_SPAN[joint.revolute]:
+                continue
+            # Contiguous ranges with equal numbers of units (ties broken by order).
+            rank = np.argsort(np.argsort(values, kind="stable"), kind="stable")
+            unit_fold = (rank * RANGES) // n_units
+            if _enough(unit_fold, RANGES):
+                schemes.append(FoldScheme(f"q{j + 1} ranges", _entry_folds(units, unit_fold),
+                                          True))
+        if n_units >= CLUSTERS * MIN_UNITS_PER_FOLD:
+            scale = np.array([1.0 if j.revolute else 10.0 for j in problem.robot.joints])
+            labels = _kmeans(units.joints * scale, CLUSTERS, seed)
+            if _enough(labels, int(labels.max()) + 1):
+                schemes.append(FoldScheme("clusters", _entry_folds(units, labels), True))
+    if len(problem.models) > 1 and _enough(units.dataset, len(problem.models)):
+        schemes.append(FoldScheme("datasets", _entry_folds(units, units.dataset), True))
+    return schemes
+
+
+class FoldGrams:
+    """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation.
+
+    ``fold`` numbers the rows of ``Z`` (-1: always trained on); ``total`` may pass
+    ``Z.T @ Z`` when several schemes share one ``Z``. The last column of ``Z`` is the
+    residual [m]; the others are the linearised unknowns (any scaling).
+    """
+
+    def __init__(self, Z: np.ndarray, fold: np.ndarray, total: np.ndarray | None = None):
+        self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
+        self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
+        self.total = Z.T @ Z if total is None else total
+        self.r = Z.shape[1] - 1
+
+    def held_out_sse(self, columns: Sequence[int]) -> float:
+        """Sum over folds of the held-out squared residual after fitting ``columns``.
+
+        Columns with no weight in a fold's training rows (that fold's own placement) are
+        fitted on its held-out rows instead.
+        """
+        if not self.count:
+            return float("nan")
+        S = np.asarray(columns, dtype=int)
+        r = self.r
+        total = 0.0
+        for Gf in self.parts:
+            Gt = self.total - Gf
+            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
+            shared, own = S[~local], S[local]
+            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
+            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
+            if own.size:
+                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
+                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
+            total += max(float(sse), 0.0)
+        return total

@@ -1,0 +1,381 @@
+"""What the final model leaves unexplained: is the residual noise, or structure?
+
+After the effect search, the residual is tested for structure that no effect of the
+library describes. The hypothesis class is broad on purpose: *some geometric parameter
+of some joint takes a value that varies smoothly with some variable*. The variables are
+each joint reading ``q<j>``, each joint's direction of motion ``direction_q<j>`` (the
+sign of its change from the previous row; rows are in measurement order), each numeric
+extra column (``temperature``, ``time``, ``payload`` ...), and each pair of joint
+readings. A length that sags with its angle, a joint offset that follows another joint,
+backlash, a warm-up: each is such a variation, named or not.
+
+For one variable ``v`` and one parameter ``p_c`` (``theta``, ``d``, ``a``, ``alpha`` of
+each joint) the residual would move by ``sum_k S_c[:, k] g(v_k)``, with ``S_c`` the
+row sensitivities (``Problem.row_sensitivities``) and ``g`` a flexible function of
+``v``: piecewise-linear on knots at the quantiles of ``v`` (a product of two such for a
+pair; one value per sign for a direction). The columns are projected off everything the
+model already fits; the drop of the residual sum of squares gives a likelihood-ratio
+statistic, compared with the chi-square quantile at a family-wise level ``ALPHA`` shared
+over all tests (Bonferroni). The strongest significant tests (distinct variables, at most
+``COMBINED``) are then fitted together and judged by K-fold cross-validation over units
+of data (rows, or whole placements): the held-out mean square they remove is the
+structured part; what stays held out estimates the noise floor.
+
+``find`` returns None when nothing is significant, the cross-validation does not
+improve, or the structured part is below ``MIN_SHARE`` of the remaining mean square.
+Linearised at the final solution; residuals [m] are those of ``Problem.residual``,
+RMS values over the per-measurement errors as ``Problem.rms``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from statistics import NormalDist
+from typing import Any
+
+import numpy as np
+
+from .folds import FoldGrams, fold_schemes
+
+ALPHA = 1e-3  # family-wise false-alarm level over all tests
+MIN_SHARE = 0.02  # structure below this share of the remaining mean square is not reported
+COMBINED = 3  # strongest variables fitted together
+KNOTS = 5  # knots of a single variable's piecewise-linear function
+PAIR_KNOTS = 3  # knots per variable of a pair's function
+MAX_ENTRIES = 9000  # residual entries tested (whole units drawn at random beyond)
+MIN_SPAN = {True: 1e-3, False: 1e-4}  # [rad] / [m]: a joint that moves less is still
+STEMS = ("theta", "d", "a", "alpha")
+PAIR_GAIN = 1.25  # a pair's statistic over the better of its two variables alone
+LISTED = 0.25  # variables listed down to this fraction of the strongest statistic
+
+
+@dataclass(frozen=True)
+class StructureTest:
+    """One variable against one geometric parameter: the numbers of its test."""
+
+    variable: str
+    parameter: str
+    columns: int  # free columns after projection
+    statistic: float  # n log(RSS0 / RSS1)
+    threshold: float  # chi-square quantile it must exceed
+    rss_drop: float  # relative
+
+    @property
+    def significant(self) -> bool:
+        return self.statistic > self.threshold
+
+    def __repr__(self) -> str:
+        return (f"StructureTest({self.parameter} ~ {self.variable}: {self.statistic:.4g} "
+                f"vs {self.threshold:.4g}, rss -{100 * self.rss_drop:.3g}%)")
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """A structured residual the model does not explain.
+
+    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS), ``share``
+    its fraction of the remaining mean square, ``variables`` the variables it follows,
+    strongest first, ``parameters`` the geometric parameter that varies with each (the
+    likeliest carrier, not a diagnosis), ``noise_floor`` [m] the held-out RMS once the
+    structure is fitted. ``curve`` holds per data row the strongest variable's value
+    (SI, or the column's own unit) and the RMS [m] of the row's residual entries before
+    and after removing the structure, for a plot.
+    """
+
+    rms: float
+    share: float
+    variables: tuple[str, ...]
+    parameters: tuple[str, ...]
+    noise_floor: float
+    tests: tuple[StructureTest, ...] = field(repr=False, default=())
+    curve: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+
+    def to_json(self, length_scale: float, unit: str) -> dict[str, Any]:
+        """The result file's form: rms in the file's length unit."""
+        return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
+                "variables": list(self.variables)}
+
+    def sentence(self, length_scale: float, unit: str) -> str:
+        """One sentence for a person, in the file's length unit."""
+        pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
+        return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
+                f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
+                f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
+                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
+
+
+# ----------------------------------------------------------------------------- variables
+
+
+@dataclass(frozen=True)
+class _Variable:
+    name: str
+    basis: np.ndarray  # (rows x K) over the stacked data rows
+
+
+def _hats(values: np.ndarray, knots: int) -> np.ndarray | None:
+    """Piecewise-linear hat functions on knots at the quantiles of ``values``."""
+    points = np.unique(np.quantile(values, np.linspace(0, 1, knots)))
+    if len(points) < 2:
+        return None
+    basis = np.zeros((len(values), len(points)))
+    position = np.clip(np.searchsorted(points, values, side="right") - 1, 0, len(points) - 2)
+    left, right = points[position], points[position + 1]
+    weight = np.clip((values - left) / (right - left), 0.0, 1.0)
+    rows = np.arange(len(values))
+    basis[rows, position] = 1 - weight
+    basis[rows, position + 1] += weight
+    return basis
+
+
+def _directions(joints: np.ndarray) -> np.ndarray:
+    """Sign of each joint's change from the previous row (0 for the first and still rows)."""
+    out = np.zeros_like(joints)
+    if len(joints) > 1:
+        out[1:] = np.sign(np.diff(joints, axis=0))
+    return out
+
+
+def _variables(problem) -> list[_Variable]:
+    robot = problem.robot
+    joints_parts, directions_parts, extras_parts = [], [], []
+    columns: set[str] | None = None
+    for model in problem.models:
+        dataset = model.dataset
+        readings = dataset.joints if model.uses_robot and dataset.joints is not None \
+            else np.full((dataset.rows, robot.dof), np.nan)
+        joints_parts.append(readings)
+        directions_parts.append(_directions(readings))
+        numeric = {k for k, v in dataset.extras.items()
+                   if np.asarray(v).dtype.kind in "fiu"}
+        columns = numeric if columns is None else columns & numeric
+        extras_parts.append(dataset.extras)
+    joints = np.vstack(joints_parts)
+    directions = np.vstack(directions_parts)
+    out: list[_Variable] = []
+    moving = []
+    for j, joint in enumerate(robot.joints):
+        values = joints[:, j]
+        if not np.all(np.isfinite(values)) or np.ptp(values) < MIN_SPAN[joint.revolute]:
+            continue
+        moving.append(j)
+        basis = _hats(values, KNOTS)
+        if basis is not None:
+            out.append(_Variable(f"q{j + 1}", basis))
+        sign = directions[:, j]
+        if np.any(sign > 0) and np.any(sign < 0):
+            out.append(_Variable(f"direction_q{j + 1}",
+                                 np.column_stack([sign > 0, sign < 0]).astype(float)))
+    for name in sorted(columns or ()):
+        values = np.concatenate([np.asarray(e[name], float) for e in extras_parts])
+        if np.all(np.isfinite(values)) and np.ptp(values) > 0:
+            basis = _hats(values, KNOTS - 1)
+            if basis is not None:
+                out.append(_Variable(name, basis))
+    for a_index, a in enumerate(moving):
+        for b in moving[a_index + 1:]:
+            first, second = _hats(joints[:, a], PAIR_KNOTS), _hats(joints[:, b], PAIR_KNOTS)
+            if first is None or second is None:
+                continue
+            basis = (first[:, :, None] * second[:, None, :]).reshape(len(joints), -1)
+            out.append(_Variable(f"q{a + 1}*q{b + 1}", basis))
+    return out
+
+
+def _names(variable: str) -> list[str]:
+    return variable.split("*")
+
+
+# ----------------------------------------------------------------------------- the test
+
+
+def _chi2_quantile(k: int, tail: float) -> float:
+    """Upper ``tail`` quantile of chi-square with ``k`` degrees of freedom
+    (Wilson-Hilferty; within a few percent for the small tails used here)."""
+    z = NormalDist().inv_cdf(1.0 - tail)
+    h = 2.0 / (9.0 * k)
+    return k * (1.0 - h + z * math.sqrt(h)) ** 3
+
+
+def _units_subset(problem, n: int, seed: int) -> np.ndarray:
+    """Residual entries to test: all, or whole units drawn at random up to MAX_ENTRIES."""
+    if n <= MAX_ENTRIES:
+        return np.arange(n)
+    keys = np.concatenate([np.asarray(m.residual_groups()) + 1_000_000 * k
+                           for k, m in enumerate(problem.models)])
+    units = np.unique(keys)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(units))
+    share = MAX_ENTRIES / n
+    chosen = units[order[:max(1, int(len(units) * share))]]
+    return np.flatnonzero(np.isin(keys, chosen))
+
+
+def find(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0) -> Unexplained | None:
+    """Test the residual of ``problem`` at ``x`` (``free``: the unknowns fitted) for
+    structure; see the module. None when what remains is consistent with noise."""
+    robot = problem.robot
+    if not any(m.uses_robot for m in problem.models):
+        return None
+    r_all = problem.residual(x)
+    n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in problem.models)
+    keep = _units_subset(problem, len(r_all), seed)
+    scale = len(keep) / len(r_all)
+    r = r_all[keep]
+    n = len(r)
+    A = problem.jacobian(x, np.flatnonzero(free))[keep]
+    norms = np.linalg.norm(A, axis=0)
+    A = A[:, norms > 0] / norms[norms > 0]
+    U, singular, _ = np.linalg.svd(A, full_matrices=False)
+    U = U[:, singular > singular[0] * 1e-10] if singular.size else U[:, :0]
+    r_perp = r - U @ (U.T @ r)
+    rss0 = float(r_perp @ r_perp)
+    if n < 10 or rss0 <= 0:
+        return None
+
+    names = [f"{stem}{j}" for j in range(1, robot.dof + 1) for stem in STEMS
+             if f"{stem}{j}" in problem.kinematics.registry.names]
+    indices = [problem.kinematics.registry.names.index(name) for name in names]
+    entries, rows, values = problem.row_sensitivities(x, indices)
+    position = np.full(len(r_all), -1)
+    position[keep] = np.arange(n)
+    inside = position[entries] >= 0
+    entries, rows, values = position[entries[inside]], rows[inside], values[inside]
+    variables = _variables(problem)
+
+    def projected_columns(variable: _Variable) -> np.ndarray:
+        """(n x channels x K) columns of every parameter varying with ``variable``,
+        unit-scaled and projected off the model's own columns (one product for all)."""
+        K = variable.basis.shape[1]
+        rows_of_columns = np.empty((len(names) * K, n))  # one column per row, for speed
+        basis = variable.basis[rows]
+        for channel in range(len(names)):
+            weights = values[:, channel]
+            for k in range(K):
+                rows_of_columns[channel * K + k] = np.bincount(
+                    entries, weights=weights * basis[:, k], minlength=n)
+        size = np.sqrt(np.einsum("ij,ij->i", rows_of_columns, rows_of_columns))
+        rows_of_columns[size > 0] /= size[size > 0, None]
+        rows_of_columns -= (rows_of_columns @ U) @ U.T
+        return rows_of_columns.reshape(len(names), K, n).transpose(2, 0, 1)
+
+    tests, bases = [], {}
+    for variable in variables:
+        X_all = projected_columns(variable)
+        for channel in range(len(names)):
+            X = X_all[:, channel, :]
+            if not np.any(X):
+                continue
+            # Orthonormal basis of what the model cannot already do (singular values of
+            # the unit-scaled, projected columns above 1e-3), from the small Gram matrix.
+            eigenvalues, vectors = np.linalg.eigh(X.T @ X)
+            big = eigenvalues > 1e-6
+            Q = X @ (vectors[:, big] / np.sqrt(eigenvalues[big]))
+            if not Q.shape[1] or Q.shape[1] >= n - U.shape[1] - 1:
+                continue
+            drop = float(np.sum((Q.T @ r_perp) ** 2))
+            rss1 = max(rss0 - drop, 1e-300)
+            statistic = n * math.log(rss0 / rss1)
+            tests.append(StructureTest(variable.name, names[channel], Q.shape[1], statistic,
+                                       0.0, drop / rss0))
+            bases[(variable.name, names[channel])] = Q
+    if not tests:
+        return None
+    tail = ALPHA / len(tests)
+    tests = [StructureTest(t.variable, t.parameter, t.columns, t.statistic,
+                           _chi2_quantile(t.columns, tail), t.rss_drop) for t in tests]
+    significant = sorted((t for t in tests if t.significant), key=lambda t: -t.statistic)
+    if not significant:
+        return None
+
+    chosen: list[StructureTest] = []
+    for test in significant:
+        if test.variable not in {t.variable for t in chosen}:
+            chosen.append(test)
+        if len(chosen) == COMBINED:
+            break
+    X = np.column_stack([bases[(t.variable, t.parameter)] for t in chosen])
+    schemes = [s for s in fold_schemes(problem, 5, seed) if not s.extrapolating]
+    if not schemes:
+        return None
+    fold = schemes[0].fold[keep]
+    Z = np.column_stack([U, X, r])
+    grams = FoldGrams(Z, fold)
+    sse0 = grams.held_out_sse(list(range(U.shape[1])))
+    sse1 = grams.held_out_sse(list(range(U.shape[1] + X.shape[1])))
+    if not (np.isfinite(sse0) and np.isfinite(sse1)) or sse1 >= sse0:
+        return None
+    errors = n_errors * scale
+    structured = (sse0 - sse1) / errors
+    share = (sse0 - sse1) / sse0
+    if share < MIN_SHARE:
+        return None
+    ordered, carriers = _ranking(significant)
+    fitted = X @ np.linalg.lstsq(X, r_perp, rcond=None)[0]
+    curve = _curve(problem, chosen[0].variable, entries, rows, r, r - fitted)
+    return Unexplained(rms=math.sqrt(structured), share=float(share),
+                       variables=tuple(ordered[:6]), parameters=tuple(carriers[:6]),
+                       noise_floor=math.sqrt(sse1 / errors), tests=tuple(tests), curve=curve)
+
+
+def _ranking(significant: list[StructureTest]) -> tuple[list[str], list[str]]:
+    """Variable names strongest first, each with the parameter of its strongest test.
+
+    A pair counts only where it beats both its variables alone by ``PAIR_GAIN``; a
+    variable is listed while its statistic is at least ``LISTED`` of the strongest.
+    """
+    best: dict[str, StructureTest] = {}
+    for test in significant:
+        if test.variable not in best or test.statistic > best[test.variable].statistic:
+            best[test.variable] = test
+    single = {v: t.statistic for v, t in best.items() if "*" not in v}
+    ranked = []
+    for variable, test in best.items():
+        parts = _names(variable)
+        if len(parts) > 1 and test.statistic < PAIR_GAIN * max(single.get(p, 0.0)
+                                                               for p in parts):
+            continue
+        ranked.append(test)
+    ranked.sort(key=lambda t: -t.statistic)
+    top = ranked[0].statistic if ranked else 0.0
+    ordered: list[str] = []
+    carriers: list[str] = []
+    for test in ranked:
+        if test.statistic < LISTED * top:
+            break
+        for name in _names(test.variable):
+            if name not in ordered:
+                ordered.append(name)
+                carriers.append(test.parameter)
+    return ordered, carriers
+
+
+def _curve(problem, variable: str, entries: np.ndarray, rows: np.ndarray,
+           before: np.ndarray, after: np.ndarray) -> dict[str, np.ndarray]:
+    """Per data row: the strongest single variable, and the RMS [m] of the residual
+    entries that row moves, before and after removing the structure."""
+    name = _names(variable)[0]
+    pairs = np.unique(np.column_stack([entries, rows]), axis=0)
+    total = sum(m.dataset.rows for m in problem.models)
+    counts = np.bincount(pairs[:, 1], minlength=total)
+    seen = counts > 0
+    square_before = np.bincount(pairs[:, 1], before[pairs[:, 0]] ** 2, total)
+    square_after = np.bincount(pairs[:, 1], after[pairs[:, 0]] ** 2, total)
+    return {"variable": np.array(name), "value": _values_of(problem, name)[seen],
+            "before": np.sqrt(square_before[seen] / counts[seen]),
+            "after": np.sqrt(square_after[seen] / counts[seen])}
+
+
+def _values_of(problem, name: str) -> np.ndarray:
+    parts = []
+    for model in problem.models:
+        dataset = model.dataset
+        if name.startswith("direction_q"):
+            j = int(name[len("direction_q"):]) - 1
+            parts.append(_directions(dataset.joints)[:, j])
+        elif name.startswith("q") and name[1:].isdigit():
+            parts.append(dataset.joints[:, int(name[1:]) - 1])
+        else:
+            parts.append(np.asarray(dataset.extras[name], float))
+    return np.concatenate(parts)

@@ -1,0 +1,210 @@
+"""Diagnosis that survives extrapolation and says what it cannot explain.
+
+Truths here come from outside the estimator: ``robocal_casadi.simulate`` for the library's
+effects, and, for effects no library names, data computed in this file through
+pinocchio with a robot whose geometry changes row by row.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal_casadi import load_dataset
+from robocal_casadi.calibration import Problem, calibrate, models_for, solve
+from robocal_casadi.calibration.folds import fold_schemes
+from robocal_casadi.calibration.identification import recommend
+from robocal_casadi.calibration.selection import dataset_rows
+from robocal_casadi.calibration.unexplained import find
+from robocal_casadi.commands.calibrate import summary
+from robocal_casadi.examples import ROBOTS
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model
+from robocal_casadi.results import RmsSummary
+from robocal_casadi.robot import save_robot
+from robocal_casadi.simulate import simulate
+
+NOISE = 1e-5  # [m] per tracker coordinate
+FLOOR = NOISE * math.sqrt(3)  # RMS of the 3-D point error from noise alone
+TARGET = np.array([0.0, 0.0, 0.1])  # [m] reflector in the flange frame
+
+
+def true_geometry(robot, seed: int) -> np.ndarray:
+    """Nominal geometry plus fixed random DH errors (0.5 mm, 0.5 mrad), registry order."""
+    kinematics = Kinematics(robot)
+    p = kinematics.nominal.copy()
+    rng = np.random.default_rng(700 + seed)
+    for i in range(1, robot.dof + 1):
+        for stem in ("theta", "d", "a", "alpha"):
+            p[kinematics.registry.index(f"{stem}{i}")] += rng.normal(0.0, 5e-4)
+    return p
+
+
+def tracker_with_row_geometry(folder: Path, robot, rows: int, seed: int, vary,
+                              noise: float = NOISE, sequence=None) -> object:
+    """Tracker data whose true geometry changes with the row: ``vary(q, p, k)`` returns the
+    row's geometry (registry order, SI) from its joints ``q``, the true ``p`` and the row
+    index ``k``. Points by pinocchio, in the world frame (the tracker frame is fitted)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    lower = np.maximum(robot.lower_limits, -math.pi) * 0.9
+    upper = np.minimum(robot.upper_limits, math.pi) * 0.9
+    Q = rng.uniform(lower, upper, size=(rows, robot.dof)) if sequence is None else sequence
+    p_true = true_geometry(robot, 0)
+    points = []
+    for k, q in enumerate(Q):
+        model = pinocchio_model(robot.with_parameters(vary(q, p_true.copy(), k)),
+                                with_links=False)
+        T = frame_placements(model, q, ["flange"])[0]
+        points.append(T[:3, :3] @ TARGET + T[:3, 3])
+    points = np.array(points) + rng.normal(0.0, noise, (rows, 3))
+    save_robot(robot, folder / "robot.yaml")
+    (folder / "dataset.yaml").write_text(
+        "kind: tracker_points\nrobot: robot.yaml\nunits: {length: m, angle: rad}\n"
+        f"target: {{xyz: [{TARGET[0]}, {TARGET[1]}, {TARGET[2]}]}}\ndata: points.csv\n")
+    header = ",".join([f"q{j + 1}" for j in range(robot.dof)] + ["x", "y", "z"])
+    table = np.column_stack([Q, points])
+    lines = [header] + [",".join(repr(float(v)) for v in row) for row in table]
+    (folder / "points.csv").write_text("\n".join(lines) + "\n")
+    return load_dataset(folder / "dataset.yaml")
+
+
+# ----------------------------------------------------------------------------- engine parts
+
+
+def test_row_sensitivities_sum_to_the_jacobian_and_match_one_row_finite_differences(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    bar = simulate(robot, "cross_bar", out_dir=tmp_path / "bar", rows=8, noise=0.0, seed=3,
+                   progress=False).load()
+    problem = Problem(robot, models_for([bar]))
+    x = problem.initial()
+    names = ["theta2", "a3", "d4"]
+    index = [problem.kinematics.registry.index(n) for n in names]
+    entries, rows, values = problem.row_sensitivities(x, index)
+    # Changing a parameter in every row is changing the parameter.
+    for c, i in enumerate(index):
+        summed = np.bincount(entries, weights=values[:, c], minlength=problem.size)
+        np.testing.assert_allclose(summed, problem.jacobian(x, [i])[:, 0], atol=1e-12)
+    # theta2 in one row is that row's joint-2 reading: central differences on the data.
+    k, h = 5, 1e-6
+    moved = []
+    for sign in (1, -1):
+        joints = bar.joints.copy()
+        joints[k, 1] += sign * h
+        other = Problem(robot, models_for([replace(bar, joints=joints)]))
+        moved.append(other.residual(x))
+    finite = (moved[0] - moved[1]) / (2 * h)
+    exact = np.zeros(problem.size)
+    one = rows == k
+    np.add.at(exact, entries[one], values[one, 0])
+    np.testing.assert_allclose(exact, finite, atol=1e-7)
+    assert np.count_nonzero(finite) > 0
+
+
+def test_region_folds_hold_out_contiguous_joint_ranges(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=80, noise=NOISE,
+                    seed=1, progress=False).load()
+    problem = Problem(robot, models_for([data]))
+    schemes = {s.name: s for s in fold_schemes(problem, 5, 0)}
+    assert not schemes["units"].extrapolating and schemes["q2 ranges"].extrapolating
+    fold = schemes["q2 ranges"].fold[::3]  # three entries per tracker row
+    q2 = data.joints[:, 1]
+    ranges = [(q2[fold == f].min(), q2[fold == f].max()) for f in range(4)]
+    for (_, high), (low, _) in zip(ranges, ranges[1:]):
+        assert high < low  # the ranges do not overlap: each fold is a region
+
+
+def test_recommendation_follows_the_held_out_data():
+    fit = RmsSummary(1.0, 0.1, 0.05)
+    assert recommend(fit, None, added=False)[0] == "final"
+    assert recommend(fit, None, added=True)[0] == "final"
+    assert recommend(fit, RmsSummary(1.0, 0.2, 0.1), added=True)[0] == "final"
+    choice, why = recommend(fit, RmsSummary(1.0, 0.2, 0.7), added=True)
+    assert choice == "geometric" and "worse" in why
+
+
+# ----------------------------------------------------------------------------- effects no library names
+
+
+def test_a_link_that_sags_with_its_angle_is_left_unexplained_and_named(tmp_path):
+    """a2 shortens with cos(q2) by 0.3 mm: no effect in the library describes it."""
+    robot = ROBOTS["industrial_6r"]()
+    a2 = Kinematics(robot).registry.index("a2")
+
+    def sag(q, p, k):
+        p[a2] += 3e-4 * math.cos(q[1])
+        return p
+
+    fit = tracker_with_row_geometry(tmp_path / "fit", robot, 300, 1, sag)
+    validation = tracker_with_row_geometry(tmp_path / "val", robot, 150, 2, sag)
+    result = calibrate([fit], [validation])
+    assert result.validation.rms_final <= result.validation.rms_geometric * 1.001, result
+    assert result.unexplained is not None
+    assert result.unexplained.variables[0] == "q2", result.unexplained
+    assert result.unexplained.share > 0.3
+    written = result.to_json()["unexplained"]
+    assert set(written) == {"rms", "unit", "share", "variables"} and written["unit"] == "mm"
+    assert "follows q2" in summary(result)
+
+
+def test_clean_data_leave_nothing_unexplained(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    fit = tracker_with_row_geometry(tmp_path / "fit", robot, 300, 3, lambda q, p, k: p)
+    result = calibrate([fit])
+    assert result.effects == () and result.unexplained is None
+    assert result.to_json()["unexplained"] is None
+
+
+@pytest.mark.parametrize("kind,rows", [("cross_bar", 40), ("artifact_touches", 30),
+                                       ("tracker_points", 300), ("sphere_laser", 300)])
+@pytest.mark.parametrize("seed", [11, 12])
+def test_clean_data_of_every_kind_add_nothing(tmp_path, kind, rows, seed):
+    robot = ROBOTS["industrial_6r"]()
+    data = simulate(robot, kind, out_dir=tmp_path / "d", rows=rows, noise=NOISE, seed=seed,
+                    geometric_errors={"a2": 3e-4, "theta3": 2e-4, "d4": -2e-4},
+                    progress=False).load()
+    result = calibrate([data])
+    assert result.effects == (), [e.summary for e in result.effects]
+    assert result.unexplained is None, result.unexplained
+    assert result.recommended == "final"
+
+
+# ----------------------------------------------------------------------------- extrapolation
+
+
+def test_compliance_fitted_on_half_of_joint_1_range_holds_on_the_other_half(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "d", rows=600, noise=NOISE,
+                    seed=4, geometric_errors={"a2": 3e-4, "theta3": 2e-4, "d4": -2e-4},
+                    effects={"joint_compliance": {2: 1.5e-6, 3: 2.5e-6}},
+                    payload=(0.0, 10.0), progress=False).load()
+    low = data.joints[:, 0] < np.median(data.joints[:, 0])
+    result = calibrate([dataset_rows(data, low)], [dataset_rows(data, ~low)])
+    names = {e.name for e in result.effects}
+    assert "joint_compliance" in names, [e.summary for e in result.effects]
+    assert not names & {"joint_cyclic", "joint_scale"}, [e.summary for e in result.effects]
+    assert result.validation.rms_final <= 1.25 * FLOOR, result
+    assert result.recommended == "final"
+
+
+def test_an_implausibly_large_periodic_error_is_not_named(tmp_path):
+    """A 0.5 deg once-per-turn error is ten times what real gears show: the data hold
+    something the library does not name, and the residual says so."""
+    robot = ROBOTS["industrial_6r"]()
+    amplitude = math.radians(0.5)
+    fit, validation = (simulate(robot, "tracker_points", out_dir=tmp_path / name, rows=rows,
+                                noise=NOISE, seed=seed,
+                                effects={"joint_cyclic": {3: (amplitude, 0.0, 0.0, 0.0)}},
+                                geometric_errors={"a2": 3e-4}, progress=False).load()
+                       for name, rows, seed in (("fit", 300, 5), ("val", 150, 6)))
+    result = calibrate([fit], [validation])
+    assert all(e.name != "joint_cyclic" for e in result.effects)
+    rejected = [t for t in result.diagnosis
+                if t["effect"] == "joint_cyclic" and t["joints"] == (3,)]
+    assert any("implausible" in t["decision"] for t in rejected)
+    assert result.unexplained is not None and "q3" in result.unexplained.variables[:2]
