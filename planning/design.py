@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robocal_casadi.datasets import Dataset
-from robocal_casadi.errors import InputError
+from robocal_casadi.errors import ArgumentError, InputError
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.progress import Progress
 
@@ -111,8 +111,8 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     the progress line.
     """
     index = canonical(index)
-    if count < 1:
-        raise InputError(f"--count must be at least 1, got {count}")
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
     setup = setup_from_dataset(dataset)
     kinematics = Kinematics(setup.robot)
     workspace = Workspace(kinematics, table_height=setup.table_height)

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal_casadi.checks import choice
+
 INDICES = ("O1", "O2", "O3", "O4", "O5")
 ALIASES = {"cond": "O2"}
 DEFAULT_INDEX = "cond"
@@ -45,10 +47,9 @@ def scaling(name: str) -> str:
 
 def canonical(name: str) -> str:
     """``'cond'`` -> ``'O2'``; other valid names unchanged; anything else raises ValueError."""
-    key = ALIASES.get(name, name)
+    key = ALIASES.get(name, name) if isinstance(name, str) else name
     if key not in INDICES:
-        raise ValueError(f"unknown observability index {name!r}; expected one of "
-                         f"{['cond', *INDICES]}")
+        choice(name, ("cond", *INDICES), "index")  # raises, listing the valid names
     return key
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import count
 from .errors import InputError
 from .ik import inverse_kinematics
 from .kinematics import Kinematics
@@ -68,8 +69,9 @@ def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
     random seeds (within the limits, from ``seed``) per target before it counts as
     unreachable.
     """
+    restarts = count(restarts, "restarts", minimum=0)
     targets = np.atleast_2d(np.asarray(targets, dtype=float))
-    if targets.shape[1] not in (3, 7):
+    if targets.ndim != 2 or targets.shape[1] not in (3, 7):
         raise InputError(f"targets need 3 (x, y, z) or 7 (x, y, z, qw, qx, qy, qz) columns, "
                          f"got {targets.shape[1]}")
     kinematics = Kinematics(robot)

@@ -34,3 +34,16 @@ class SolverError(RobocalError):
     def __init__(self, message: str, *, stats: dict | None = None):
         self.stats = dict(stats or {})
         super().__init__(message)
+
+
+class ArgumentError(InputError, ValueError):
+    """A function argument that cannot be used as given (a ``ValueError`` as well, so
+    callers used to scipy's front-door checks can catch it as one).
+
+    The message names the argument, says what was expected and what was given, e.g.
+    ``loss: unknown name 'hubr'; expected one of 'linear', 'huber' (did you mean 'huber'?)``.
+    """
+
+    def __init__(self, what: str, *, argument: str):
+        self.argument = argument
+        super().__init__(what, where=argument)

@@ -39,6 +39,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from .checks import array, choice, count, positive
 from .errors import InputError
 from .kinematics import Kinematics
 
@@ -105,10 +106,8 @@ class InverseKinematics:
     """IK of one ``Kinematics`` in one mode with one method; get it from ``inverse_kinematics``."""
 
     def __init__(self, kinematics: Kinematics, mode: str = "pose", method: str = "lm"):
-        if mode not in MODES:
-            raise InputError(f"unknown IK mode {mode!r}; expected one of {list(MODES)}")
-        if method not in METHODS:
-            raise InputError(f"unknown IK method {method!r}; expected one of {list(METHODS)}")
+        mode = choice(mode, MODES, "mode")
+        method = choice(method, METHODS, "method")
         self.kinematics = kinematics
         self.mode = mode
         self.method = method
@@ -190,6 +189,12 @@ class InverseKinematics:
         closest of the successful starts is kept.
         """
         kin = self.kinematics
+        restarts = count(restarts, "restarts", minimum=0)
+        max_iterations = count(max_iterations, "max_iterations")
+        position_tolerance = positive(position_tolerance, "position_tolerance")
+        orientation_tolerance = positive(orientation_tolerance, "orientation_tolerance")
+        if seed is not None:
+            seed = array(seed, (kin.dof,), "seed")
         p = kin.nominal if p is None else np.asarray(p, dtype=float)
         lower, upper = self._bounds(bounds)
         position, rotation, weight, soft = self._target(target, orientation, orientation_weight)

@@ -45,6 +45,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from .checks import choice, count, positive
 from .datasets import KINDS, Dataset, load_dataset
 from .errors import InputError
 from .ik import inverse_kinematics, random_joints
@@ -348,15 +349,12 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     ``socket_distance`` [m], ``sockets``, ``touches`` (per socket and placement) and
     ``sphere_radius`` [m] shape the artifacts.
     """
-    if kind not in KINDS:
-        raise InputError(f"unknown kind {kind!r}; expected one of {list(KINDS)}", where="kind")
-    if readings not in READINGS:
-        raise InputError(f"unknown readings {readings!r}; expected one of {list(READINGS)}",
-                         where="readings")
-    if int(rows) < 1:
-        raise InputError(f"rows must be at least 1, got {rows}", where="rows")
-    if noise < 0:
-        raise InputError(f"noise must not be negative, got {noise}", where="noise")
+    kind = choice(kind, KINDS, "kind")
+    readings = choice(readings, READINGS, "readings")
+    rows = count(rows, "rows")
+    noise = positive(noise, "noise", allow_zero=True)
+    sockets = count(sockets, "sockets", minimum=2)
+    touches = count(touches, "touches")
     nominal = load_robot(robot) if isinstance(robot, (str, Path)) else robot
     units = units or nominal.units
     out_dir = Path(out_dir)

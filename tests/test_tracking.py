@@ -333,10 +333,21 @@ def test_max_step_refuses_a_jump_and_allows_a_small_move(trackers):
     near = nominal_pose(robot, q0 + np.array([0.01, -0.01, 0.01, 0.0, 0.01, 0.0]))
     step = tracker.step(q0, observation_for(robot, q0, near))
     assert step.ok and np.max(np.abs(step.q - q0)) <= 0.05
-    far = nominal_pose(robot, q0 + np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    jump = tracker.step(q0, observation_for(robot, q0, far))
-    assert jump.status == "unreachable"
-    assert np.array_equal(jump.q, step.q)
+    q_far = step.q + np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
+    far = nominal_pose(robot, q_far)
+    observation = observation_for(robot, step.q, far)
+    # The jump needs 0.3 rad on joint 1: each cycle takes the largest allowed step
+    # towards it (``limited``) until the goal is met, six cycles later.
+    q = step.q
+    statuses = []
+    for _ in range(8):
+        jump = tracker.step(step.q, observation)  # the same capture: the same goal
+        statuses.append(jump.status)
+        assert np.max(np.abs(jump.q - q)) <= 0.05 + 1e-12
+        q = jump.q
+    assert statuses == ["limited"] * 5 + ["ok"] * 3
+    check_answer(robot, q, level_pose(far))
+    assert q == pytest.approx(q_far, abs=1e-7)
 
 
 def test_non_finite_observation_fails_safely(trackers):
@@ -511,8 +522,9 @@ def test_cli_max_step_in_job_units(tmp_path):
     out = tmp_path / "joints.csv"
     assert main(["track", str(job), "--out", str(out), "--max-step", "5"]) == 0
     _, rows = read_csv(out)
-    assert [r[7] for r in rows][:3] == ["ok", "ok", "unreachable"]
-    assert rows[2][1:7] == rows[1][1:7]
+    assert [r[7] for r in rows] == ["ok", "ok", "limited", "limited"]
+    steps = np.abs(np.diff(np.array([[float(v) for v in r[1:7]] for r in rows]), axis=0))
+    assert steps.max() <= 5 + 1e-9  # degrees
     assert main(["track", str(job), "--out", str(out), "--max-step", "30"]) == 0
     _, rows = read_csv(out)
     assert [r[7] for r in rows] == ["ok"] * 4

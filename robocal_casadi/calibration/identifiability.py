@@ -30,6 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import SolverError
 from ..results import Identifiability
 
 RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
@@ -78,7 +79,7 @@ def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
     while available:
         norms = remaining[available]
         best = norms.max()
-        if best < tolerance:
+        if not best >= tolerance:  # also stops on NaN: nothing left that can be chosen
             break
         ties = [available[k] for k in np.flatnonzero(norms >= best * PREFERENCE_BAND)]
         pick = min(ties, key=lambda j: priority[j])
@@ -101,6 +102,9 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
     counts as determined.
     """
     J = np.asarray(jacobian, float)
+    if not np.all(np.isfinite(J)):
+        raise SolverError(f"the Jacobian holds {int(np.sum(~np.isfinite(J)))} non-finite "
+                          f"entries: identifiability cannot be judged (degenerate data)")
     candidates = list(candidates)
     raw = J[:, candidates]
     raw_norms = np.linalg.norm(raw, axis=0)

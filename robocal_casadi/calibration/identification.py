@@ -19,15 +19,18 @@ from typing import Sequence
 
 import numpy as np
 
-from . import unexplained
+from ..checks import choice, count, positive
+from ..datasets import DatasetBase
 from ..effects.base import Effect
-from ..errors import InputError, SolverError
+from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
 from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
                        RmsSummary)
+from . import unexplained
+from .degeneracy import check_dataset, check_finite
 from .identifiability import PRACTICAL_TOLERANCE, analyse
 from .problem import Problem
-from .solver import Solution, solve
+from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
 
@@ -84,13 +87,29 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
                                  for m in problem.models}))
-    return analyse(problem.jacobian(x), names, candidate_index, placement,
+    jacobian = problem.jacobian(x)
+    check_finite(problem.models, problem.residual(x), jacobian, "the fitted placement")
+    return analyse(jacobian, names, candidate_index, placement,
                    invisible_reason=invisible, absorbed_reason=absorbed, tolerance=tolerance)
 
 
 def find_unexplained(problem: Problem, x: np.ndarray, free: np.ndarray):
     """The structured residual ``problem`` leaves at ``x``, or None (see ``unexplained``)."""
     return unexplained.find(problem, x, free)
+
+
+def _datasets(value, argument: str) -> list:
+    """``value`` as a list of loaded datasets (a path or a single dataset is refused)."""
+    if isinstance(value, (str, Path)) or not isinstance(value, (list, tuple)):
+        hint = " (load it with load_dataset and pass a list)" if isinstance(
+            value, (str, Path, DatasetBase)) else ""
+        raise ArgumentError(f"expected a list of datasets, got a {type(value).__name__}{hint}",
+                            argument=argument)
+    wrong = [type(d).__name__ for d in value if not isinstance(d, DatasetBase)]
+    if wrong:
+        raise ArgumentError(f"expected datasets from load_dataset, got {', '.join(wrong[:3])}",
+                            argument=argument)
+    return list(value)
 
 
 def _check_same_robot(datasets: Sequence) -> None:
@@ -148,7 +167,7 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
-              diagnose: bool = True, method: str = "lm", loss: str = "linear",
+              diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
               progress: bool = False) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
@@ -160,11 +179,30 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     than that fraction are dropped first, as in the published cross-bar method
     (``selection``, docs/methods.md#cross-bar-calibration); what was dropped is in
     ``result.selection``.
+
+    Arguments are checked at the door (``ArgumentError``, a ``ValueError``): ``method`` one
+    of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
+    closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
+    ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
+    a number >= 0.
     """
-    datasets = list(datasets)
+    method = choice(method, METHODS, "method")
+    loss = choice(loss, LOSSES, "loss")
+    max_iterations = count(max_iterations, "max_iterations")
+    if select_growth is not None:
+        select_growth = positive(select_growth, "select_growth", allow_zero=True)
+    datasets = _datasets(datasets, "datasets")
+    validation = _datasets(validation, "validation")
+    if not all(isinstance(e, Effect) for e in effects):
+        raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
+                            + ", ".join(sorted({type(e).__name__ for e in effects
+                                                if not isinstance(e, Effect)})),
+                            argument="effects")
     if not datasets:
         raise InputError("no dataset given")
     _check_same_robot(datasets + list(validation))
+    for dataset in datasets + list(validation):
+        check_dataset(dataset)
     robot = datasets[0].robot
     models = models_for(datasets)
     problem = Problem(robot, models, effects)

@@ -20,14 +20,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import casadi as ca
 import numpy as np
 
-from ..errors import SolverError
+from ..checks import array, choice, count, positive
+from ..errors import ArgumentError, SolverError
 from .problem import Problem
 
-METHODS = ("lm", "ipopt", "linearised", "two_stage")
+Method = Literal["lm", "ipopt", "linearised", "two_stage"]
+Loss = Literal["linear", "huber"]
+METHODS: tuple[str, ...] = ("lm", "ipopt", "linearised", "two_stage")
+LOSSES: tuple[str, ...] = ("linear", "huber")
 TWO_STAGE_TOLERANCE = 1e-6  # relative cost decrease of a round below which two_stage stops
 
 
@@ -177,12 +182,24 @@ def _ipopt(problem: Problem, x0: np.ndarray, free: np.ndarray, max_iterations: i
     return x, r, _covariance(J, r), 0.5 * float(r @ r), int(stats.get("iter_count", 0)), status
 
 
-def solve(problem: Problem, x0: np.ndarray, free: np.ndarray, *, method: str = "lm",
-          loss: str = "linear", max_iterations: int = 100, tolerance: float = 1e-10) -> Solution:
-    """Minimise ``0.5 |r(x)|^2`` over ``x[free]``, the rest held at ``x0``."""
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
-    free = np.asarray(free, dtype=bool)
+def solve(problem: Problem, x0: np.ndarray, free: np.ndarray, *, method: Method = "lm",
+          loss: Loss = "linear", max_iterations: int = 100, tolerance: float = 1e-10) -> Solution:
+    """Minimise ``0.5 |r(x)|^2`` over ``x[free]``, the rest held at ``x0``.
+
+    ``x0`` (all unknowns, SI) and ``free`` (boolean, same length) are checked at the
+    door, as are ``method``, ``loss``, ``max_iterations`` and ``tolerance``
+    (``ArgumentError``, a ``ValueError``).
+    """
+    method = choice(method, METHODS, "method")
+    loss = choice(loss, LOSSES, "loss")
+    max_iterations = count(max_iterations, "max_iterations")
+    tolerance = positive(tolerance, "tolerance")
+    size = len(problem.unknowns)
+    x0 = array(x0, (size,), "x0")
+    free = np.asarray(free)
+    if free.shape != (size,) or free.dtype != bool:
+        raise ArgumentError(f"expected {size} booleans, got {free.dtype} of shape {free.shape}",
+                            argument="free")
     start = time.perf_counter()
     if not free.any():
         r = problem.residual(x0)

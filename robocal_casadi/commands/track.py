@@ -6,8 +6,10 @@ camera observations time,q1..qn,x,y,z,roll,pitch,yaw. For each row it solves one
 NLP (target at (0, 0, Z) in the end frame, end z axis on the target, end x axis level,
 joint limits, smallest move from the previous answer) and writes JOINTS.csv:
 time,q1..qn,status,solve_ms with the joints in the job's units. `status` is ok,
-unreachable or failed; a row that is not ok keeps the last safe joints (the first row's
-capture joints before any answer). Rows are solved in order, as a controller would.
+limited (with --max-step: a bounded step towards a reachable goal), unreachable or
+failed; an unreachable or failed row keeps the last safe joints (the first row's capture
+joints before any answer). Rows are solved in order, as a controller would; a row the
+previous joints cannot reach smoothly is seeded from inverse kinematics.
 
 With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml.
 """
@@ -24,7 +26,7 @@ from ..output import atomic_file
 from ..progress import Progress
 from ..table import write_table
 from ..tracking.job import load_tracking_job
-from ..tracking.tracker import Tracker
+from ..tracking.tracker import STATUSES, Tracker
 from .arguments import output_file
 from .fk import calibrated_robot
 
@@ -37,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="use DIR/robot_calibrated.yaml instead of the job's robot file")
     parser.add_argument("--max-step", type=float, metavar="STEP",
                         help="largest joint move per row, in the job's angle unit (length "
-                        "unit for prismatic joints); a target needing more is unreachable")
+                        "unit for prismatic joints); a target needing more is approached "
+                        "by steps of this size (status limited)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         max_step = scales * args.max_step
     tracker = Tracker(job.robot, job.camera_xyz, job.standoff, up=job.up, max_step=max_step)
     rows = []
-    counts = {"ok": 0, "unreachable": 0, "failed": 0}
+    counts = dict.fromkeys(STATUSES, 0)
     with Progress("track", total=job.rows) as bar:
         for i in range(job.rows):
             step = tracker.step(job.joints[i], job.observations[i])
@@ -70,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(args.out) as staging:
         write_table(staging, columns, rows)
     times = np.array([r[-1] for r in rows])
-    print(f"{job.rows} rows: {counts['ok']} ok, {counts['unreachable']} unreachable, "
-          f"{counts['failed']} failed; solve time median {np.median(times):.3f} ms, "
+    tally = ", ".join(f"{counts[s]} {s}" for s in STATUSES)
+    print(f"{job.rows} rows: {tally}; solve time median {np.median(times):.3f} ms, "
           f"max {times.max():.3f} ms -> {args.out}")
     return 0

@@ -105,12 +105,15 @@ class GaussNewtonSolver:
                 f"max_iterations={self.max_iterations}, compiled={self.compiled})")
 
     def solve(self, previous: np.ndarray, goal: np.ndarray, lower: np.ndarray,
-              upper: np.ndarray) -> SolveOutcome:
-        """Joints meeting ``goal`` (12-vector) closest to ``previous``, within bounds."""
+              upper: np.ndarray, start: np.ndarray | None = None) -> SolveOutcome:
+        """Joints meeting ``goal`` (12-vector) closest to ``previous``, within bounds.
+
+        The iterations start from ``start`` (default ``previous``), clipped to the bounds.
+        """
         q, free, dq, test = self._q, self._free, self._dq, self._test
         self._q_previous[:] = previous
         self._goal[:] = goal
-        np.maximum(previous, lower, out=q)
+        np.maximum(previous if start is None else start, lower, out=q)
         np.minimum(q, upper, out=q)
         free.fill(1.0)
         holding = False
@@ -212,10 +215,11 @@ class NlpsolSolver:
         return f"NlpsolSolver({self.problem.robot.name!r}, plugin={self.plugin!r}{suffix})"
 
     def solve(self, previous: np.ndarray, goal: np.ndarray, lower: np.ndarray,
-              upper: np.ndarray) -> SolveOutcome:
+              upper: np.ndarray, start: np.ndarray | None = None) -> SolveOutcome:
         """As ``GaussNewtonSolver.solve``."""
         parameters = np.concatenate([previous, goal, self._up, self._p, self._weights])
-        result = self._solver(x0=np.clip(previous, lower, upper), p=parameters, lbx=lower,
+        x0 = previous if start is None else start
+        result = self._solver(x0=np.clip(x0, lower, upper), p=parameters, lbx=lower,
                               ubx=upper, lbg=0.0, ubg=0.0, lam_g0=self._lam_g)
         stats = self._solver.stats()
         q = np.asarray(result["x"], dtype=float).ravel()

@@ -3,10 +3,11 @@
 Built once for a robot, a camera mount and a standoff; ``step(q_capture, observation)``
 then computes the goal end pose from the method's frame chain (``tracking.goal``),
 solves the per-cycle NLP from the previous answer (``tracking.problem``,
-``tracking.solver``), takes each revolute joint to the turn nearest the previous answer,
-verifies the constraint errors, and answers with a ``TrackStep``. An answer that is not
-verified is never returned as ``ok``: the step says ``unreachable`` or ``failed`` and hands
-back the last safe joints.
+``tracking.solver``; from inverse kinematics where that fails), takes each joint to its
+equivalent value nearest the previous answer, verifies the constraint errors, and answers
+with a ``TrackStep``. An answer that is not verified is never returned as ``ok``: the step
+says ``limited`` (a bounded step towards a verified answer), ``unreachable`` or ``failed``
+(the last safe joints).
 """
 
 from __future__ import annotations
@@ -14,22 +15,30 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Literal, Sequence
 
 import numpy as np
 
 from ..errors import InputError
 from ..robot import Robot
 from .problem import TrackingProblem
-from .solver import GaussNewtonSolver, NlpsolSolver
+from ..checks import choice, rotation_matrix
+from .conventions import (MARKER_CONVENTIONS, MarkerConvention, method_observation,
+                          observation_rotation)
+from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
 
 #: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
 POSITION_TOLERANCE = 1e-6
 ANGLE_TOLERANCE = 1e-6
+#: Random restarts of the inverse kinematics that seeds a cycle the warm start cannot solve.
+IK_RESTARTS = 4
 #: How far outside a bound [rad or m] a verified answer may sit (rounding) before clipping.
 BOUND_TOLERANCE = 1e-12
-STATUSES = ("ok", "unreachable", "failed")
-METHODS = ("gauss_newton", "sqpmethod", "ipopt")
+STATUSES = ("ok", "limited", "unreachable", "failed")
+TrackingMethod = Literal["gauss_newton", "sqpmethod", "ipopt"]
+QpSolver = Literal["qrqp", "qpoases"]
+METHODS: tuple[str, ...] = ("gauss_newton", "sqpmethod", "ipopt")
+QPSOLS: tuple[str, ...] = ("qrqp", "qpoases")
 
 
 @dataclass(frozen=True)
@@ -37,9 +46,12 @@ class TrackStep:
     """One cycle's answer.
 
     ``q`` (n, read-only) the joints to command [rad or m], SI; the last safe joints when
-    ``status`` is not ``ok``. ``status`` is ``ok``, ``unreachable`` (no solution within the joint
-    limits and the step bound near the previous joints) or ``failed`` (the solver gave no
-    verified answer, or the observation was not finite). ``solve_ms`` [ms] is the whole
+    ``status`` is ``unreachable`` or ``failed``. ``status`` is ``ok`` (the goal is met),
+    ``limited`` (the goal is reachable but farther than the step bound allows: ``q`` is
+    the bounded step towards it, and the errors are those of that step), ``unreachable``
+    (no solution within the joint limits, found from the previous joints nor from inverse
+    kinematics) or ``failed`` (the solver gave no verified answer, or the observation was
+    not finite). ``solve_ms`` [ms] is the whole
     cycle (goal, solve, verification). ``constraint_error`` is the larger of
     ``position_error`` [m] and ``angle_error`` [rad] of the solver's answer (NaN when
     none was computed); ``iterations`` the solver's iterations.
@@ -112,7 +124,20 @@ class Tracker:
     QP solver of ``sqpmethod`` (``qrqp`` or ``qpoases``); ``compiled`` runs the per-cycle
     CasADi functions as machine code (compiled once per robot structure and cached on
     disk, see ``codegen``); ``problem`` a ``TrackingProblem`` of the same robot structure
-    to share.
+    to share; ``camera_rotation`` (3x3) the camera axes in the end frame (hand-eye; default
+    parallel to it); ``marker_convention`` how an observation's orientation reads:
+    ``method`` ``(x, y, z [m], roll, pitch, yaw [rad])`` of the target frame, or
+    ``opencv`` ``(tvec [m], rvec [rad])`` of an OpenCV/ArUco marker
+    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot solve start again
+    from inverse kinematics of the goal pose (a first capture far from the answer, a
+    target that jumped).
+
+    Of the joints that meet the goal, the answer is the one nearest the previous answer
+    (weighted): each revolute joint on its nearest whole turn within its limits, and the
+    last joint on its nearest half turn where that turns the end frame about its own z
+    axis (the level x axis may point either way). With ``max_step``, a goal that needs
+    a larger move is approached by the largest step allowed along the straight line in
+    joint space (status ``limited``), and met in later cycles.
 
     In a control loop::
 
@@ -127,14 +152,16 @@ class Tracker:
                  up: Sequence[float] = (0.0, 0.0, 1.0),
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
-                 method: str = "gauss_newton", qpsol: str = "qrqp", compiled: bool = True,
-                 problem: TrackingProblem | None = None):
+                 method: TrackingMethod = "gauss_newton", qpsol: QpSolver = "qrqp",
+                 compiled: bool = True,
+                 problem: TrackingProblem | None = None, seed_from_ik: bool = True,
+                 camera_rotation: Sequence[Sequence[float]] | None = None,
+                 marker_convention: MarkerConvention = "method"):
         if robot.dof < 6:
             raise InputError(f"tracking needs at least 6 joints (three position and three "
                              f"orientation conditions); robot {robot.name!r} has {robot.dof}")
-        if method not in METHODS:
-            raise InputError(f"unknown method {method!r}; expected one of {list(METHODS)}",
-                             where="method")
+        method = choice(method, METHODS, "method")
+        qpsol = choice(qpsol, QPSOLS, "qpsol")
         self.robot = robot
         self.problem = problem if problem is not None else TrackingProblem(robot)
         n = robot.dof
@@ -147,6 +174,13 @@ class Tracker:
                              where="standoff")
         self.standoff = standoff
         self.up = unit_up(up)
+        self.marker_convention = choice(marker_convention, MARKER_CONVENTIONS,
+                                        "marker_convention")
+        self.camera_rotation = (np.eye(3) if camera_rotation is None
+                                else rotation_matrix(camera_rotation, "camera_rotation"))
+        # The method's own description needs no conversion per cycle.
+        self._converts = (self.marker_convention != "method"
+                          or not np.array_equal(self.camera_rotation, np.eye(3)))
         self.max_step = None
         if max_step is not None:
             try:
@@ -165,6 +199,7 @@ class Tracker:
             raise InputError(f"weights must be positive, got {list(self.weights)}",
                              where="weights")
         self.method = method
+        self.seed_from_ik = bool(seed_from_ik)
         if method == "gauss_newton":
             self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights,
                                             compiled=compiled)
@@ -221,6 +256,11 @@ class Tracker:
         return pose
 
     def _goal_vector(self, q_capture: np.ndarray, observation: np.ndarray) -> np.ndarray:
+        if self._converts:
+            observation = method_observation(
+                self.camera_xyz, self.camera_rotation, observation[:3],
+                observation_rotation(observation, self.marker_convention),
+                self.marker_convention)
         self._goal_in[0][:] = q_capture
         self._goal_in[1][:] = observation
         self._goal_evaluate()
@@ -253,41 +293,148 @@ class Tracker:
             lower = np.maximum(lower, previous - self.max_step)
             upper = np.minimum(upper, previous + self.max_step)
         outcome = self.solver.solve(previous, goal, lower, upper)
-        q = self._nearest_turn(outcome.q, previous, lower, upper)
+        q, position_error, angle_error, verified = self._settle(outcome, previous, goal, lower,
+                                                                upper)
+        iterations = outcome.iterations
+        status = "ok"
+        if not verified:
+            # Nothing meets the goal near the previous joints (within the step bound, if
+            # any): look for the goal within the joint limits alone, from the previous
+            # joints and then from inverse kinematics, and approach it by a bounded step.
+            far, iterations_far = self._search(previous, goal)
+            iterations += iterations_far
+            if far is None:
+                status = "unreachable" if outcome.infeasible or self.seed_from_ik else "failed"
+                q = previous
+            else:
+                q, position_error, angle_error = far
+                status = "ok"
+                if self.max_step is not None:
+                    move = np.abs(q - previous)
+                    share = float(np.min(np.where(move > 0, self.max_step / np.where(
+                        move > 0, move, 1.0), np.inf), initial=1.0))
+                    if share < 1.0:
+                        q = previous + share * (q - previous)
+                        np.maximum(q, self.lower, out=q)
+                        np.minimum(q, self.upper, out=q)
+                        errors = self.problem.errors(q, goal, self.up, self.p)
+                        position_error, angle_error = float(errors[0]), float(errors[1])
+                        status = "limited"
+        if status in ("ok", "limited"):
+            q.setflags(write=False)  # shared by the answer and the tracker's memory
+            self._previous = q
+        constraint_error = max(position_error, angle_error)
+        return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
+                         position_error, angle_error, iterations)
+
+    def _settle(self, outcome: SolveOutcome, previous: np.ndarray, goal: np.ndarray,
+                lower: np.ndarray, upper: np.ndarray
+                ) -> tuple[np.ndarray, float, float, bool]:
+        """The solver's answer on its nearest equivalent branch, verified: ``(q,
+        position_error [m], angle_error [rad], verified)``; ``q`` is clipped into the
+        bounds when verified."""
+        q = self._nearest_branch(outcome.q, previous, lower, upper, goal)
         position_error, angle_error = outcome.position_error, outcome.angle_error
         if q is not outcome.q:
             errors = self.problem.errors(q, goal, self.up, self.p)
             position_error, angle_error = float(errors[0]), float(errors[1])
-        constraint_error = max(position_error, angle_error)
         verified = (position_error < POSITION_TOLERANCE and angle_error < ANGLE_TOLERANCE
                     and bool((q >= lower - BOUND_TOLERANCE).all())
                     and bool((q <= upper + BOUND_TOLERANCE).all()))
         if verified:
-            np.maximum(q, lower, out=q)
-            np.minimum(q, upper, out=q)
-            q.setflags(write=False)  # shared by the answer and the tracker's memory
-            self._previous = q
-            status = "ok"
-        else:
-            status = "unreachable" if outcome.infeasible else "failed"
-            q = previous
-        return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
-                         position_error, angle_error, outcome.iterations)
+            q = np.minimum(np.maximum(q, lower), upper)
+        return q, position_error, angle_error, verified
+
+    def _search(self, previous: np.ndarray, goal: np.ndarray
+                ) -> tuple[tuple[np.ndarray, float, float] | None, int]:
+        """Joints meeting ``goal`` within the joint limits (no step bound), smallest move
+        from ``previous`` near where they were found: ``((q, position_error,
+        angle_error) or None, iterations)``.
+
+        First the warm start without the step bound (when there is one), then inverse
+        kinematics of the goal pose and of it turned half about its z axis, each refined
+        by the tracking solver towards the smallest move (kept as found where the
+        refinement does not verify, e.g. a redundant arm stopped by a limit).
+        """
+        iterations = 0
+        if self.max_step is not None:
+            outcome = self.solver.solve(previous, goal, self.lower, self.upper)
+            iterations += outcome.iterations
+            q, position_error, angle_error, verified = self._settle(
+                outcome, previous, goal, self.lower, self.upper)
+            if verified:
+                return (q, position_error, angle_error), iterations
+        if not self.seed_from_ik:
+            return None, iterations
+        found = []
+        for seed in self._ik_solutions(previous, goal):
+            outcome = self.solver.solve(previous, goal, self.lower, self.upper, start=seed)
+            iterations += outcome.iterations
+            settled = self._settle(outcome, previous, goal, self.lower, self.upper)
+            if not settled[3]:
+                errors = self.problem.errors(seed, goal, self.up, self.p)
+                as_found = SolveOutcome(seed, True, False, 0, float(errors[0]),
+                                        float(errors[1]))
+                settled = self._settle(as_found, previous, goal, self.lower, self.upper)
+            if settled[3]:
+                found.append(settled[:3])
+        if not found:
+            return None, iterations
+        return min(found, key=lambda f: float(self.weights @ (f[0] - previous) ** 2)), iterations
+
+    def _ik_solutions(self, previous: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+        """Inverse kinematics within the joint limits of the goal pose ``A''`` and of
+        ``A'' Rz(pi)`` (the level x axis the other way), started from ``previous``, then
+        from random joints (fixed seed: repeatable)."""
+        from ..ik import inverse_kinematics
+
+        pose = np.eye(4)
+        pose[:3, 3] = goal[0:3]
+        pose[:3, 0], pose[:3, 1], pose[:3, 2] = goal[3:6], goal[6:9], goal[9:12]
+        flipped = pose.copy()
+        flipped[:3, 0:2] *= -1.0
+        solver = inverse_kinematics(self.problem.kinematics, "pose")
+        out = []
+        for target in (pose, flipped):
+            result = solver.solve(target, seed=previous, p=self.p, restarts=IK_RESTARTS, rng=0,
+                                  position_tolerance=POSITION_TOLERANCE * 1e-3,
+                                  orientation_tolerance=ANGLE_TOLERANCE * 1e-3)
+            if result.success:
+                out.append(result.q)
+        return out
 
     def _refuse(self, status: str, start: float) -> TrackStep:
         assert self._previous is not None  # set by ``step`` before any refusal
         return TrackStep(self._previous, status, (time.perf_counter() - start) * 1e3,
                          math.nan)
 
-    def _nearest_turn(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
-                      upper: np.ndarray) -> np.ndarray:
-        """Each revolute joint moved by whole turns to the value nearest ``previous`` that
-        stays within the bounds (the constraints are 2 pi periodic in it)."""
-        if float(np.abs(previous - q).max()) <= math.pi:
+    def _nearest_branch(self, q: np.ndarray, previous: np.ndarray, lower: np.ndarray,
+                        upper: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The equivalent joints nearest ``previous`` within the bounds.
+
+        The constraints are 2 pi periodic in every revolute joint; when the last joint
+        turns the end frame about its own z axis, a half turn of it keeps the goal too
+        (the x axis stays level, pointing the other way), checked here rather than
+        assumed. The weighted move is a sum over joints, so each joint takes its nearest
+        equivalent value on its own. Returns ``q`` itself when nothing is nearer.
+        """
+        move = np.abs(previous - q)
+        if float(move.max()) <= math.pi / 2:
             return q
-        turns = np.where(self.revolute, np.round((previous - q) / (2 * math.pi)), 0.0)
-        if not turns.any():
-            return q
-        moved = q + 2 * math.pi * turns
-        keep = (moved >= lower) & (moved <= upper)
-        return np.where(keep, moved, q)
+        period = np.where(self.revolute, 2 * math.pi, 0.0)
+        last = self.robot.dof - 1
+        if self.revolute[last] and move[last] > math.pi / 2:
+            flipped = q.copy()
+            flipped[last] += math.pi
+            errors = self.problem.errors(flipped, goal, self.up, self.p)
+            if float(errors[0]) < POSITION_TOLERANCE and float(errors[1]) < ANGLE_TOLERANCE:
+                period[last] = math.pi
+        moved = q.copy()
+        for j in np.flatnonzero(period > 0):
+            turns = np.round((previous[j] - q[j]) / period[j])
+            for k in (turns, turns - 1, turns + 1):  # the nearest that fits the bounds
+                value = q[j] + k * period[j]
+                if lower[j] <= value <= upper[j] and abs(value - previous[j]) < abs(
+                        moved[j] - previous[j]):
+                    moved[j] = value
+        return q if np.array_equal(moved, q) else moved
