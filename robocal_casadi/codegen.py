@@ -11,6 +11,13 @@ Where no compiler is found or compilation fails, the interpreted function is ret
 unchanged and a warning says why (once per reason), so callers never depend on a
 compiler being present.
 
+A library is machine code run with the caller's rights, so the cache is private: the
+folder is created 0700, and a folder or library that belongs to another user or that
+others may write is never used (the function is compiled into a private temporary
+folder instead, with a warning). A library that does not load (truncated, corrupt) is
+compiled again. Build folders of killed runs (``robocal_build_<pid>_*``) are removed
+once their process is gone.
+
 ``BatchFunction`` evaluates a function over many rows (e.g. joint readings) that share
 the other inputs (e.g. the parameter vector): whatever depends on the shared inputs
 alone (sines and cosines of DH angles, base and tool rotations, ...) is computed once
@@ -22,9 +29,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
+import stat
 import subprocess
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -34,6 +44,9 @@ import numpy as np
 FLAGS = ("-O2", "-shared", "-fPIC")
 _warned: set[str] = set()
 _loaded: dict[tuple[str, str], ca.Function] = {}
+_private: list[Path] = []  # this process's fallback cache, made on first need
+_BUILD = re.compile(r"robocal_build_(?P<pid>\d+)_.*")
+STALE_BUILD_AGE = 3600.0  # [s] a build folder this old is abandoned whatever its process
 
 
 class CompilationWarning(UserWarning):
@@ -92,27 +105,122 @@ def compiled(function: ca.Function) -> ca.Function:
     key = (function.name(), digest)
     if key in _loaded:
         return _loaded[key]
-    folder = cache_folder()
-    library = folder / f"{digest[:32]}.so"
-    if not library.is_file():
-        try:
-            _compile(cc, source, library)
-        except (OSError, subprocess.SubprocessError) as error:
-            _warn_once(f"compiling {function.name()!r} failed ({_short(error)})")
-            return function
     try:
-        loaded = ca.external(function.name(), str(library))
-    except RuntimeError as error:
-        _warn_once(f"loading {library} failed ({_short(error)})")
+        folder = safe_cache_folder()
+    except OSError as error:
+        _warn_once(f"no usable cache folder ({_short(error)})")
         return function
+    library = folder / f"{digest[:32]}.so"
+    if library.exists() and not _owned_privately(library, folder=False):
+        # Never run a library someone else could have written: build our own elsewhere.
+        warnings.warn(f"{library} belongs to another user or others may write it; compiling "
+                      "into a private temporary folder instead", CompilationWarning,
+                      stacklevel=2)
+        library = _private_folder() / library.name
+    for attempt in range(2):
+        if not library.is_file():
+            try:
+                _compile(cc, source, library)
+            except (OSError, subprocess.SubprocessError) as error:
+                _warn_once(f"compiling {function.name()!r} failed ({_short(error)})")
+                return function
+        try:
+            loaded = ca.external(function.name(), str(library))
+            break
+        except RuntimeError as error:
+            if attempt == 0:
+                # A truncated or corrupt library (a run killed while writing it, a full
+                # disk): remove it and compile it again.
+                try:
+                    library.unlink()
+                except OSError:
+                    library = _private_folder() / library.name
+                continue
+            _warn_once(f"loading {library} failed ({_short(error)})")
+            return function
     _loaded[key] = loaded
     return loaded
+
+
+def _owned_privately(path: Path, *, folder: bool) -> bool:
+    """True when ``path`` (followed if a link) is a folder or regular file of ours that
+    neither the group nor others may write."""
+    try:
+        info = path.stat()
+    except OSError:
+        return False
+    kind_ok = stat.S_ISDIR(info.st_mode) if folder else stat.S_ISREG(info.st_mode)
+    return kind_ok and info.st_uid == os.getuid() and not info.st_mode & 0o022
+
+
+def safe_cache_folder() -> Path:
+    """The cache folder, created 0700 if missing; if it belongs to another user or others
+    may write it, a private temporary folder of this process instead (with a warning)."""
+    folder = cache_folder()
+    if not folder.exists():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            folder.mkdir(mode=0o700)
+        except FileExistsError:
+            pass  # made by a concurrent process a moment ago: checked below
+        else:
+            os.chmod(folder, 0o700)  # whatever the umask
+    if _owned_privately(folder, folder=True):
+        return folder
+    if folder not in _private_warned:
+        _private_warned.add(folder)
+        warnings.warn(f"the cache folder {folder} belongs to another user or others may write "
+                      "it; compiled code goes to a private temporary folder instead (make it "
+                      "yours with mode 0700, or set ROBOCAL_CACHE)", CompilationWarning,
+                      stacklevel=3)
+    return _private_folder()
+
+
+_private_warned: set[Path] = set()
+
+
+def _private_folder() -> Path:
+    if not _private:
+        _private.append(Path(tempfile.mkdtemp(prefix="robocal_cache_")))  # 0700
+    return _private[0]
+
+
+def remove_stale_builds(folder: Path) -> None:
+    """Remove build folders in ``folder`` left by killed runs: their process is gone, or
+    they are older than an hour (a compilation is given ten minutes)."""
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        match = _BUILD.fullmatch(entry.name)
+        if match is None or not entry.is_dir() or entry.is_symlink():
+            continue
+        pid = int(match.group("pid"))
+        try:
+            old = time.time() - entry.stat().st_mtime > STALE_BUILD_AGE
+        except OSError:
+            continue
+        if old or (pid != os.getpid() and not _alive(pid)):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 def _compile(cc: str, source: str, library: Path) -> None:
     """Compile ``source`` into ``library``; the file appears only once it is complete."""
     library.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="robocal_build_", dir=library.parent) as folder:
+    remove_stale_builds(library.parent)
+    with tempfile.TemporaryDirectory(prefix=f"robocal_build_{os.getpid()}_",
+                                     dir=library.parent) as folder:
         source_path = Path(folder) / "function.c"
         source_path.write_text(source)
         output = Path(folder) / library.name
@@ -120,6 +228,7 @@ def _compile(cc: str, source: str, library: Path) -> None:
                                 capture_output=True, text=True, timeout=600)
         if result.returncode != 0:
             raise subprocess.SubprocessError(result.stderr.strip() or f"exit {result.returncode}")
+        os.chmod(output, 0o700)  # never group- or world-writable, whatever the umask
         os.replace(output, library)
 
 

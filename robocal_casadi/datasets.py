@@ -25,8 +25,9 @@ from typing import Any, Union
 import numpy as np
 
 from .errors import InputError
-from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, file_kind, file_name,
-                     load_yaml, mapping, quantities, quantity, require, units_of, vector)
+from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, cut, file_kind,
+                     file_name, load_yaml, mapping, quantities, quantity, referenced_file,
+                     require, resolved, units_of, vector)
 from .robot import Robot, load_robot
 from .table import Table, read_table
 from .transforms import matrix_from_quaternion
@@ -36,7 +37,7 @@ KINDS = ("cross_bar", "artifact_touches", "sphere_laser", "tracker_points")
 BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
-COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning")
+COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report")
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
 BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),
@@ -123,12 +124,14 @@ Dataset = Union[ArtifactTouches, SphereLaser, TrackerPoints]
 
 
 def load_dataset(path: str | Path, *, require_data: bool = True,
-                 robot: Robot | None = None) -> Dataset:
+                 robot: Robot | None = None, allow_outside_data: bool = False) -> Dataset:
     """Read and check a dataset file and its table.
 
     ``require_data=False`` (planning) does not read the table (it may be missing, or a
     plan whose measured columns are still empty) and returns no rows.
     ``robot`` replaces the robot file the dataset names (e.g. a calibrated robot).
+    The data table must lie in the dataset file's folder or below it unless
+    ``allow_outside_data`` (see ``fields.referenced_file``).
     Every problem raises ``InputError`` naming the file, the key or line, and what is wrong.
     """
     path = Path(path)
@@ -138,7 +141,7 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
         raise InputError(f"this is {looks}, not a dataset file", file=path)
     kind = require(content, "kind", file=path)
     if not isinstance(kind, str) or kind not in KINDS:
-        raise InputError(f"unknown kind {kind!r}; expected one of {list(KINDS)}", file=path,
+        raise InputError(f"unknown kind {cut(kind)}; expected one of {list(KINDS)}", file=path,
                          where="kind")
     check_keys(content, COMMON_KEYS + KIND_KEYS[kind], file=path)
     for block in KIND_KEYS[kind]:
@@ -149,14 +152,13 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if content.get("planning") is not None:
         _check_planning(content["planning"], units, path)
     robot_path, robot = referenced_robot(content, path, robot)
-    data_name = content.get("data")
+    data_path = referenced_file(content, "data", file=path, allow_outside=allow_outside_data,
+                                required=False)
     table = None
-    data_path = None
-    if data_name is not None:
-        data_path = path.parent / file_name(data_name, file=path, where="data")
+    if data_path is not None:
         if data_path.is_dir():
             raise InputError(f"the data table {data_path} is a folder", file=path, where="data")
-        if not data_path.exists() and require_data:
+        if not data_path.exists() and not data_path.is_symlink() and require_data:
             raise InputError(f"data table {data_path} not found", file=path, where="data")
         # Planning describes a set-up: its table may be missing or an unmeasured plan.
         if require_data:
@@ -192,11 +194,11 @@ def _check_planning(block: Any, units: Units, path: Path) -> None:
                          where=f"planning.{key}", unit=units.angle)
         if not 0 < value <= np.radians(limit) + 1e-12:
             raise InputError(f"expected an angle above 0 and at most {limit:g} deg, got "
-                             f"{block[key]!r} {units.angle}", file=path, where=f"planning.{key}")
+                             f"{cut(block[key])} {units.angle}", file=path, where=f"planning.{key}")
     touches = block.get("touches_per_socket")
     if touches is not None and (isinstance(touches, bool) or not isinstance(touches, int)
                                 or touches < 1):
-        raise InputError(f"expected a whole number of at least 1, got {touches!r}", file=path,
+        raise InputError(f"expected a whole number of at least 1, got {cut(touches)}", file=path,
                          where="planning.touches_per_socket")
     if block.get("table_height") is not None:
         quantity(block["table_height"], units.length_scale, "length", file=path,
@@ -214,11 +216,11 @@ def referenced_robot(content: dict, path: Path, robot: Robot | None = None
     one by its own name, key and line.
     """
     name = file_name(require(content, "robot", file=path), file=path, where="robot")
-    robot_path = (path.parent / name).resolve()
+    robot_path = resolved(path.parent / name)
     if robot is None:
         if robot_path.is_dir():
             raise InputError(f"robot file {robot_path} is a folder", file=path, where="robot")
-        if not robot_path.is_file():
+        if not robot_path.is_file() and not robot_path.is_symlink():  # a loop: named below
             raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
         robot = load_robot(robot_path)
     return robot_path, robot
@@ -360,7 +362,7 @@ def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...
     if bad.any():
         row = int(np.argmax(bad))
         raise InputError(f"column 'pose': expected a whole-number placement id (at most "
-                         f"{MAX_POSE_ID:.0e} in size), got {table.text('pose')[row]!r}",
+                         f"{MAX_POSE_ID:.0e} in size), got {cut(table.text('pose')[row])}",
                          file=table.path, where=f"line {table.line(row)}")
     points = tuple(table.text("point"))
     for i, p in enumerate(points):
@@ -381,7 +383,7 @@ def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouc
         poses, points = _touch_columns(table, path)
         for i, p in enumerate(points):
             if p not in BAR_POINTS:
-                raise InputError(f"column 'point': expected one of A, B, C, D, got {p!r}",
+                raise InputError(f"column 'point': expected one of A, B, C, D, got {cut(p)}",
                                  file=table.path, where=f"line {table.line(i)}")
         for pose_id in np.unique(poses):
             seen = {points[i] for i in np.flatnonzero(poses == pose_id)}
@@ -400,7 +402,7 @@ def _cross_bar(content: dict, table: Table | None, common: dict) -> ArtifactTouc
 def _socket_name(value: Any, *, path: Path, where: str) -> str:
     """A socket named in the artifact block: text or a whole number, as text."""
     if isinstance(value, bool) or not isinstance(value, (str, int)) or str(value).strip() == "":
-        raise InputError(f"expected a socket name, got {value!r}", file=path, where=where)
+        raise InputError(f"expected a socket name, got {cut(value)}", file=path, where=where)
     return str(value).strip()
 
 
@@ -409,7 +411,7 @@ def _list_of(artifact: dict, key: str, path: Path) -> list:
     if value is None:
         return []
     if not isinstance(value, list):
-        raise InputError(f"expected a list, got {value!r}", file=path, where=f"artifact.{key}")
+        raise InputError(f"expected a list, got {cut(value)}", file=path, where=f"artifact.{key}")
     return value
 
 
@@ -423,16 +425,16 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
     for k, entry in enumerate(_list_of(artifact, "distances", path)):
         where = f"artifact.distances[{k}]"
         if not isinstance(entry, list) or len(entry) != 3:
-            raise InputError(f"expected [socket, socket, length], got {entry!r}", file=path,
+            raise InputError(f"expected [socket, socket, length], got {cut(entry)}", file=path,
                              where=where)
         a = _socket_name(entry[0], path=path, where=f"{where}[0]")
         b = _socket_name(entry[1], path=path, where=f"{where}[1]")
         if a == b:
-            raise InputError(f"a distance from socket {a!r} to itself", file=path, where=where)
+            raise InputError(f"a distance from socket {cut(a)} to itself", file=path, where=where)
         length = quantity(entry[2], units.length_scale, "length", file=path, where=f"{where}[2]",
                           unit=units.length)
         if length <= 0:
-            raise InputError(f"distance must be positive, got {entry[2]!r}", file=path,
+            raise InputError(f"distance must be positive, got {cut(entry[2])}", file=path,
                              where=f"{where}[2]")
         pair = frozenset((a, b))
         if pair in lengths:
@@ -444,7 +446,7 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
     for k, entry in enumerate(_list_of(artifact, "perpendicular", path)):
         where = f"artifact.perpendicular[{k}]"
         if not isinstance(entry, list) or len(entry) != 4:
-            raise InputError(f"expected [A, C, B, D] (AC perpendicular to BD), got {entry!r}",
+            raise InputError(f"expected [A, C, B, D] (AC perpendicular to BD), got {cut(entry)}",
                              file=path, where=where)
         names = tuple(_socket_name(e, path=path, where=f"{where}[{i}]")
                       for i, e in enumerate(entry))
@@ -470,7 +472,7 @@ def _artifact(content: dict, table: Table | None, common: dict) -> ArtifactTouch
             counts[p] = counts.get(p, 0) + 1
         for i, p in enumerate(points):
             if counts[p] == 1 and p not in named:
-                raise InputError(f"socket {p!r} is touched only once and named in no distance "
+                raise InputError(f"socket {cut(p)} is touched only once and named in no distance "
                                  f"or perpendicularity: it adds nothing (a misspelt socket "
                                  f"name? sockets: {sorted(counts)})", file=table.path,
                                  where=f"line {table.line(i)}")

@@ -6,8 +6,12 @@ the same way everywhere: the file, the key path, what was expected and what was 
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import re
+import reprlib
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -18,12 +22,38 @@ from .errors import InputError
 _FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
+# Bounds on what a YAML file may make the reader do. Robot, dataset and job files are a
+# few kilobytes; these only stop files built to exhaust memory or the stack.
+MAX_YAML_BYTES = 4 * 2**20  # a YAML file larger than this is refused before reading
+MAX_TABLE_BYTES = 256 * 2**20  # likewise a data table
+MAX_DEPTH = 100  # nesting of lists and mappings
+MAX_EXPANDED = 100_000  # values in the document once every alias (*name) is expanded
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
 class _StrictLoader(yaml.SafeLoader):
-    """``SafeLoader`` that refuses a key written twice in one mapping (PyYAML keeps the last)."""
+    """``SafeLoader`` that refuses a key written twice in one mapping (PyYAML keeps the
+    last) and nesting deeper than ``MAX_DEPTH``. Merge keys (``<<: *defaults``) work as
+    YAML defines them: the mapping's own keys win over merged ones."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nested more than {MAX_DEPTH} levels deep",
+                    self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
 
     def construct_mapping(self, node, deep=False):
         seen: dict = {}
         for key_node, _ in node.value:
+            if key_node.tag == _MERGE_TAG:
+                continue
             try:
                 key = self.construct_object(key_node, deep=True)
                 hash(key)
@@ -33,10 +63,49 @@ class _StrictLoader(yaml.SafeLoader):
                 ) from None
             if key in seen:
                 raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r} (first on line {seen[key] + 1})",
+                    None, None, f"duplicate key {cut(key)} (first on line {seen[key] + 1})",
                     key_node.start_mark)
             seen[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
+
+
+class _ExpansionError(Exception):
+    """The document's aliases expand too far, or one refers to a value holding it."""
+
+
+def _expanded_size(node, sizes: dict, open_nodes: set) -> int:
+    """Values in ``node`` with every alias expanded (each shared node counted once per
+    use); memoised, so the cost is the size of the file, not of the expansion."""
+    key = id(node)
+    if key in sizes:
+        return sizes[key]
+    if key in open_nodes:
+        raise _ExpansionError("an alias (*name) refers to a value that contains it")
+    open_nodes.add(key)
+    total = 1
+    if isinstance(node, yaml.SequenceNode):
+        total += sum(_expanded_size(item, sizes, open_nodes) for item in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        total += sum(_expanded_size(k, sizes, open_nodes) + _expanded_size(v, sizes, open_nodes)
+                     for k, v in node.value)
+    open_nodes.discard(key)
+    if total > MAX_EXPANDED:
+        raise _ExpansionError(f"aliases (*name) expand the file to more than {MAX_EXPANDED:,} "
+                              "values")
+    sizes[key] = total
+    return total
+
+
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel, _SHORT.maxlist, _SHORT.maxtuple, _SHORT.maxdict = 2, 4, 4, 3
+_SHORT.maxstring, _SHORT.maxlong, _SHORT.maxother = 40, 30, 30
+
+
+def cut(value: Any, limit: int = 60) -> str:
+    """A short ``repr`` of ``value`` for messages, whatever its size: long text, huge
+    numbers and deep or shared structures are cut, never expanded in full."""
+    text = _SHORT.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _describe(value: Any) -> str:
@@ -46,28 +115,45 @@ def _describe(value: Any) -> str:
     if isinstance(value, bool):
         return f"a boolean ({value})"
     if isinstance(value, (int, float)):
-        return f"a number ({value!r})"
+        return f"a number ({cut(value)})"
     if isinstance(value, str):
-        text = repr(value)
-        return f"text ({text if len(text) < 60 else text[:50] + '...'})"
+        return f"text ({cut(value)})"
     if isinstance(value, list):
-        return f"a list ({value!r})" if len(repr(value)) < 60 else f"a list of {len(value)} items"
+        text = cut(value)
+        return f"a list ({text})" if "..." not in text else f"a list of {len(value)} items"
     if isinstance(value, dict):
         return "a mapping"
     return type(value).__name__
 
 
-def read_text(path: Path, *, what: str = "file") -> str:
+def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> str:
     """The UTF-8 text of ``path`` (a leading byte-order mark dropped); an ``InputError``
-    for a missing file, a folder, an unreadable file or bytes that are not UTF-8."""
-    if path.is_dir():
-        raise InputError(f"expected a {what}, found a folder", file=path)
-    if not path.is_file():
-        raise InputError(f"{what} not found", file=path)
+    for a missing file, a folder, a device or pipe, a file larger than ``limit`` bytes
+    (checked before reading), an unreadable file or bytes that are not UTF-8."""
     try:
-        data = path.read_bytes()
+        mode = path.stat()
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", file=path) from None
+    except OSError as error:
+        reason = "a loop of symbolic links" if error.errno == errno.ELOOP else error.strerror
+        raise InputError(f"cannot read the {what} ({reason})", file=path) from None
+    except ValueError:  # a NUL in the name
+        raise InputError(f"{what} not found", file=path) from None
+    if stat.S_ISDIR(mode.st_mode):
+        raise InputError(f"expected a {what}, found a folder", file=path)
+    if not stat.S_ISREG(mode.st_mode):
+        raise InputError(f"expected a {what}, found a device, pipe or socket", file=path)
+    if mode.st_size > limit:
+        raise InputError(f"the {what} has {mode.st_size:,} bytes, more than the "
+                         f"{limit // 2**20} MiB a {what} may have", file=path)
+    try:
+        with path.open("rb") as handle:
+            data = handle.read(limit + 1)
     except OSError as error:
         raise InputError(f"cannot read the {what} ({error.strerror})", file=path) from None
+    if len(data) > limit:  # grew while we looked
+        raise InputError(f"the {what} is larger than the {limit // 2**20} MiB a {what} may "
+                         "have", file=path)
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as error:
@@ -81,19 +167,32 @@ def read_text(path: Path, *, what: str = "file") -> str:
 
 
 def load_yaml(path: str | Path, *, what: str = "file") -> dict:
-    """Read a YAML mapping; a missing file, bad YAML, a key written twice or a top level
-    that is not a mapping is an ``InputError`` naming the file (and the line)."""
+    """Read a YAML mapping; a missing file, bad YAML, a key written twice, nesting or
+    aliases beyond the bounds above, or a top level that is not a mapping is an
+    ``InputError`` naming the file (and the line)."""
     path = Path(path)
     text = read_text(path, what=what)
+    loader = _StrictLoader(text)
     try:
-        content = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader)
+        node = loader.get_single_node()
+        if node is not None:
+            _expanded_size(node, {}, set())
+        content = loader.construct_document(node) if node is not None else None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else None
         problem = getattr(error, "problem", None) or str(error).splitlines()[0]
-        if problem.startswith("duplicate key") or problem.startswith("a mapping key"):
+        problem = problem if len(problem) <= 200 else problem[:197] + "..."
+        if problem.startswith(("duplicate key", "a mapping key", "nested more")):
             raise InputError(problem, file=path, where=where) from None
         raise InputError(f"not valid YAML ({problem})", file=path, where=where) from None
+    except _ExpansionError as error:
+        raise InputError(str(error), file=path) from None
+    except (ValueError, OverflowError) as error:  # e.g. an integer of more than 4,300 digits
+        raise InputError(f"a value that cannot be read ({cut(str(error), 120)})",
+                         file=path) from None
+    finally:
+        loader.dispose()
     if content is None:
         raise InputError(f"the {what} is empty; expected a YAML mapping of keys", file=path)
     if not isinstance(content, dict):
@@ -101,7 +200,7 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
                          f"{_describe(content)}", file=path)
     bad = [k for k in content if not isinstance(k, str)]
     if bad:
-        raise InputError(f"key {bad[0]!r} is not a name", file=path)
+        raise InputError(f"key {cut(bad[0])} is not a name", file=path)
     return content
 
 
@@ -152,6 +251,38 @@ def file_name(value: Any, *, file: str | Path | None, where: str) -> str:
     return value.strip()
 
 
+def resolved(path: Path) -> Path:
+    """``path`` with links followed; a loop of links leaves the name as written."""
+    return _resolved(path)
+
+
+def referenced_file(content: dict, key: str, *, file: Path, allow_outside: bool = False,
+                    required: bool = True) -> Path | None:
+    """The file a YAML file names under ``key`` (``data: points.csv``), relative to the
+    naming file's folder. It must lie in that folder or below it (after following
+    links): an absolute path or ``../`` could read any file on the machine, so it needs
+    ``allow_outside`` (``--allow-outside-data``). None when optional and absent."""
+    if content.get(key) is None and not required:
+        return None
+    name = file_name(require(content, key, file=file), file=file, where=key)
+    target = file.parent / name
+    if not allow_outside:
+        folder = _resolved(file.parent)
+        resolved = _resolved(target)
+        if resolved != folder and folder not in resolved.parents:
+            raise InputError(f"{cut(name)} lies outside the folder of {file.name}; a {key} "
+                             "table must be in that folder or below it (give "
+                             "--allow-outside-data to read it anyway)", file=file, where=key)
+    return target
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):  # a symlink loop: judge the name as written
+        return Path(os.path.abspath(path))
+
+
 def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
     """The file's ``units`` mapping as ``Units``; wrong types and unknown keys refused."""
     from .units import ANGLE_SCALE, LENGTH_SCALE, parse_units
@@ -167,7 +298,7 @@ def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
             raise InputError(f"no {name} unit given; expected one of {sorted(known)}",
                              file=file, where=f"{key}.{name}")
         if not isinstance(value[name], str):
-            raise InputError(f"unknown {name} unit {value[name]!r}; expected one of "
+            raise InputError(f"unknown {name} unit {cut(value[name])}; expected one of "
                              f"{sorted(known)}", file=file, where=f"{key}.{name}")
     return parse_units(value, file=file, key=key)
 
@@ -179,7 +310,11 @@ def number(value: Any, *, file: str | Path | None, where: str) -> float:
         value = float(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"expected a number, got {_describe(value)}", file=file, where=where)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer of hundreds of digits
+        raise InputError(f"{cut(value)} is too large for a number", file=file,
+                         where=where) from None
     if not math.isfinite(value):
         raise InputError(f"expected a finite number, got {value}", file=file, where=where)
     return value

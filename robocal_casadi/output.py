@@ -1,34 +1,107 @@
-"""Writing outputs all or nothing.
+"""Writing outputs all or nothing, and never over something robocal did not write.
 
 A verb writes into a temporary sibling and moves it into place only when everything
-succeeded, so a failure never leaves a half-written folder or file behind.
+succeeded, so a failure never leaves a half-written folder or file behind. Staging
+names carry the writing process's id (``.<name>.robocal-<pid>-<random>``), so the
+leftovers of a run that was killed are recognised and removed by the next run that
+writes beside them (when their process is gone, or after a day).
+
+Every output folder holds a marker file, ``.robocal-output``: a folder with it was
+written by robocal and may be replaced as a whole by the next run; any other non-empty
+folder is refused unless the caller forces it (see ``commands.arguments``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import tempfile
+import time
 from pathlib import Path
 from typing import Iterator
+
+MARKER = ".robocal-output"
+MARKER_TEXT = ("robocal_casadi wrote this folder; a run given it as --out replaces it as a "
+               "whole.\n")
+STAGING_TAG = "robocal"
+STALE_AGE = 24 * 3600.0  # [s] staging left by a live process is removed after a day
+
+
+def _staging_prefix(target: Path) -> str:
+    return f".{target.name}.{STAGING_TAG}-{os.getpid()}-"
+
+
+_STAGING = re.compile(rf"\.(?P<name>.+)\.{STAGING_TAG}-(?P<pid>\d+)-[^/]*")
+
+
+def _process_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True  # someone else's process, or cannot tell: keep its files
+    return True
+
+
+def remove_stale_staging(folder: str | Path, name: str | None = None) -> list[Path]:
+    """Remove staging files and folders in ``folder`` left by killed runs (of the output
+    ``name`` only, when given): those whose process is gone, or older than a day.
+    Returns what was removed."""
+    removed = []
+    try:
+        entries = list(Path(folder).iterdir())
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        match = _STAGING.fullmatch(entry.name)
+        if match is None or (name is not None and match.group("name") != name):
+            continue
+        try:
+            age = now - entry.lstat().st_mtime
+        except OSError:
+            continue
+        if _process_alive(int(match.group("pid"))) and age < STALE_AGE:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                entry.unlink()
+        removed.append(entry)
+    return removed
+
+
+def written_by_robocal(folder: str | Path) -> bool:
+    """True when ``folder`` carries the marker robocal writes into its output folders."""
+    return (Path(folder) / MARKER).is_file()
 
 
 @contextlib.contextmanager
 def atomic_directory(target: str | Path) -> Iterator[Path]:
-    """Yield a fresh temporary folder; on success it replaces ``target``."""
-    target = Path(target)
+    """Yield a fresh temporary folder; on success it replaces ``target`` (with the marker
+    file added)."""
+    target = Path(os.path.abspath(target))
+    if target.name in ("", ".", ".."):
+        raise ValueError(f"{target} cannot be replaced as a folder")
     target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    remove_stale_staging(target.parent, target.name)
+    staging = Path(tempfile.mkdtemp(prefix=_staging_prefix(target), dir=target.parent))
     os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it private; outputs are not
     try:
         yield staging
+        (staging / MARKER).write_text(MARKER_TEXT)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     if target.exists():
-        backup = target.with_name(f".{target.name}.old")
-        shutil.rmtree(backup, ignore_errors=True)
+        backup = Path(tempfile.mkdtemp(prefix=_staging_prefix(target), dir=target.parent))
+        backup.rmdir()
         target.rename(backup)
         staging.rename(target)
         shutil.rmtree(backup, ignore_errors=True)
@@ -47,7 +120,8 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``target``; on success it is renamed to ``target``."""
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    handle, name = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    remove_stale_staging(target.parent, target.name)
+    handle, name = tempfile.mkstemp(prefix=_staging_prefix(target), dir=target.parent)
     os.close(handle)
     staging = Path(name)
     try:

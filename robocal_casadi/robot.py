@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from .errors import InputError
-from .fields import (check_keys, load_yaml, mapping, number, quantities, quantity, require,
+from .fields import (check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
                      vector)
 from .units import SI, Units
 
@@ -29,6 +29,12 @@ JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com
 ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity")
 MAX_MASS = 1e5  # kg, a link heavier than this is a typo
 MAX_GRAVITY = 1e3  # m/s^2
+MAX_NAME = 200  # characters of a robot's name
+# In a file that declares rad, a DH angle or rpy beyond a full turn, or a joint limit
+# beyond two turns, is almost surely written in degrees (alpha: -90).
+FULL_TURN = 2 * math.pi  # [rad]
+MAX_LIMIT = 4 * math.pi  # [rad]
+DEGREES_HINT = "the value looks like degrees in a file that declares rad"
 
 
 @dataclass(frozen=True)
@@ -146,14 +152,14 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     convention = require(content, "convention", file=file)
     if not isinstance(convention, str) or convention not in CONVENTIONS:
         raise InputError(
-            f"unknown convention {convention!r}; expected one of {list(CONVENTIONS)}",
+            f"unknown convention {cut(convention)}; expected one of {list(CONVENTIONS)}",
             file=file,
             where="convention",
         )
     units = units_of(content, file=file)
     raw_joints = require(content, "joints", file=file)
     if not isinstance(raw_joints, list) or not raw_joints:
-        raise InputError(f"expected a non-empty list of joints, got {raw_joints!r}"[:200],
+        raise InputError(f"expected a non-empty list of joints, got {cut(raw_joints)}",
                          file=file, where="joints")
     joints = tuple(
         _joint_from_dict(raw, units, file=file, where=f"joints[{i}] (joint {i + 1})")
@@ -171,7 +177,10 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     if name is None:
         name = Path(file).stem if file else "robot"
     elif isinstance(name, (list, dict, bool)):
-        raise InputError(f"expected a name, got {name!r}", file=file, where="name")
+        raise InputError(f"expected a name, got {cut(name)}", file=file, where="name")
+    elif len(str(name)) > MAX_NAME:
+        raise InputError(f"a name of {len(str(name))} characters; at most {MAX_NAME} are "
+                         "allowed", file=file, where="name")
     return Robot(
         name=str(name),
         convention=convention,
@@ -188,8 +197,8 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
 
 def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     if not isinstance(raw, dict):
-        raise InputError(f"expected a mapping {{type, theta, d, a, alpha, ...}}, got {raw!r}",
-                         file=file, where=where)
+        raise InputError(f"expected a mapping {{type, theta, d, a, alpha, ...}}, got "
+                         f"{cut(raw)}", file=file, where=where)
     unknown = set(raw) - JOINT_KEYS
     if unknown:
         raise InputError(
@@ -199,7 +208,7 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     joint_type = raw.get("type", "revolute")
     if not isinstance(joint_type, str) or joint_type not in JOINT_TYPES:
         raise InputError(
-            f"unknown joint type {joint_type!r}; expected one of {list(JOINT_TYPES)}",
+            f"unknown joint type {cut(joint_type)}; expected one of {list(JOINT_TYPES)}",
             file=file,
             where=f"{where}.type",
         )
@@ -215,6 +224,8 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     if raw.get("beta") is not None:
         beta = quantity(raw["beta"], A, "angle", file=file, where=f"{where}.beta",
                         unit=units.angle)
+    for key, value in (("theta", values["theta"]), ("alpha", values["alpha"]), ("beta", beta)):
+        _within_a_turn(value, units, file=file, where=f"{where}.{key}")
     limits = None
     if raw.get("limits") is not None:
         revolute = joint_type == "revolute"
@@ -225,6 +236,9 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
         if lo >= hi:
             raise InputError(f"lower limit {lo / scale:g} is not below upper limit "
                              f"{hi / scale:g}", file=file, where=f"{where}.limits")
+        if revolute and units.angle == "rad" and max(abs(lo), abs(hi)) > MAX_LIMIT:
+            raise InputError(f"[{lo:g}, {hi:g}] rad allows more than two turns each way; "
+                             f"{DEGREES_HINT}", file=file, where=f"{where}.limits")
         limits = (lo, hi)
     mass = None
     if raw.get("mass") is not None:
@@ -249,6 +263,13 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     )
 
 
+def _within_a_turn(value: float, units: Units, *, file, where: str) -> None:
+    """Refuse a fixed angle [rad] beyond a full turn in a file that declares rad."""
+    if units.angle == "rad" and abs(value) > FULL_TURN + 1e-9:
+        raise InputError(f"{value:g} rad is more than a full turn; {DEGREES_HINT}", file=file,
+                         where=where)
+
+
 def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
     if raw is None:
         return Frame()
@@ -256,6 +277,9 @@ def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
     check_keys(raw, ("xyz", "rpy"), file=file, where=where)
     xyz = raw.get("xyz")
     rpy = raw.get("rpy")
+    for k, angle in enumerate([] if rpy is None else quantities(
+            rpy, 3, units.angle_scale, "angle", file=file, where=f"{where}.rpy")):
+        _within_a_turn(angle, units, file=file, where=f"{where}.rpy[{k}]")
     return Frame(
         tuple(quantities([0, 0, 0] if xyz is None else xyz, 3, units.length_scale, "length",
                          file=file, where=f"{where}.xyz", unit=units.length)),  # type: ignore

@@ -50,7 +50,7 @@ from .datasets import KINDS, Dataset, load_dataset
 from .errors import InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
-from .output import atomic_directory
+from .output import atomic_directory, written_by_robocal
 from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
@@ -329,7 +329,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
              payload=None, payload_com=None, temperature: tuple[float, float] | None = None,
              reference_temperature: float = 20.0, readings: str = "joints",
              bar_length: float = 0.4, socket_distance: float = 0.05, sockets: int = 2,
-             touches: int = 5, sphere_radius: float = 0.025, progress: bool = True
+             touches: int = 5, sphere_radius: float = 0.025, progress: bool = True,
+             force: bool = False
              ) -> SimulatedDataset:
     """Write a simulated dataset of ``kind`` into ``out_dir``; return its paths and truth.
 
@@ -347,7 +348,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     no column). ``readings``: sphere_laser writes ``joints`` or ``pendant`` poses (the
     controller's nominal flange pose at the readings, world frame). ``bar_length``,
     ``socket_distance`` [m], ``sockets``, ``touches`` (per socket and placement) and
-    ``sphere_radius`` [m] shape the artifacts.
+    ``sphere_radius`` [m] shape the artifacts. ``out_dir`` is replaced as a whole: a
+    non-empty folder that is no earlier output is refused unless ``force``.
     """
     kind = choice(kind, KINDS, "kind")
     readings = choice(readings, READINGS, "readings")
@@ -358,7 +360,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     nominal = load_robot(robot) if isinstance(robot, (str, Path)) else robot
     units = units or nominal.units
     out_dir = Path(out_dir)
-    _check_out_dir(out_dir)
+    if not force:
+        _check_out_dir(out_dir)
     rng = np.random.default_rng(seed)
 
     p_true, errors = true_parameters(nominal, geometric_errors, rng)
@@ -411,7 +414,8 @@ def _check_out_dir(out_dir: Path) -> None:
     if out_dir.exists():
         if not out_dir.is_dir():
             raise InputError("exists and is not a folder", file=out_dir, where="--out")
-        if any(out_dir.iterdir()) and not (out_dir / "truth.yaml").is_file():
+        if any(out_dir.iterdir()) and not (out_dir / "truth.yaml").is_file() \
+                and not written_by_robocal(out_dir):
             raise InputError("folder is not empty and holds no earlier simulation "
                              "(truth.yaml); choose a new folder", file=out_dir, where="--out")
 

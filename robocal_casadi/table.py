@@ -21,7 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import InputError
-from .fields import read_text
+from .fields import MAX_TABLE_BYTES, cut, read_text
 
 # A decimal number as people write it in a table; float() alone would also take
 # "1_000", "infinity" or " nan ", which a table must not contain silently.
@@ -63,7 +63,7 @@ class Table:
         hint = f" (found {', '.join(near)}: column names are case-sensitive)" if near else ""
         label = "column" if len(absent) == 1 else "columns"
         shown = repr(absent[0]) if len(absent) == 1 else str(absent)
-        return InputError(f"missing {label} {shown}; the table has {list(self.columns)}{hint}",
+        return InputError(f"missing {label} {shown}; the table has {listed(self.columns)}{hint}",
                           file=self.path, where="line 1")
 
     def require(self, *names: str) -> None:
@@ -92,16 +92,22 @@ class Table:
         return out
 
 
+def listed(names: Sequence[str], limit: int = 200) -> str:
+    """Column names for a message, cut to ``limit`` characters (a header may be anything)."""
+    text = str(list(names))
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def parse_number(cell: str, column: str, *, file: Path | None, where: str) -> float:
     """A table cell as a finite float, or an ``InputError`` saying what is wrong with it."""
     if _NUMBER.fullmatch(cell):
         value = float(cell)
         if math.isfinite(value):
             return value
-        raise InputError(f"column {column!r}: {cell!r} is too large for a number", file=file,
+        raise InputError(f"column {column!r}: {cut(cell)} is too large for a number", file=file,
                          where=where)
     if _NON_FINITE.fullmatch(cell):
-        raise InputError(f"column {column!r}: expected a finite number, got {cell!r}",
+        raise InputError(f"column {column!r}: expected a finite number, got {cut(cell)}",
                          file=file, where=where)
     hint = ""
     if cell == "":
@@ -110,14 +116,14 @@ def parse_number(cell: str, column: str, *, file: Path | None, where: str) -> fl
         hint = " (write the decimal separator as a point)"
     elif "\u2212" in cell:
         hint = " (a typographic minus sign; use '-')"
-    raise InputError(f"column {column!r}: expected a number, got {cell!r}{hint}", file=file,
+    raise InputError(f"column {column!r}: expected a number, got {cut(cell)}{hint}", file=file,
                      where=where)
 
 
 def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
     """Read a CSV with a header row; ragged rows, missing columns and empty tables are errors."""
     path = Path(path)
-    text = read_text(path, what="data table")
+    text = read_text(path, what="data table", limit=MAX_TABLE_BYTES)
     reader = csv.reader(io.StringIO(text, newline=""), skipinitialspace=True)
     records: list[tuple[int, list[str]]] = []
     try:
@@ -135,7 +141,7 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
     columns = [c.strip() for c in header]
     if len(columns) == 1 and any(sep in columns[0] for sep in (";", "\t", "|")):
         sep = next(s for s in (";", "\t", "|") if s in columns[0])
-        raise InputError(f"the header is one cell {columns[0]!r} separated by {sep!r}; the "
+        raise InputError(f"the header is one cell {cut(columns[0])} separated by {sep!r}; the "
                          "table must be comma-separated", file=path, where=f"line {header_line}")
     if columns and all(_NUMBER.fullmatch(c) or _NON_FINITE.fullmatch(c) for c in columns if c):
         raise InputError("the first line holds numbers, not column names: the table needs a "
@@ -143,7 +149,7 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
     if len(set(columns)) != len(columns):
         repeated = sorted({c for c in columns if columns.count(c) > 1})
         raise InputError(f"column(s) {repeated} appear more than once in the header "
-                         f"{columns}", file=path, where=f"line {header_line}")
+                         f"{listed(columns)}", file=path, where=f"line {header_line}")
     rows, lines = [], []
     for number, record in records[1:]:
         cells = [c.strip() for c in record]
@@ -160,7 +166,7 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
         filled = [i for i, r in enumerate(rows) if r[k]]
         if filled:
             raise InputError(f"column {k + 1} has no name in the header but holds "
-                             f"{rows[filled[0]][k]!r}", file=path,
+                             f"{cut(rows[filled[0]][k])}", file=path,
                              where=f"line {lines[filled[0]]}")
     keep = [k for k in range(len(columns)) if k not in unnamed]
     table = Table(path, tuple(columns[k] for k in keep),

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
+from .fields import cut
 
 LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
 ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -63,13 +64,13 @@ def parse_units(value: Any, *, file: str | Path | None, key: str = "units") -> U
     angle = value.get("angle")
     if not isinstance(length, str) or length not in LENGTH_SCALE:
         raise InputError(
-            f"unknown length unit {length!r}; expected one of {sorted(LENGTH_SCALE)}",
+            f"unknown length unit {cut(length)}; expected one of {sorted(LENGTH_SCALE)}",
             file=file,
             where=f"{key}.length",
         )
     if not isinstance(angle, str) or angle not in ANGLE_SCALE:
         raise InputError(
-            f"unknown angle unit {angle!r}; expected one of {sorted(ANGLE_SCALE)}",
+            f"unknown angle unit {cut(angle)}; expected one of {sorted(ANGLE_SCALE)}",
             file=file,
             where=f"{key}.angle",
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -10,8 +11,18 @@ import pytest
 from robocal_casadi import examples
 from robocal_casadi.robot import Robot, load_robot
 
-# The real robot files shipped with the package (robocal_casadi/data/*/robot.yaml).
-DATA = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data"
+REPOSITORY = Path(__file__).resolve().parents[1]
+
+
+def real_data_folder() -> Path:
+    """The real data sets: ``$ROBOCAL_DATA`` if set, else the copies shipped in the
+    package (``robocal_casadi/data``)."""
+    if os.environ.get("ROBOCAL_DATA"):
+        return Path(os.environ["ROBOCAL_DATA"])
+    return REPOSITORY / "robocal_casadi" / "data"
+
+
+DATA = real_data_folder()
 REAL_ROBOT_FILES = sorted(DATA.glob("*/robot.yaml")) if DATA.is_dir() else []
 ROBOT_IDS = list(examples.ROBOTS) + [f"file:{p.parent.name}" for p in REAL_ROBOT_FILES]
 

@@ -14,7 +14,11 @@ must still be the file's own.
 
 from __future__ import annotations
 
+import os
 import shutil
+import stat
+import subprocess
+import sys
 from pathlib import Path
 from typing import Callable
 
@@ -27,6 +31,8 @@ from robocal_casadi.datasets import load_dataset
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.robot import save_robot
 from robocal_casadi.simulate import simulate
+
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 # ----------------------------------------------------------------------------- templates
 
@@ -151,6 +157,54 @@ def drop_lines(name: str, predicate: Callable[[str], bool]) -> Callable:
         kept = [lines[0]] + [line for line in lines[1:] if not predicate(line)]
         assert len(kept) < len(lines)
         (folder / name).write_text("\n".join(kept) + "\n")
+
+    return change
+
+
+# Nine levels of nine aliases each: 9**9 (387 million) strings once expanded, in a file
+# of a few hundred bytes; as top-level keys, and as one flow mapping for any value.
+_LEVELS = ["a: &a [x, x, x, x, x, x, x, x, x]"] + [
+    f"{chr(98 + k)}: &{chr(98 + k)} [{', '.join(['*' + chr(97 + k)] * 9)}]" for k in range(8)]
+ALIAS_BOMB = "\n".join(_LEVELS) + "\n"
+ALIAS_BOMB_VALUE = "{" + ", ".join(_LEVELS) + "}"
+
+
+def grow(name: str, size: int) -> Callable:
+    """Make ``name`` ``size`` bytes long (sparse: no disk space is used)."""
+
+    def change(folder: Path) -> None:
+        with (folder / name).open("r+b") as handle:
+            handle.truncate(size)
+
+    return change
+
+
+def symlink_loop(name: str, replace_existing: bool = False) -> Callable:
+    """``name`` becomes one of two symbolic links pointing at each other."""
+
+    def change(folder: Path) -> None:
+        if replace_existing:
+            (folder / name).unlink()
+        (folder / name).symlink_to(f"{name}.other")
+        (folder / f"{name}.other").symlink_to(name)
+
+    return change
+
+
+def link(name: str, target: str) -> Callable:
+    def change(folder: Path) -> None:
+        (folder / name).symlink_to(target)
+
+    return change
+
+
+def fifo(name: str, replace_existing: bool = False) -> Callable:
+    """``name`` becomes a named pipe no one writes to: reading it would wait forever."""
+
+    def change(folder: Path) -> None:
+        if replace_existing:
+            (folder / name).unlink()
+        os.mkfifo(folder / name)
 
     return change
 
@@ -485,6 +539,84 @@ CASES = [
      ["targets.csv", "line 3", "norm"]),
     ("targets huge", "targets", "compensate", cell("targets.csv", 2, "x", "1e300"),
      ["targets.csv", "line 2", "'x'", "implausibly large"]),
+    # --- files built to exhaust memory or the stack, or numbers beyond any float
+    ("robot alias bomb", "bar", "fk", write("robot.yaml", ALIAS_BOMB),
+     ["robot.yaml", "aliases", "100,000"]),
+    ("robot alias bomb as the name", "bar", "fk",
+     replace("robot.yaml", "name: industrial-6r", "name: " + ALIAS_BOMB_VALUE),
+     ["robot.yaml", "aliases"]),
+    ("robot alias bomb as the joints", "bar", "fk",
+     replace("robot.yaml", "joints:\n", "joints: [" + ALIAS_BOMB_VALUE + "]\nold_joints:\n"),
+     ["robot.yaml", "aliases"]),
+    ("dataset alias bomb as the kind", "tracker", "calibrate", write(
+        "dataset.yaml", ALIAS_BOMB + "kind: *i\n"), ["dataset.yaml", "aliases"]),
+    ("dataset nested 100k deep", "tracker", "calibrate",
+     write("dataset.yaml", "kind: " + "[" * 100_000 + "]" * 100_000 + "\n"),
+     ["dataset.yaml", "nested more than 100 levels"]),
+    ("job nested mappings deep", "job", "track",
+     write("job.yaml", "".join(f"{' ' * k}k{k}:\n" for k in range(300)) + " " * 300 + "x: 1\n"),
+     ["job.yaml", "nested more than"]),
+    ("dataset recursive alias", "tracker", "calibrate",
+     replace("dataset.yaml", "target:\n", "loop: &r [*r]\ntarget:\n"),
+     ["dataset.yaml", "contains it"]),
+    ("robot 400-digit integer", "tracker", "fk",
+     replace("robot.yaml", "d: 0.333", "d: " + "9" * 400), ["robot.yaml", "d", "too large"]),
+    ("robot 5000-digit integer", "tracker", "fk",
+     replace("robot.yaml", "d: 0.333", "d: " + "9" * 5000), ["robot.yaml", "cannot be read"]),
+    ("dataset 400-digit integer", "tracker", "plan",
+     replace("dataset.yaml", "xyz: [0.0, 0.0, 0.1]", "xyz: [0.0, 0.0, " + "1" * 400 + "]"),
+     ["dataset.yaml", "target.xyz[2]", "too large"]),
+    ("table 400-digit integer", "tracker", "calibrate", cell("points.csv", 3, "x", "7" * 400),
+     ["points.csv", "line 3", "'x'", "too large"]),
+    ("a 300 MiB table", "tracker", "calibrate", grow("points.csv", 300 * 2**20),
+     ["points.csv", "MiB"]),
+    ("a 5 MiB robot file", "tracker", "fk", grow("robot.yaml", 5 * 2**20),
+     ["robot.yaml", "MiB"]),
+    ("a long text value", "bar", "fk", replace("robot.yaml", "convention: dh",
+                                               "convention: " + "x" * 100_000),
+     ["robot.yaml", "convention"]),
+    # --- a robot file declaring rad that holds degrees
+    ("robot rad file with alpha in degrees", "tracker", "fk",
+     replace("robot.yaml", "alpha: 0.0", "alpha: -90"),
+     ["robot.yaml", "joints[0]", "alpha", "looks like degrees"]),
+    ("robot rad file with theta in degrees", "tracker", "calibrate",
+     replace("robot.yaml", "theta: 0.0", "theta: 180"),
+     ["robot.yaml", "theta", "looks like degrees"]),
+    ("robot rad file with limits in degrees", "tracker", "fk",
+     replace("robot.yaml", "limits: [-2.8973, 2.8973]", "limits: [-166, 166]"),
+     ["robot.yaml", "joints[0]", "limits", "looks like degrees"]),
+    ("robot rad file with a tool rpy in degrees", "tracker", "fk",
+     yaml_set("robot.yaml", ("tool", "rpy"), [0, 0, 45]),
+     ["robot.yaml", "tool.rpy[2]", "looks like degrees"]),
+    # --- links: loops, and tables outside the dataset's folder
+    ("data a symlink loop", "tracker", "calibrate",
+     both(symlink_loop("loop.csv"), replace("dataset.yaml", "data: points.csv", "data: loop.csv")),
+     ["loop.csv", "loop of symbolic links"]),
+    ("robot a symlink loop", "tracker", "calibrate",
+     both(symlink_loop("loop.yaml"), replace("dataset.yaml", "robot: robot.yaml",
+                                             "robot: loop.yaml")),
+     ["loop.yaml", "loop of symbolic links"]),
+    ("fk robot file a symlink loop", "bar", "fk",
+     symlink_loop("robot.yaml", replace_existing=True),
+     ["robot.yaml", "loop of symbolic links"]),
+    ("data an absolute path", "tracker", "calibrate",
+     replace("dataset.yaml", "data: points.csv", "data: /etc/passwd"),
+     ["dataset.yaml", "data", "outside", "--allow-outside-data"]),
+    ("data up the tree", "tracker", "plan",
+     replace("dataset.yaml", "data: points.csv", "data: ../../../../../../etc/passwd"),
+     ["dataset.yaml", "data", "outside", "--allow-outside-data"]),
+    ("data a link out of the folder", "tracker", "calibrate",
+     both(link("elsewhere.csv", "/etc/hostname"),
+          replace("dataset.yaml", "data: points.csv", "data: elsewhere.csv")),
+     ["dataset.yaml", "outside"]),
+    ("job data outside", "job", "track",
+     replace("job.yaml", "data: observations.csv", "data: /etc/passwd"),
+     ["job.yaml", "data", "outside"]),
+    ("data a named pipe", "tracker", "calibrate",
+     both(fifo("pipe.csv"), replace("dataset.yaml", "data: points.csv", "data: pipe.csv")),
+     ["pipe.csv", "pipe"]),
+    ("robot file a named pipe", "bar", "fk", fifo("robot.yaml", replace_existing=True),
+     ["robot.yaml", "pipe"]),
 ]
 
 
@@ -654,3 +786,285 @@ def test_a_bad_command_line_is_one_line_too(capsys):
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and err.startswith(f"robocal {bad[0]}: error: "), err
         assert "--help" in err
+
+
+# --------------------------------------------------------------------- outputs never destroy
+
+
+def _one_line(capsys, *fragments) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for fragment in fragments:
+        assert fragment in err, f"{fragment!r} not in {err!r}"
+    return err
+
+
+@pytest.mark.parametrize("verb", ["fk", "track", "compensate", "plan"])
+def test_out_on_a_named_pipe_is_refused_and_left_a_pipe(templates, tmp_path, capsys, verb):
+    """Replacing a device or a pipe with a regular file would destroy it (think of
+    --out /dev/null run as root)."""
+    template = {"fk": "bar", "track": "job", "compensate": "targets", "plan": "tracker"}[verb]
+    folder = Path(shutil.copytree(templates / template, tmp_path / template))
+    pipe = tmp_path / "pipe.csv"
+    os.mkfifo(pipe)
+    assert main(argv(verb, folder, pipe)) == 2
+    _one_line(capsys, "--out", "pipe.csv", "named pipe")
+    assert stat.S_ISFIFO(pipe.lstat().st_mode)
+
+
+def test_out_on_a_device_is_refused(templates, tmp_path, capsys):
+    """/dev/null is only looked at: the check refuses before anything is written."""
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    assert main(argv("fk", folder, Path("/dev/null"))) == 2
+    _one_line(capsys, "--out", "/dev/null", "device")
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+@pytest.mark.parametrize("verb, target", [
+    ("fk", "touches.csv"), ("fk", "robot.yaml"),
+    ("track", "observations.csv"), ("track", "job.yaml"), ("track", "robot.yaml"),
+    ("compensate", "targets.csv"), ("compensate", "robot.yaml"),
+    ("plan", "dataset.yaml"), ("plan", "robot.yaml"), ("plan", "points.csv"),
+])
+def test_a_verb_never_writes_over_its_own_input(templates, tmp_path, capsys, verb, target):
+    template = {"fk": "bar", "track": "job", "compensate": "targets", "plan": "tracker"}[verb]
+    folder = Path(shutil.copytree(templates / template, tmp_path / template))
+    before = _snapshot(folder)
+    assert main(argv(verb, folder, folder / target)) == 2
+    _one_line(capsys, "--out", target)
+    assert _snapshot(folder) == before
+
+
+def test_an_input_reached_through_a_hard_link_is_not_overwritten(templates, tmp_path, capsys):
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    os.link(folder / "touches.csv", tmp_path / "alias.csv")
+    before = (folder / "touches.csv").read_bytes()
+    assert main(argv("fk", folder, tmp_path / "alias.csv")) == 2
+    _one_line(capsys, "--out", "is the input")
+    assert (folder / "touches.csv").read_bytes() == before
+
+
+def test_plan_may_replace_its_own_unmeasured_plan_but_not_measurements(templates, tmp_path,
+                                                                       capsys):
+    folder = Path(shutil.copytree(templates / "tracker", tmp_path / "tracker"))
+    measured = (folder / "points.csv").read_bytes()
+    assert main(argv("plan", folder, folder / "points.csv")) == 2
+    _one_line(capsys, "--out", "holds readings")
+    assert (folder / "points.csv").read_bytes() == measured
+    # A plan written there first (its measured columns empty) may be planned again.
+    (folder / "points.csv").unlink()
+    plan = ["plan", str(folder / "dataset.yaml"), "--count", "12", "--no-refine", "--out",
+            str(folder / "points.csv")]
+    assert main(plan) == 0, capsys.readouterr().err
+    first = (folder / "points.csv").read_text()
+    assert first.splitlines()[1].endswith(",,,")
+    assert main([*plan, "--seed", "3"]) == 0
+    assert (folder / "points.csv").read_text() != first
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("verb", ["calibrate", "simulate"])
+def test_a_folder_robocal_did_not_write_is_refused_unless_forced(templates, tmp_path, capsys,
+                                                                 verb):
+    folder = tmp_path / "bar"
+    simulate(ROBOTS["industrial_6r"](), "cross_bar", rows=12, seed=2, out_dir=folder,
+             progress=False)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("years of work\n")
+    assert main(argv(verb, folder, mine)) == 2
+    _one_line(capsys, "--out", "did not write", "--force")
+    assert (mine / "thesis.tex").read_text() == "years of work\n"
+    assert main([*argv(verb, folder, mine), "--force"]) == 0
+    assert not (mine / "thesis.tex").exists()
+    # A folder robocal wrote is replaced without asking.
+    assert main(argv(verb, folder, mine)) == 0
+    assert main(argv(verb, folder, tmp_path / "new")) == 0  # and a new one is made
+    (tmp_path / "empty").mkdir()
+    assert main(argv(verb, folder, tmp_path / "empty")) == 0  # an empty one is taken
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("out", [".", "..", "./", ""])
+def test_out_the_current_folder_is_one_line(templates, tmp_path, capsys, monkeypatch, out):
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    work = tmp_path / "work" / "here"
+    work.mkdir(parents=True)
+    (work / "keep.txt").write_text("keep\n")
+    monkeypatch.chdir(work)
+    for verb in ("simulate", "calibrate"):
+        assert main([*argv(verb, folder, Path("x")), "--out", out, "--force"]) == 2
+        _one_line(capsys, "--out")
+    assert sorted(p.name for p in work.iterdir()) == ["keep.txt"]
+    assert sorted(p.name for p in work.parent.iterdir()) == ["here"]
+
+
+def _read_only_folder(tmp_path: Path) -> Path:
+    """A folder this process cannot write in: chmod'ed for a normal user; as root (who
+    ignores permissions) a read-only system folder, or skip."""
+    if os.geteuid() != 0:
+        folder = tmp_path / "locked"
+        folder.mkdir()
+        folder.chmod(0o555)
+        return folder
+    for candidate in (Path("/proc/sys"), Path("/sys")):
+        if candidate.is_dir() and not os.access(candidate, os.W_OK):
+            return candidate
+    pytest.skip("no folder that root cannot write")
+
+
+def test_a_read_only_output_folder_is_found_before_the_work(templates, tmp_path, capsys,
+                                                           monkeypatch):
+    from robocal_casadi.commands import calibrate as calibrate_verb
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the calibration ran although its output cannot be written")
+
+    monkeypatch.setattr(calibrate_verb, "calibrate", no_work)
+    locked = _read_only_folder(tmp_path)
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    assert main(argv("calibrate", folder, locked / "robocal-result")) == 2
+    _one_line(capsys, "--out", "not writable")
+    assert main(argv("fk", folder, locked / "robocal-poses.csv")) == 2
+    _one_line(capsys, "--out", "not writable")
+
+
+def test_leftovers_of_killed_runs_are_removed_and_live_ones_kept(templates, tmp_path, capsys):
+    """A run killed mid-way leaves its staging file or folder; the next run beside it
+    removes those whose process is gone, and keeps those of a live run."""
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    out = tmp_path / "out"
+    out.mkdir()
+    dead_folder = out / f".sim.robocal-{gone.pid}-abc123"
+    dead_folder.mkdir()
+    (dead_folder / "points.csv").write_text("half written")
+    dead_file = out / f".poses.csv.robocal-{gone.pid}-def456"
+    dead_file.write_text("half")
+    live = out / f".sim.robocal-{os.getppid()}-ghi789"
+    live.mkdir()
+    assert main(argv("simulate", folder, out / "sim")) == 0
+    assert main(argv("fk", folder, out / "poses.csv")) == 0
+    capsys.readouterr()
+    assert not dead_folder.exists() and not dead_file.exists()
+    assert live.is_dir()
+    assert sorted(p.name for p in out.iterdir()) == sorted(["sim", "poses.csv", live.name])
+
+
+# ----------------------------------------------------------------------------- arguments
+
+
+def test_every_validate_file_is_kept():
+    from robocal_casadi.cli import build_parser
+
+    parser = build_parser()
+    for line in (["--validate", "a.yaml", "--validate", "b.yaml", "--validate", "c.yaml"],
+                 ["--validate", "a.yaml", "b.yaml", "--validate", "c.yaml"],
+                 ["--validate", "a.yaml", "b.yaml", "c.yaml"]):
+        args = parser.parse_args(["calibrate", "fit.yaml", *line, "--out", "r"])
+        assert [p.name for p in args.validate] == ["a.yaml", "b.yaml", "c.yaml"], line
+        assert [p.name for p in args.datasets] == ["fit.yaml"]
+    assert parser.parse_args(["calibrate", "fit.yaml", "--out", "r"]).validate == []
+
+
+def test_repeated_validate_reaches_the_calibration(templates, tmp_path, capsys, monkeypatch):
+    from robocal_casadi.commands import calibrate as calibrate_verb
+
+    seen = {}
+
+    def record(datasets, validation, **kwargs):
+        seen["validation"] = [d.path.name for d in validation]
+        raise calibrate_verb.InputError("stop here")
+
+    monkeypatch.setattr(calibrate_verb, "calibrate", record)
+    names = []
+    for k in range(3):
+        copy = Path(shutil.copytree(templates / "tracker", tmp_path / f"v{k}"))
+        names.append(copy / f"held_out_{k}.yaml")
+        (copy / "dataset.yaml").rename(names[-1])
+    assert main(["calibrate", str(templates / "tracker" / "dataset.yaml"), "--validate",
+                 str(names[0]), "--validate", str(names[1]), str(names[2]), "--out",
+                 str(tmp_path / "r")]) == 2
+    capsys.readouterr()
+    assert seen["validation"] == ["held_out_0.yaml", "held_out_1.yaml", "held_out_2.yaml"]
+
+
+@pytest.mark.parametrize("verb_line", [
+    ["simulate", "--example", "industrial_6r", "--kind", "cross_bar", "--out", "x"],
+    ["plan", "d.yaml", "--count", "3", "--out", "p.csv"],
+    ["compensate", "r.yaml", "t.csv", "--out", "j.csv"],
+])
+@pytest.mark.parametrize("seed", ["-1", "4294967296", "1e3", "9" * 5000])
+def test_a_bad_seed_is_one_line(capsys, verb_line, seed):
+    with pytest.raises(SystemExit) as stop:
+        main([*verb_line, "--seed", seed])
+    assert stop.value.code == 2
+    _one_line(capsys, "--seed")
+
+
+# ---------------------------------------------------------------- YAML and data references
+
+
+def test_merge_keys_are_read_as_yaml_defines_them(templates, tmp_path):
+    """``<<: *name`` copies a mapping's keys, and keys written beside it win: the same
+    robot as the one written out in full."""
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    content = yaml.safe_load((folder / "robot.yaml").read_text())
+    first, second = content["joints"][:2]
+    others = yaml.safe_dump({k: v for k, v in content.items() if k != "joints"})
+    rest = [yaml.safe_dump(j, default_flow_style=True).strip() for j in content["joints"][2:]]
+    merged = others + "joints:\n" + "\n".join(
+        [f"- &first {yaml.safe_dump(first, default_flow_style=True).strip()}",
+         f"- {{<<: *first, theta: {second['theta']!r}, d: 123.5}}"] + [f"- {j}" for j in rest])
+    (folder / "robot.yaml").write_text(merged + "\n")
+    explicit = dict(first, theta=second["theta"], d=123.5)
+    content["joints"][1] = explicit
+    (folder / "explicit.yaml").write_text(yaml.safe_dump(content))
+    from robocal_casadi.robot import load_robot
+
+    assert load_robot(folder / "robot.yaml") == load_robot(folder / "explicit.yaml").with_units(
+        load_robot(folder / "robot.yaml").units)
+    assert load_robot(folder / "robot.yaml").joints[1].d == pytest.approx(0.1235)
+    # A key written twice beside the merge is still a duplicate.
+    (folder / "robot.yaml").write_text(merged.replace("d: 123.5}", "d: 123.5, d: 1}") + "\n")
+    with pytest.raises(Exception, match="duplicate key 'd'"):
+        load_robot(folder / "robot.yaml")
+
+
+def test_a_data_table_outside_the_folder_needs_the_option(templates, tmp_path, capsys):
+    """``data: ../x.csv`` reads only with --allow-outside-data; what is echoed of a
+    foreign file is cut short."""
+    folder = Path(shutil.copytree(templates / "tracker", tmp_path / "sets" / "tracker"))
+    (folder / "points.csv").rename(tmp_path / "points.csv")
+    replace("dataset.yaml", "data: points.csv", "data: ../../points.csv")(folder)
+    with pytest.raises(Exception, match="outside"):
+        load_dataset(folder / "dataset.yaml")
+    moved = load_dataset(folder / "dataset.yaml", allow_outside_data=True)
+    assert moved.rows == 6
+    # A foreign file: a long first line is not echoed whole.
+    (tmp_path / "foreign.txt").write_text("secret:" + "s" * 5000 + "\n1\n")
+    replace("dataset.yaml", "data: ../../points.csv", "data: ../../foreign.txt")(folder)
+    out = tmp_path / "r"
+    assert main(["calibrate", str(folder / "dataset.yaml"), "--out", str(out),
+                 "--allow-outside-data"]) == 2
+    err = _one_line(capsys, "foreign.txt")
+    assert len(err) < 600 and "s" * 300 not in err, err
+    assert not out.exists()
+
+
+def test_inputs_are_checked_before_reading_so_nothing_hangs(templates, tmp_path):
+    """A named pipe as an input would block a reader forever: the CLI, run as a separate
+    process, must refuse it at once."""
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    os.mkfifo(tmp_path / "joints.csv")
+    done = subprocess.run([sys.executable, "-m", "robocal_casadi.cli", "fk",
+                           str(folder / "robot.yaml"), str(tmp_path / "joints.csv"), "--out",
+                           str(tmp_path / "poses.csv")], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "PYTHONPATH": str(REPOSITORY)})
+    assert done.returncode == 2, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "pipe" in done.stderr

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import stat
+import subprocess
+import sys
 import warnings
 
 import casadi as ca
@@ -116,3 +121,103 @@ def test_kinematics_batch_is_built_once(cache):
     Q = np.random.default_rng(13).uniform(-1, 1, (300, kinematics.dof))
     (poses,) = batch(Q, kinematics.nominal)
     np.testing.assert_allclose(poses, kinematics.tool_poses(Q), rtol=1e-14, atol=1e-15)
+
+
+# ----------------------------------------------------------------------------- a private cache
+
+
+def _fresh_function(name: str) -> ca.Function:
+    x = ca.SX.sym("x", 2)
+    return ca.Function(name, [x], [ca.dot(x, x) + 1])
+
+
+@pytest.fixture
+def loose_umask():
+    """A umask that would make new files group-writable (002), restored afterwards."""
+    previous = os.umask(0o002)
+    yield
+    os.umask(previous)
+
+
+@needs_compiler
+def test_cache_folder_and_library_are_private_under_any_umask(cache, loose_umask):
+    compiled = codegen.compiled(_fresh_function("private_square"))
+    assert compiled.is_a("External")
+    assert stat.S_IMODE(cache.stat().st_mode) == 0o700
+    (library,) = cache.glob("*.so")
+    assert not library.stat().st_mode & 0o022
+
+
+@needs_compiler
+def test_a_cache_others_may_write_is_not_used(cache, monkeypatch):
+    monkeypatch.setattr(codegen, "_private_warned", set())
+    cache.mkdir(mode=0o700)
+    cache.chmod(0o777)  # as a shared or carelessly made folder
+    with pytest.warns(codegen.CompilationWarning, match="others may write"):
+        compiled = codegen.compiled(_fresh_function("shared_cache_square"))
+    assert compiled.is_a("External") and float(compiled([1, 2])) == 6.0
+    assert not list(cache.glob("*.so"))  # built in a private folder instead
+
+
+def _compile_in_another_process(cache, *functions: tuple[str, str]) -> None:
+    """Compile ``(name, expression in x)`` functions into ``cache`` from a separate
+    process, as an earlier run would: this process never maps those libraries, so the
+    test may change the files on disk."""
+    lines = ["import casadi as ca", "from robocal_casadi import codegen",
+             "x = ca.SX.sym('x', 2)"]
+    for name, expression in functions:
+        lines.append(f"assert codegen.compiled(ca.Function({name!r}, [x], [{expression}]))"
+                     ".is_a('External')")
+    subprocess.run([sys.executable, "-c", "\n".join(lines)], check=True, timeout=300,
+                   env={**os.environ, "ROBOCAL_CACHE": str(cache)})
+
+
+@needs_compiler
+def test_a_planted_library_is_never_loaded(cache, monkeypatch):
+    """A library under the expected name that others could have written (or that belongs
+    to another user) is not run: the function is compiled afresh elsewhere."""
+    _compile_in_another_process(cache, ("planted_square", "ca.dot(x, x) + 1"))
+    (library,) = cache.glob("*.so")
+    # Another function of the same name: its library is what an attacker would plant.
+    _compile_in_another_process(cache, ("planted_square", "ca.SX(-1)"))
+    (impostor,) = [p for p in cache.glob("*.so") if p != library]
+    shutil.copyfile(impostor, library)
+    library.chmod(0o666)
+    function = _fresh_function("planted_square")
+    with pytest.warns(codegen.CompilationWarning, match="another user or others may write"):
+        again = codegen.compiled(function)
+    assert float(again([1, 2])) == 6.0  # its own code, not the planted one
+    if os.geteuid() == 0:  # root can hand the file to another user
+        library.chmod(0o700)
+        os.chown(library, 65534, 65534)
+        codegen._loaded.clear()
+        with pytest.warns(codegen.CompilationWarning, match="another user"):
+            assert float(codegen.compiled(function)([1, 2])) == 6.0
+
+
+@needs_compiler
+def test_a_truncated_library_is_compiled_again(cache):
+    _compile_in_another_process(cache, ("truncated_square", "ca.dot(x, x) + 1"))
+    (library,) = cache.glob("*.so")
+    size = library.stat().st_size
+    with library.open("r+b") as handle:
+        handle.truncate(200)  # as a run killed while copying it, or a full disk
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", codegen.CompilationWarning)
+        again = codegen.compiled(_fresh_function("truncated_square"))
+    assert again.is_a("External") and float(again([1, 2])) == 6.0
+    assert library.stat().st_size == size
+
+
+@needs_compiler
+def test_build_folders_of_killed_runs_are_removed(cache):
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    cache.mkdir(mode=0o700)
+    stale = cache / f"robocal_build_{gone.pid}_abc"
+    stale.mkdir()
+    (stale / "function.c").write_text("int x;")
+    live = cache / f"robocal_build_{os.getppid()}_def"
+    live.mkdir()
+    codegen.compiled(_fresh_function("cleaning_square"))
+    assert not stale.exists() and live.is_dir()

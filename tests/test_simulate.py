@@ -287,8 +287,8 @@ def test_cli_writes_the_four_files(tmp_path, capsys):
                    "--effect", "joint_compliance:2,3", "--effect", "joint_cyclic:2=1e-4/0/0/0",
                    "--seed", "1", "--out", str(out)])
     assert status == 0
-    assert sorted(p.name for p in out.iterdir()) == ["dataset.yaml", "points.csv", "robot.yaml",
-                                                     "truth.yaml"]
+    assert sorted(p.name for p in out.iterdir()) == [".robocal-output", "dataset.yaml",
+                                                     "points.csv", "robot.yaml", "truth.yaml"]
     truth = yaml.safe_load((out / "truth.yaml").read_text())
     assert truth["units"] == {"length": "mm", "angle": "deg"}
     assert truth["noise"] == 0.01

@@ -1,56 +1,162 @@
 """Checks of command-line arguments shared by the verbs (not a verb itself).
 
 Output paths are checked before any work is done, so a run that would fail to write
-its result fails at once, with one line, instead of after a long computation.
+its result, or would destroy something, fails at once, with one line, instead of after
+a long computation:
+
+* a file output must be a new name or a regular file (never a device, a pipe or a
+  socket, which replacing would destroy), not one of the run's inputs, in a folder
+  that can be written;
+* a folder output is replaced as a whole: it must not be the current folder or hold
+  it, not hold an input, and, when it exists and is not empty, must be a folder robocal
+  wrote (it carries the marker ``.robocal-output``) unless ``--force`` is given.
 """
 
 from __future__ import annotations
 
+import argparse
+import errno
+import os
+import stat
 from pathlib import Path
 
 from ..errors import InputError
+from ..output import written_by_robocal
+
+
+def _nearest_existing(path: Path) -> Path | None:
+    for parent in path.parents:
+        if parent.exists():
+            return parent
+    return None
 
 
 def _parent_usable(path: Path, option: str) -> None:
-    """The nearest existing ancestor of ``path`` must be a folder (it is created below)."""
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise InputError(f"{parent} is a file, so {path} cannot be created",
-                                 where=option)
-            return
+    """The nearest existing ancestor of ``path`` must be a folder we may write in (the
+    missing ones are created below it)."""
+    parent = _nearest_existing(path)
+    if parent is None:
+        return
+    if not parent.is_dir():
+        raise InputError(f"{parent} is a file, so {path} cannot be created", where=option)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"the folder {parent} is not writable, so {path} cannot be written",
+                         where=option)
 
 
-def output_file(path: str | Path, option: str = "--out") -> Path:
-    """A file to write: not an existing folder, and not under a file."""
+def _kind_of(mode: int) -> str:
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """True when ``a`` and ``b`` name the same existing file (also through links)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):  # a symlink loop: compare the names as written
+        return Path(os.path.abspath(path))
+
+
+def output_file(path: str | Path, option: str = "--out", *, inputs=()) -> Path:
+    """A file to write: a new name or an existing regular file that is none of
+    ``inputs``, not under a file, in a folder that can be written."""
     path = Path(path)
     if str(path).strip() == "":
         raise InputError("expected a file name", where=option)
     if path.is_dir():
         raise InputError(f"{path} is a folder; expected a file name", where=option)
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as error:
+        raise InputError(f"{path} cannot be used ({error.strerror})", where=option) from None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise InputError(f"{path} is {_kind_of(mode)}; expected a regular file to write",
+                         where=option)
+    for item in inputs:
+        if item is not None and (_same_file(path, Path(item))
+                                 or _resolved(path) == _resolved(Path(item))):
+            raise InputError(f"{path} is the input {item}; write the output to another file",
+                             where=option)
     _parent_usable(path, option)
     return path
 
 
-def output_folder(path: str | Path, option: str = "--out") -> Path:
-    """A folder to write (replaced as a whole): not an existing file, and not under one."""
+def output_folder(path: str | Path, option: str = "--out", *, force: bool = False,
+                  inputs=()) -> Path:
+    """A folder to write (replaced as a whole): not an existing file, not under one, not
+    the current folder or one holding it, holding none of ``inputs``, and empty or
+    written by robocal unless ``force``."""
     path = Path(path)
     if str(path).strip() == "":
         raise InputError("expected a folder name", where=option)
-    if path.exists() and not path.is_dir():
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as error:
+        raise InputError(f"{path} cannot be used ({error.strerror})", where=option) from None
+    if mode is not None and not stat.S_ISDIR(mode):
         raise InputError(f"{path} is a file; expected a folder (it is replaced as a whole)",
                          where=option)
+    root = _resolved(path)
+    here = _resolved(Path.cwd())
+    if root == here or root in here.parents or root.parent == root:
+        raise InputError(f"{path} is the current folder or holds it; the output folder is "
+                         "replaced as a whole, so name a new folder", where=option)
+    not_replacing_inputs(path, inputs, option)
+    if mode is not None and not force and not written_by_robocal(path):
+        try:
+            occupied = any(path.iterdir())
+        except OSError as error:
+            raise InputError(f"{path} cannot be read ({error.strerror})", where=option) from None
+        if occupied:
+            raise InputError(f"{path} is a folder robocal did not write and it is not empty; "
+                             "the output folder is replaced as a whole, so name a new folder "
+                             "(or give --force to replace it)", where=option)
     _parent_usable(path, option)
     return path
 
 
+def add_force(parser: argparse.ArgumentParser) -> None:
+    """The ``--force`` option of verbs that write a folder."""
+    parser.add_argument("--force", action="store_true",
+                        help="replace the --out folder even when robocal did not write it "
+                        "(its contents are deleted)")
+
+
+def add_allow_outside_data(parser: argparse.ArgumentParser) -> None:
+    """The ``--allow-outside-data`` option of verbs that read dataset or job files."""
+    parser.add_argument("--allow-outside-data", action="store_true",
+                        help="let a dataset or job file's data: name a table outside the "
+                        "file's own folder tree (an absolute path or ../)")
+
+
 def input_file(path: str | Path, what: str) -> Path:
-    """A file to read: it exists and is not a folder."""
+    """A file to read: it exists and is not a folder (nor a loop of links)."""
     path = Path(path)
-    if path.is_dir():
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", file=path) from None
+    except OSError as error:
+        reason = "a loop of symbolic links" if error.errno == errno.ELOOP else error.strerror
+        raise InputError(f"cannot read the {what} ({reason})", file=path) from None
+    if stat.S_ISDIR(mode):
         raise InputError(f"expected a {what}, found a folder", file=path)
-    if not path.exists():
-        raise InputError(f"{what} not found", file=path)
     return path
 
 
@@ -61,20 +167,29 @@ def positive_count(value: int, option: str) -> int:
     return value
 
 
+MAX_SEED = 2**32 - 1
+
+
+def seed(text: str) -> int:
+    """An argparse type: a random seed, a whole number from 0 to 2^32 - 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text[:40]!r}") from None
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"expected a seed from 0 to {MAX_SEED}, got "
+                                         f"{text[:40]}")
+    return value
+
+
 def not_replacing_inputs(folder: Path, inputs, option: str = "--out") -> None:
     """Refuse an output folder that holds one of the input files: replacing the folder
     as a whole would delete them."""
-    try:
-        root = Path(folder).resolve()
-    except OSError:
-        return
+    root = _resolved(Path(folder))
     for item in inputs:
         if item is None:
             continue
-        try:
-            resolved = Path(item).resolve()
-        except OSError:
-            continue
+        resolved = _resolved(Path(item))
         if resolved == root or root in resolved.parents:
             raise InputError(f"{folder} holds the input {item}; the output folder is replaced "
                              "as a whole, so choose another one", where=option)

@@ -14,23 +14,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import sys
 from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from ..calibration import calibrate
+from ..calibration import METHODS, calibrate
 from ..output import atomic_directory
 from ..results import CalibrationResult
 from ..robot import save_robot
-from ..calibration import METHODS
-from .arguments import not_replacing_inputs, output_folder
+from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("datasets", nargs="+", type=Path, metavar="DATASET.yaml")
-    parser.add_argument("--validate", nargs="+", type=Path, default=[], metavar="VAL.yaml",
-                        help="held-out datasets evaluated with the calibrated model")
+    parser.add_argument("--validate", nargs="+", action="extend", type=Path, default=[],
+                        metavar="VAL.yaml",
+                        help="held-out datasets evaluated with the calibrated model "
+                        "(repeatable; every file given is kept)")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="output folder (replaced as a whole when the run succeeds)")
     parser.add_argument("--no-diagnose", action="store_true",
@@ -46,7 +48,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to the geometric fit (default 200)")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
-    parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
+    add_force(parser)
+    add_allow_outside_data(parser)
+    parser.add_argument("--pdf", action="store_true",
+                        help="also write report.pdf (printed by headless Chromium when "
+                             "installed)")
+    report = parser.add_argument_group(
+        "report fields", "shown at the top of report.html; each overrides the same field "
+        "of a dataset file's report: block")
+    for option, meta, text in (("--customer", "NAME", "customer"),
+                               ("--robot-serial", "SERIAL", "robot serial number"),
+                               ("--instrument", "TEXT", "measuring instrument"),
+                               ("--operator", "NAME", "who measured"),
+                               ("--date", "DATE", "date of measurement"),
+                               ("--logo", "FILE", "logo image (PNG, JPEG or SVG)")):
+        report.add_argument(option, metavar=meta, help=text)
+    report.add_argument("--report-templates", type=Path, metavar="DIR",
+                        help="folder of Jinja2 templates replacing the report's own "
+                             "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
 def _clean(value):
@@ -61,15 +80,23 @@ def _clean(value):
 
 
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
-                  pdf: bool = False) -> None:
-    """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out`` atomically."""
+                  pdf: bool = False, keep: tuple[str, ...] = (), info=None,
+                  templates: Path | None = None) -> None:
+    """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out``
+    atomically (``info``: the report's customer fields, ``templates``: a folder of report
+    templates); the files named in ``keep`` that ``out`` already holds are carried over
+    into the new folder."""
     with atomic_directory(out) as staging:
+        for name in keep:
+            if (out / name).is_file() and not (out / name).is_symlink():
+                shutil.copy2(out / name, staging / name)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
         if report:
             from ..report import write_report
 
-            write_report(result, staging / "report.html", pdf=pdf)
+            write_report(result, staging / "report.html", pdf=pdf, info=info,
+                         templates=templates)
 
 
 def summary(result: CalibrationResult) -> str:
@@ -107,8 +134,27 @@ def summary(result: CalibrationResult) -> str:
     return "\n".join(lines)
 
 
+def report_info(args: argparse.Namespace, datasets: list):
+    """The report's customer fields: the datasets' ``report:`` blocks in turn, then the
+    command-line options, each overriding what came before."""
+    from ..report.info import ReportInfo, check_logo, info_from_dataset_file
+
+    info = ReportInfo()
+    for dataset in datasets:
+        info = info.merged(info_from_dataset_file(dataset.path))
+    given = {name: getattr(args, name) for name in ("customer", "robot_serial", "instrument",
+                                                    "operator", "date")
+             if getattr(args, name, None)}
+    if getattr(args, "logo", None):
+        given["logo"] = check_logo(args.logo)
+    if args.report_templates is not None and not args.report_templates.is_dir():
+        raise InputError("is not a folder of report templates", file=args.report_templates,
+                         where="--report-templates")
+    return info.merged(ReportInfo(**given))
+
+
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out)
+    output_folder(args.out, force=args.force, inputs=[*args.datasets, *args.validate])
     if args.max_iterations < 1:
         raise InputError(f"expected a positive count, got {args.max_iterations}",
                          where="--max-iterations")
@@ -116,8 +162,9 @@ def run(args: argparse.Namespace) -> int:
                                                and args.select_growth > 0):
         raise InputError(f"expected a positive fraction, got {args.select_growth}",
                          where="--select-growth")
-    datasets = [load_dataset(p) for p in args.datasets]
-    validation = [load_dataset(p) for p in args.validate]
+    outside = args.allow_outside_data
+    datasets = [load_dataset(p, allow_outside_data=outside) for p in args.datasets]
+    validation = [load_dataset(p, allow_outside_data=outside) for p in args.validate]
     seen: dict = {}
     for dataset in datasets + validation:
         key = dataset.path.resolve()
@@ -125,13 +172,15 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"the same dataset is given twice ({seen[key]} and {dataset.path}); "
                              "a dataset is either fitted or held out, once", file=dataset.path)
         seen[key] = dataset.path
+    info = report_info(args, datasets + validation)
     not_replacing_inputs(args.out, [p for d in datasets + validation
                                     for p in (d.path, d.data_path, d.robot_path)])
     result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
                        loss=args.loss, select_growth=args.select_growth,
                        max_iterations=args.max_iterations,
                        progress=sys.stderr.isatty())
-    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
+    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
+                  templates=args.report_templates)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
           + ("" if args.no_report else ", report.html"))

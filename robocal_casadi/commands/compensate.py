@@ -27,7 +27,7 @@ from ..fields import MAX_LENGTH, check_magnitude
 from ..output import atomic_file
 from ..robot import Robot, load_robot
 from ..table import read_table, write_table
-from .arguments import output_file
+from .arguments import output_file, seed
 
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
 POSITION = ("x", "y", "z")
@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "middle of the limits)")
     parser.add_argument("--restarts", type=int, default=10,
                         help="random starts per target before it is unreachable (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random starts")
+    parser.add_argument("--seed", type=seed, default=0, help="seed of the random starts")
 
 
 def robot_of(argument: str) -> Robot:
@@ -64,7 +64,9 @@ def robot_of(argument: str) -> Robot:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_file(args.out)
+    robot_argument = Path(args.robot)
+    output_file(args.out, inputs=[args.targets, robot_argument / CALIBRATED_ROBOT
+                                  if robot_argument.is_dir() else robot_argument])
     if args.restarts < 0:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
     robot = robot_of(args.robot)

@@ -8,7 +8,10 @@ Two cases, each calibrated on part of the data and validated on the rest:
   placements fit, two whole placements held out.
 
 Each case writes result.json, robot_calibrated.yaml and report.html (plus a screenshot
-report.png when Chromium is installed) into OUT/<case>/.
+report.png when Chromium is installed) into OUT/<case>/, replacing that folder as a
+whole. Without Chromium (or with --no-screenshot) a report.png already in the folder is
+kept: the data and the results are the same on every run, so the screenshot still
+shows the report (only its time stamp and solver times differ).
 """
 
 from __future__ import annotations
@@ -20,12 +23,13 @@ from pathlib import Path
 
 from ..datasets import load_dataset
 from ..calibration import calibrate
-from .arguments import output_folder
+from .arguments import add_force, output_folder
 from .calibrate import summary, write_outputs
 
 PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
              "mid_left")
 PANDA_VALIDATION = ("mid-high", "mid_right")
+SCREENSHOT = "report.png"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-diagnose", action="store_true",
                         help="stop after the geometric model")
     parser.add_argument("--no-screenshot", action="store_true",
-                        help="do not render report.png with Chromium")
+                        help="do not render report.png with Chromium (an existing one is "
+                        "kept)")
+    add_force(parser)
 
 
 def data_folder() -> Path:
@@ -54,22 +60,29 @@ def cases() -> dict[str, tuple[list[Path], list[Path]]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out)
-    for name, (fit_files, validation_files) in cases().items():
+    chosen = cases()
+    for name in chosen:
+        output_folder(args.out / name, force=args.force)
+    for name, (fit_files, validation_files) in chosen.items():
         print(f"== {name}")
         fit = [load_dataset(p) for p in fit_files]
         validation = [load_dataset(p) for p in validation_files]
         result = calibrate(fit, validation, diagnose=not args.no_diagnose,
                            progress=sys.stderr.isatty())
         out = args.out / name
-        write_outputs(result, out)
-        print(summary(result))
+        render = False
         if not args.no_screenshot:
-            from ..report import find_chromium, screenshot_report
+            from ..report import find_chromium
 
-            if find_chromium():
-                screenshot_report(out / "report.html", out / "report.png")
-            else:
-                print("(no Chromium found: report.png not rendered)")
+            render = find_chromium() is not None
+        write_outputs(result, out, keep=() if render else (SCREENSHOT,))
+        print(summary(result))
+        if render:
+            from ..report import screenshot_report
+
+            screenshot_report(out / "report.html", out / SCREENSHOT)
+        elif not args.no_screenshot:
+            kept = "kept from the previous run" if (out / SCREENSHOT).exists() else "not rendered"
+            print(f"(no Chromium found: {SCREENSHOT} {kept})")
         print(f"wrote {out}/report.html")
     return 0

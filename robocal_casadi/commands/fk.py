@@ -69,7 +69,8 @@ def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     robot_path = input_file(args.robot, "robot file")
-    output_file(args.out)
+    calibrated = Path(args.calibrated) / CALIBRATED_ROBOT if args.calibrated else None
+    output_file(args.out, inputs=[robot_path, args.joints, calibrated])
     robot = load_robot(robot_path)
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), robot, robot_path)

@@ -11,11 +11,13 @@ and the median of random feasible plans of the same size.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from .arguments import output_file
+from ..table import Table, read_table
+from .arguments import add_allow_outside_data, output_file, seed
 
 MAX_COUNT = 10_000  # placements or readings in one plan
 INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
@@ -32,10 +34,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="observability index to optimise: cond = O2 condition number "
                              "(default), O1 geometric mean of singular values, O3 smallest "
                              "singular value, O4 noise amplification, O5 inverse sum of inverses")
-    parser.add_argument("--seed", type=int, default=0, metavar="S",
+    parser.add_argument("--seed", type=seed, default=0, metavar="S",
                         help="random seed of the candidate search (default 0)")
     parser.add_argument("--no-refine", action="store_true",
                         help="skip the continuous refinement of the chosen joints")
+    add_allow_outside_data(parser)
+
+
+# What a plan leaves empty for the operator; a touch table keeps the plan's socket columns.
+MEASURED_COLUMNS = {"tracker_points": ("x", "y", "z"), "sphere_laser": ("distance",)}
+PLAN_SOCKET_COLUMNS = ("socket_x", "socket_y", "socket_z")
+
+
+def holds_readings(table: Table, kind: str) -> bool:
+    """True unless ``table`` is a plan not yet measured: for tracker and laser data every
+    measured cell is empty; for touches the table still has the plan's socket columns."""
+    if kind in MEASURED_COLUMNS:
+        present = [c for c in MEASURED_COLUMNS[kind] if table.has(c)]
+        return not present or any(cell for c in present for cell in table.text(c))
+    return not all(table.has(c) for c in PLAN_SOCKET_COLUMNS)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,12 +64,16 @@ def run(args: argparse.Namespace) -> int:
     if args.count > MAX_COUNT:
         raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
                          "plan in parts", where="--count")
-    output_file(args.out)
-    dataset = load_dataset(args.dataset, require_data=False)
-    if dataset.data_path is not None and Path(args.out).resolve() == dataset.data_path.resolve() \
-            and dataset.rows:
-        raise InputError(f"{args.out} is the dataset's own data table, which holds measurements; "
-                         "write the plan to another file", where="--out")
+    output_file(args.out, inputs=[args.dataset])
+    dataset = load_dataset(args.dataset, require_data=False,
+                           allow_outside_data=args.allow_outside_data)
+    output_file(args.out, inputs=[dataset.robot_path])
+    data = dataset.data_path
+    if data is not None and data.exists() and Path(args.out).exists() \
+            and os.path.samefile(args.out, data):
+        if holds_readings(read_table(data), dataset.kind):
+            raise InputError(f"{args.out} is the dataset's own data table and it holds "
+                             "readings; write the plan to another file", where="--out")
     plan = design_plan(dataset, args.count, args.index, seed=args.seed,
                        refine=not args.no_refine)
     write_plan(plan, args.out)

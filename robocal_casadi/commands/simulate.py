@@ -45,7 +45,7 @@ from ..examples import ROBOTS
 from ..robot import Robot, load_robot
 from ..simulate import EFFECT_NAMES, READINGS, simulate
 from ..units import Units, parse_units
-from .arguments import output_folder
+from .arguments import add_force, output_folder, seed
 
 DEFAULTS = {"joint_compliance": 1e-6, "joint_cyclic": (2e-4, 1e-4, 1e-4, 5e-5),
             "joint_scale": 5e-4, "thermal_drift": 1.2e-5}
@@ -96,8 +96,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--units", metavar="LENGTH,ANGLE",
                         help="units of the dataset file and table, e.g. mm,deg (default: the "
                         "robot file's)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="random seed (default 0)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    add_force(parser)
 
 
 def _floats(text: str, count: int | None, option: str) -> list[float]:
@@ -178,7 +179,7 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out)
+    output_folder(args.out, force=args.force, inputs=[args.robot])
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
     _check_options(args, robot)
     L, A = robot.units.length_scale, robot.units.angle_scale
@@ -240,7 +241,8 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed, units=units if isinstance(units, Units) else None,
         mounted_error=mounted_error, payload=payload, payload_com=payload_com,
         temperature=temperature, reference_temperature=args.reference_temperature,
-        readings=args.readings, sockets=args.sockets, touches=args.touches, **options)
+        readings=args.readings, sockets=args.sockets, touches=args.touches, force=args.force,
+        **options)
     print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
           f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
     return 0

@@ -27,7 +27,7 @@ from ..progress import Progress
 from ..table import write_table
 from ..tracking.job import load_tracking_job
 from ..tracking.tracker import STATUSES, Tracker
-from .arguments import output_file
+from .arguments import add_allow_outside_data, output_file
 from .fk import calibrated_robot
 
 
@@ -41,17 +41,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="largest joint move per row, in the job's angle unit (length "
                         "unit for prismatic joints); a target needing more is approached "
                         "by steps of this size (status limited)")
+    add_allow_outside_data(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     job_path = Path(args.job)
-    output_file(args.out)
+    output_file(args.out, inputs=[job_path])
     if args.max_step is not None and not (np.isfinite(args.max_step) and args.max_step > 0):
         raise InputError(f"expected a positive number, got {args.max_step}", where="--max-step")
-    job = load_tracking_job(job_path)
+    outside = args.allow_outside_data
+    job = load_tracking_job(job_path, allow_outside_data=outside)
+    output_file(args.out, inputs=[job.data_path, job.robot_path])
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), job.robot, job.robot_path)
-        job = load_tracking_job(job_path, robot=robot)
+        output_file(args.out, inputs=[Path(args.calibrated) / "robot_calibrated.yaml"])
+        job = load_tracking_job(job_path, robot=robot, allow_outside_data=outside)
     scales = np.array([job.units.angle_scale if j.revolute else job.units.length_scale
                        for j in job.robot.joints])
     max_step = None

@@ -37,8 +37,8 @@ import numpy as np
 from ..datasets import joint_readings as checked_joint_readings
 from ..datasets import referenced_robot
 from ..errors import InputError
-from ..fields import (check_keys, check_magnitude, file_name, load_yaml, mapping, quantities,
-                      quantity, require, units_of, vector)
+from ..fields import (check_keys, check_magnitude, cut, load_yaml, mapping, quantities,
+                      quantity, referenced_file, require, units_of, vector)
 from ..robot import Robot
 from ..table import read_table
 from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy
@@ -90,7 +90,8 @@ class TrackingJob:
                 f"up={list(self.up)})")
 
 
-def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> TrackingJob:
+def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
+                      allow_outside_data: bool = False) -> TrackingJob:
     """Read and check a tracking job and its observation table.
 
     ``robot`` replaces the robot file the job names (e.g. a calibrated robot). Every
@@ -100,7 +101,7 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
     content = load_yaml(path, what="tracking job")
     kind = require(content, "kind", file=path)
     if kind != "tracking":
-        raise InputError(f"expected kind 'tracking', got {kind!r}", file=path, where="kind")
+        raise InputError(f"expected kind 'tracking', got {cut(kind)}", file=path, where="kind")
     check_keys(content, KEYS, file=path)
     units = units_of(content, file=path)
     L = units.length_scale
@@ -129,9 +130,8 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None) -> Tracki
                          where="up"))
     largest = float(np.abs(up).max())
     up = unit_up(up / largest if largest > 0 else up, file=path)  # scaled first: no overflow
-    data_path = path.parent / file_name(require(content, "data", file=path), file=path,
-                                        where="data")
-    if not data_path.is_file():
+    data_path = referenced_file(content, "data", file=path, allow_outside=allow_outside_data)
+    if not data_path.is_file() and not data_path.is_symlink():  # a loop: named below
         raise InputError(f"observation table {data_path} not found", file=path, where="data")
     table = read_table(data_path, required=("time", "x", "y", "z"))
     orientation = _orientation_columns(table, convention, data_path)
