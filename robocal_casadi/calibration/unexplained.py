@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ..effects.motion import directions_of_motion
 from .folds import FoldGrams, fold_schemes
 
 ALPHA = 1e-3  # family-wise false-alarm level over all tests
@@ -130,11 +131,8 @@ def _hats(values: np.ndarray, knots: int) -> np.ndarray | None:
 
 
 def _directions(joints: np.ndarray) -> np.ndarray:
-    """Sign of each joint's change from the previous row (0 for the first and still rows)."""
-    out = np.zeros_like(joints)
-    if len(joints) > 1:
-        out[1:] = np.sign(np.diff(joints, axis=0))
-    return out
+    """Each joint's direction of motion in row order (see ``effects.motion``)."""
+    return directions_of_motion(joints)
 
 
 def _variables(problem) -> list[_Variable]:
