@@ -210,6 +210,8 @@ def test_an_implausibly_large_periodic_error_is_not_named(tmp_path):
     rejected = [t for t in result.diagnosis
                 if t["effect"] == "joint_cyclic" and t["joints"] == (3,)]
     assert any("implausible" in t["decision"] for t in rejected)
+    stand_in = [line for line in summary(result).splitlines() if "stand in for" in line]
+    assert stand_in and "joint_cyclic[3]" in stand_in[0]
     assert result.unexplained is not None and "q3" in result.unexplained.variables[:2]
 
 
