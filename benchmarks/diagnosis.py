@@ -27,9 +27,8 @@ import numpy as np
 
 from robocal_casadi.calibration import (Problem, analyse_identifiability, calibrate, diagnosis,
                                         models_for, solve)
+from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.calibration.selection import dataset_rows
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m]
@@ -136,12 +135,15 @@ def real_cases(shared: Path | None) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1,000 rows only")
+    parser.add_argument("--real-only", action="store_true", help="the real data splits only")
     parser.add_argument("--shared", type=Path, default=None, metavar="DIR",
                         help="folder of the full real data sets (ur10-ipa/series_A.yaml, "
                              "series_D.yaml); default: the package's copy of series D")
     args = parser.parse_args()
     sizes = (1000,) if args.quick else (1000, 10000)
     cases = real_cases(args.shared)
+    if args.real_only:
+        sizes = ()
     with tempfile.TemporaryDirectory() as folder:
         for rows in sizes:
             for label, effects in (("compliance", {"joint_compliance": COMPLIANCE}),
