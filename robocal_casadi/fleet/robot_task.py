@@ -63,7 +63,7 @@ class RobotOutcome:
     ``robot_summary``) is None for a failed robot. ``seconds`` and ``cpu_seconds`` [s]
     are the task's wall and processor time; ``worker`` names the process that ran it;
     ``memory`` and ``peak_memory`` [bytes] are that process's resident size after the
-    task and the most it has held so far.
+    task and the most it has held so far; ``finished`` when the task ended.
     """
 
     name: str
@@ -77,6 +77,7 @@ class RobotOutcome:
     worker: str = ""
     memory: int = 0
     peak_memory: int = 0
+    finished: float = 0.0  # [s] since the epoch
 
     @property
     def ok(self) -> bool:
@@ -207,7 +208,7 @@ def _finish(clock: _Clock, name: str, status: str, caught: list, **fields) -> Ro
                         seconds=time.perf_counter() - clock.wall,
                         cpu_seconds=time.process_time() - clock.cpu,
                         worker=f"{os.uname().nodename}:{os.getpid()}", memory=now,
-                        peak_memory=peak, **fields)
+                        peak_memory=peak, finished=time.time(), **fields)
 
 
 def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> RobotOutcome:

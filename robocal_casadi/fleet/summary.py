@@ -165,7 +165,8 @@ class FleetSummary:
                  "validate": [str(p) for p in robot.validate],
                  "stands_out": flags, "warnings": list(outcome.warnings),
                  "seconds": outcome.seconds, "cpu_seconds": outcome.cpu_seconds,
-                 "worker": outcome.worker, "peak_memory": outcome.peak_memory}
+                 "worker": outcome.worker, "memory": outcome.memory,
+                 "peak_memory": outcome.peak_memory, "finished": outcome.finished}
         summary = outcome.summary
         if summary is None:
             return entry
