@@ -45,9 +45,10 @@ def _client(scheduler: str | None, workers: int | None):
                              f"({' '.join(str(error).split()) or type(error).__name__})",
                              where="--scheduler") from None
     # One single-threaded process per core: a calibration is one busy thread, and
-    # processes keep each worker's compiled functions and memory apart.
+    # processes keep each worker's compiled functions and memory apart. The scheduler's
+    # status page goes to a free port on this machine only (Dask's usual 8787 may be taken).
     cluster = LocalCluster(n_workers=workers or machine_cores(), threads_per_worker=1,
-                           processes=True, dashboard_address=None,
+                           processes=True, dashboard_address="127.0.0.1:0",
                            silence_logs=logging.ERROR)
     try:
         return Client(cluster), cluster

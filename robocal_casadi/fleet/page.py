@@ -112,7 +112,7 @@ def render(summary: FleetSummary) -> str:
     reasons = summary.reasons()
     if reasons:
         parts.append("<table><tr><th>robot</th><th>why</th></tr>")
-        parts += [f"<tr class='out'><td><a href='{_e(r['robot'])}/report.html'>{_e(r['robot'])}"
+        parts += [f"<tr class='out'><td><a href='{_e(r['robot'])}/'>{_e(r['robot'])}"
                   f"</a></td><td>{_e(r['reason'])}</td></tr>" for r in reasons]
         parts.append("</table>")
     else:
@@ -126,11 +126,13 @@ def render(summary: FleetSummary) -> str:
         for quantity in summary.quantities:
             parts.append(f"<figure id='plot-{_e(quantity.key)}'><img alt='{_e(quantity.label)}' "
                          f"src='{quantity_plot(summary, quantity)}'></figure>")
+    validated = any(o.summary and o.summary.get("validation") for o in summary.outcomes)
     parts.append(f"<h2 id='robots'>Every robot</h2><table><tr><th>robot</th><th>status</th>"
                  f"<th class='num'>fit RMS before [{_e(length)}]</th>"
                  f"<th class='num'>after [{_e(length)}]</th>"
-                 f"<th class='num'>validation before</th><th class='num'>after</th>"
-                 f"<th>effects</th></tr>")
+                 + (f"<th class='num'>validation before [{_e(length)}]</th>"
+                    f"<th class='num'>after [{_e(length)}]</th>" if validated else "")
+                 + "<th>effects</th></tr>")
     flagged = set(summary.standing_out)
     for outcome in summary.outcomes:
         cells = ["", "", "", ""]
@@ -139,6 +141,7 @@ def render(summary: FleetSummary) -> str:
             cells = [f"{fit['rms_nominal'] / s:.4g}", f"{fit['rms_final'] / s:.4g}",
                      f"{val['rms_nominal'] / s:.4g}" if val else "",
                      f"{val['rms_final'] / s:.4g}" if val else ""]
+        cells = cells if validated else cells[:2]
         name = _e(outcome.name)
         link = name if not outcome.ok else f"<a href='{name}/'>{name}</a>"
         css = "failed" if not outcome.ok else ("out" if outcome.name in flagged else "")
