@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from ..effects.base import Effect, RowContext
+from ..effects.motion import direction_values, is_direction_column
 from ..errors import InputError
 from ..kinematics import Kinematics
 from ..measurement.base import MeasurementModel
@@ -158,6 +159,8 @@ class Problem:
         for i, column in enumerate(self.columns):
             if column in dataset.extras:
                 extras[i] = np.asarray(dataset.extras[column], dtype=float)
+            elif is_direction_column(column):  # derived from the full table's row order
+                extras[i] = direction_values(dataset, column)
             elif column != "payload":
                 raise InputError(f"effect needs a {column!r} column", file=dataset.data_path)
         payload_com = dataset.payload_com if dataset.payload_com is not None else np.zeros(3)

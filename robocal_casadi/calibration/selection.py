@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..effects.motion import with_directions
 from .problem import Problem
 
 
@@ -35,7 +36,9 @@ class Selection:
 def dataset_rows(dataset, mask: np.ndarray):
     """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
     mask = np.asarray(mask, dtype=bool)
-    changes = {"extras": {k: np.asarray(v)[mask] for k, v in dataset.extras.items()}}
+    # the directions of motion belong to the full table's order: computed before cutting
+    extras = with_directions(dataset.joints, dataset.extras)
+    changes = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
     for name in ("joints", "measured", "distance", "flange_poses", "pose"):
         value = getattr(dataset, name, None)
         if value is not None:
