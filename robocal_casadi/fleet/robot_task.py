@@ -256,7 +256,16 @@ def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, va
     if input_hash(files, settings) != digest:
         raise InputError("its input files changed while it was being calibrated; run again",
                          where=robot.name)
-    write_outputs(result, folder, report=settings.report)
+    info = None
+    if settings.report:
+        # The report's customer fields come from the datasets' report blocks, as for
+        # `robocal calibrate` without command-line overrides.
+        from ..report.info import ReportInfo, info_from_dataset_file
+
+        info = ReportInfo()
+        for dataset in [*datasets, *validation]:
+            info = info.merged(info_from_dataset_file(dataset.path))
+    write_outputs(result, folder, report=settings.report, info=info)
     summary = robot_summary(result)
     written = ["result.json", "robot_calibrated.yaml"] + (["report.html"] if settings.report
                                                           else [])
