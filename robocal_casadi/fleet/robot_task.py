@@ -24,7 +24,6 @@ import time
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 from ..errors import InputError, RobocalError
 from ..output import atomic_file, written_by_robocal

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -56,7 +56,6 @@ class FleetSummary:
     previous: str | None = None
     missing_previous: tuple[str, ...] = ()
     units: Units = SI
-    notes: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def failed(self) -> list[RobotOutcome]:
@@ -287,7 +286,8 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
     for name in sorted({m.name for m in moves}, key=lambda n: (len(n), n)):
         chosen = [m for m in moves if m.name == name]
         quantities.append(Quantity(
-            key=f"offset_change.{name}", label=f"change of the offset {name} since the previous run",
+            key=f"offset_change.{name}",
+            label=f"change of the offset {name} since the previous run",
             kind=chosen[0].quantity,
             values={m.robot: (m.change, math.hypot(m.now_std, m.before_std)) for m in chosen},
             judged=False, changes=True))
