@@ -401,8 +401,8 @@ def test_data_selection_keeps_the_directions_of_the_full_table():
     is fitted with the same per-row inputs as the whole."""
     from dataclasses import dataclass
 
+    from robocal_casadi.datasets import dataset_rows
     from robocal_casadi.effects.motion import direction_values, directions_of_motion
-    from robocal_casadi.calibration.selection import dataset_rows
 
     rng = np.random.default_rng(2)
     Q = rng.normal(size=(12, 3))

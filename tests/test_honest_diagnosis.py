@@ -18,9 +18,9 @@ from robocal_casadi import load_dataset
 from robocal_casadi.calibration import Problem, calibrate, models_for, solve
 from robocal_casadi.calibration.folds import fold_schemes
 from robocal_casadi.calibration.identification import recommend
-from robocal_casadi.calibration.selection import dataset_rows
 from robocal_casadi.calibration.unexplained import find
 from robocal_casadi.commands.calibrate import summary
+from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model

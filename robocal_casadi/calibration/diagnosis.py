@@ -19,6 +19,8 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
    validation), and the extrapolating schemes that hold out contiguous ranges of each
    joint, clusters of configurations and whole datasets. All come from per-fold Gram
    matrices, so testing every candidate costs one Jacobian.
+   The held-out RMS must fall by at least ``MIN_GAIN`` (1%): an effect too small to
+   matter is not worth the risk of carrying it outside the fit region.
 4. Does it extrapolate? The held-out squared error summed over the extrapolating schemes
    must drop, and no single scheme may grow it by more than ``EXTRAPOLATION_TOLERANCE``:
    an effect that only fits the region it was fitted in (a periodic term bending to the
@@ -75,6 +77,7 @@ INVISIBLE = 1e-9  # [m] RMS change of a typical-size effect below which the data
 FOLDS = 5
 IMITATED = 0.01  # relative remaining norm below which the geometry nearly imitates a column
 CONFOUNDED = 0.9  # share of each other's explained residual two rival effects both explain
+MIN_GAIN = 0.01  # an effect must lower the held-out RMS by at least this fraction
 RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
 EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
@@ -400,6 +403,9 @@ class _Screening:
         after = self._cv(held_out)
         if np.isfinite(self.cv_before) and not after < self.cv_before:
             return "not supported"
+        if np.isfinite(self.cv_before) and after > (1.0 - MIN_GAIN) * self.cv_before:
+            return (f"too small to matter (held-out RMS -{100 * (1 - after / self.cv_before):.2g}"
+                    f"%, below {100 * MIN_GAIN:.2g}%)")
         total, worst, ratio = self.extrapolation(held_out)
         if np.isfinite(total) and (total >= 1.0 or ratio > 1.0 + EXTRAPOLATION_TOLERANCE):
             return (f"does not extrapolate (held out {worst}: squared error x{ratio:.3g}; "

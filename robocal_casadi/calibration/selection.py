@@ -10,11 +10,10 @@ by unit, so each step costs a small eigenvalue problem, not a new Jacobian.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..effects.motion import with_directions
 from .problem import Problem
 
 
@@ -31,21 +30,6 @@ class Selection:
         kept = sum(len(v) for v in self.kept.values())
         return (f"Selection(kept {kept} units, dropped {dropped}, condition number "
                 f"{self.condition_number:.4g})")
-
-
-def dataset_rows(dataset, mask: np.ndarray):
-    """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
-    mask = np.asarray(mask, dtype=bool)
-    # the directions of motion belong to the full table's order: computed before cutting
-    extras = with_directions(dataset.joints, dataset.extras)
-    changes = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
-    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
-        value = getattr(dataset, name, None)
-        if value is not None:
-            changes[name] = np.asarray(value)[mask]
-    if getattr(dataset, "point", None):
-        changes["point"] = tuple(p for p, keep in zip(dataset.point, mask) if keep)
-    return replace(dataset, **changes)
 
 
 def _condition(information: np.ndarray) -> float:
