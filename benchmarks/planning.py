@@ -50,7 +50,7 @@ from robocal_casadi.transforms import pose_from_xyz_rpy  # noqa: E402
 
 NOISE = 10e-6  # [m]
 LENGTH_ERROR, ANGLE_ERROR = 0.5e-3, 1e-3  # [m], [rad] standard deviations of the truth
-INDICES = ("cond", "O1")  # designs compared: condition number and geometric mean
+INDICES = ("tool", "cond", "O1")  # designs compared: tool error (default), cond, O1
 TARGET = {"tracker_points": 0.010e-3, "cross_bar": 0.010e-3}  # [m] model error goal
 
 

@@ -20,7 +20,7 @@ from ..table import Table, read_table
 from .arguments import add_allow_outside_data, output_file, seed
 
 MAX_COUNT = 10_000  # placements or readings in one plan
-INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
+INDEX_CHOICES = ("tool", "cond", "O1", "O2", "O3", "O4", "O5")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,10 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=int, required=True, metavar="N",
                         help="bar or artifact placements, or readings, to plan")
     parser.add_argument("--out", required=True, metavar="PLAN.csv", help="plan table to write")
-    parser.add_argument("--index", default="cond", choices=INDEX_CHOICES,
-                        help="observability index to optimise: cond = O2 condition number "
-                             "(default), O1 geometric mean of singular values, O3 smallest "
-                             "singular value, O4 noise amplification, O5 inverse sum of inverses")
+    parser.add_argument("--index", default="tool", choices=INDEX_CHOICES,
+                        help="index to optimise: tool = predicted tool-position error over "
+                             "the workspace (default), cond = O2 condition number, O1 "
+                             "geometric mean of singular values, O3 smallest singular value, "
+                             "O4 noise amplification, O5 inverse sum of inverses")
     parser.add_argument("--seed", type=seed, default=0, metavar="S",
                         help="random seed of the candidate search (default 0)")
     parser.add_argument("--no-refine", action="store_true",
