@@ -14,6 +14,8 @@ import numpy as np
 from .robot import Robot
 from .units import Units
 
+DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
+
 
 @dataclass(frozen=True)
 class ParameterEstimate:
@@ -107,8 +109,6 @@ class PriorSummary:
     @property
     def dominated(self) -> tuple[str, ...]:
         """Parameters whose estimate owes more to the prior than to the data."""
-        from .calibration.prior import DOMINATED_SHARE
-
         return tuple(n for n, s in self.data_share.items()
                      if np.isfinite(s) and s < DOMINATED_SHARE)
 
