@@ -106,6 +106,12 @@ class RowModel:
         G, L = function(Q, self.p, np.zeros(len(self.mounted)), self._placement(candidate, model))
         return self._project(G, L)
 
+    def row_jacobians(self, q, data):
+        """``(G, S)`` of one row of a per-row model at joint reading ``q`` and row data
+        ``data`` (numbers or CasADi; the laser reading for a laser), instrument nominal."""
+        return self._row(q, data, self.p, np.zeros(len(self.mounted)),
+                         self._template.nominal_placement())
+
     # ------------------------------------------------------------------ per-row models
 
     def _row_function(self, model: MeasurementModel) -> ca.Function:
