@@ -153,3 +153,140 @@ def test_urdf_calibrates_as_well_as_the_dh_file(tmp_path, dh_path, text, tip, er
     reasons = by_urdf.identifiability.unidentifiable
     assert all(f"{stem}1" in reasons for stem in ("x", "y", "z", "roll", "pitch", "yaw"))
     assert "instrument frame" in reasons["x1"]
+
+
+# ----------------------------------------------------------------------------- export
+
+
+def _calibrated_folder(tmp_path: Path, dataset: Path, name: str) -> Path:
+    out = tmp_path / name
+    assert main(["calibrate", str(dataset), "--out", str(out), "--no-diagnose",
+                 "--no-report"]) == 0
+    return out
+
+
+def _export(folder: Path, *options: str) -> None:
+    assert main(["export", str(folder), *options]) == 0
+
+
+def _pin_frames(path: Path, names, q) -> list[np.ndarray]:
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    full = np.zeros(model.nq)
+    full[:len(q)] = q
+    pin.framesForwardKinematics(model, data, full)
+    return [data.oMf[model.getFrameId(n)].homogeneous for n in names]
+
+
+UR_ERRORS = {"a2": 4e-4, "d4": -3e-4, "alpha3": 5e-4, "theta5": -6e-4, "beta3": 4e-4,
+             "theta2": 3e-4, "d5": 2e-4}
+
+
+def test_urdf_calibration_exports_over_its_own_file(tmp_path, capsys):
+    _, dataset = _simulated_pair(tmp_path / "data", UR10_DH, ur10_urdf(), "tool0", UR_ERRORS, 1)
+    folder = _calibrated_folder(tmp_path, dataset, "result")
+    out = tmp_path / "ur10_calibrated.urdf"
+    _export(folder, "--urdf", str(out))
+    calibrated = load_robot(folder / "robot_calibrated.yaml")
+    text = out.read_text()
+    # names, meshes, inertias, limits and comments as the user wrote them
+    original = ur10_urdf()
+    for kept in ("package://ur_description/meshes/ur10/visual/wrist3.dae", 'name="tool0"',
+                 'name="base_link-base_link_inertia"', '<mass value="12.93"',
+                 'effort="150"', "UR10, test copy"):
+        assert kept in text and kept in original
+    model = pin.buildModelFromUrdf(str(out))
+    reference = pin.buildModelFromXML(original)
+    assert list(model.names) == list(reference.names)
+    assert [f.name for f in model.frames] == [f.name for f in reference.frames]
+    assert np.allclose(model.lowerPositionLimit, reference.lowerPositionLimit)
+    assert [i.mass for i in model.inertias] == pytest.approx([i.mass for i in reference.inertias])
+    rng = np.random.default_rng(7)
+    kinematics = Kinematics(calibrated)
+    for _ in range(5):
+        q = rng.uniform(-3, 3, 6)
+        (tool0,) = _pin_frames(out, ["tool0"], q)
+        assert np.abs(tool0 - kinematics.flange_poses(q)[0]).max() < 1e-9
+    # the calibration changed the geometry: the export is not the original
+    (before,) = _pin_frames(write(tmp_path, "orig.urdf", original), ["tool0"], np.ones(6))
+    (after,) = _pin_frames(out, ["tool0"], np.ones(6))
+    assert np.linalg.norm(before[:3, 3] - after[:3, 3]) > 1e-4
+
+
+@pytest.mark.parametrize("dh_path, text, tip, errors", [
+    (UR10_DH, ur10_urdf(), "tool0", UR_ERRORS),
+    (PANDA_MDH, panda_urdf(), "panda_hand",
+     {"a4": 4e-4, "d5": -3e-4, "alpha3": 5e-4, "theta5": -6e-4, "d7": 3e-4}),
+], ids=["ur10-dh", "panda-mdh"])
+def test_dh_calibration_exports_into_the_vendor_link_frames(tmp_path, dh_path, text, tip,
+                                                             errors):
+    dataset, _ = _simulated_pair(tmp_path / "data", dh_path, text, tip, errors, 1)
+    folder = _calibrated_folder(tmp_path, dataset, "result")
+    vendor = write(tmp_path, "vendor.urdf", text)
+    out = tmp_path / "calibrated.urdf"
+    _export(folder, "--urdf", str(out), "--like", str(vendor), "--tip-link", tip)
+    calibrated = load_robot(folder / "robot_calibrated.yaml")
+    nominal = load_robot(dh_path)
+    # the tip link's fixed place on the DH flange, from the nominal robots
+    q0 = np.zeros(nominal.dof)
+    (tip_nominal,) = _pin_frames(vendor, [tip], q0)
+    offset = np.linalg.inv(Kinematics(nominal).flange_poses(q0)[0]) @ tip_nominal
+    kinematics = Kinematics(calibrated)
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        q = rng.uniform(nominal.lower_limits.clip(-3), nominal.upper_limits.clip(None, 3))
+        (ours,) = _pin_frames(out, [tip], q)
+        assert np.abs(ours - kinematics.flange_poses(q)[0] @ offset).max() < 1e-9
+    assert [f.name for f in pin.buildModelFromUrdf(str(out)).frames] == \
+        [f.name for f in pin.buildModelFromXML(text).frames]
+
+
+def test_vendor_file_of_another_arm_is_refused(tmp_path, capsys):
+    dataset, _ = _simulated_pair(tmp_path / "data", UR10_DH, ur10_urdf(), "tool0", UR_ERRORS, 1)
+    folder = _calibrated_folder(tmp_path, dataset, "result")
+    other = write(tmp_path, "other.urdf", ur10_urdf().replace('xyz="-0.612 0 0"',
+                                                              'xyz="-0.613 0 0"'))
+    out = tmp_path / "x.urdf"
+    assert main(["export", str(folder), "--urdf", str(out), "--like", str(other),
+                 "--tip-link", "tool0"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "does not follow joint" in error
+    assert not out.exists()
+
+
+def test_ur_calibration_file(tmp_path):
+    """The nominal UR10 gives ur_description's default kinematics values; a calibrated
+    URDF robot gives the origins its exported URDF holds."""
+    from robocal_casadi.urdf.writer import ur_calibration
+
+    block = ur_calibration(load_robot(UR10_DH))["kinematics"]
+    assert block["shoulder"] == pytest.approx({"x": 0, "y": 0, "z": 0.1273, "roll": 0,
+                                               "pitch": 0, "yaw": 0}, abs=1e-12)
+    assert block["upper_arm"]["roll"] == pytest.approx(np.pi / 2)
+    assert block["forearm"]["x"] == pytest.approx(-0.612)
+    assert (block["wrist_1"]["x"], block["wrist_1"]["z"]) == pytest.approx((-0.5723, 0.163941))
+    assert (block["wrist_2"]["y"], block["wrist_2"]["roll"]) == pytest.approx((-0.1157, np.pi / 2))
+    assert block["wrist_3"]["y"] == pytest.approx(0.0922)
+    assert block["hash"].startswith("calib_")
+
+    _, dataset = _simulated_pair(tmp_path / "data", UR10_DH, ur10_urdf(), "tool0", UR_ERRORS, 1)
+    folder = _calibrated_folder(tmp_path, dataset, "result")
+    kinematics_file, urdf_file = tmp_path / "ur10_calibration.yaml", tmp_path / "ur10.urdf"
+    _export(folder, "--ur-calibration", str(kinematics_file), "--urdf", str(urdf_file))
+    values = yaml.safe_load(kinematics_file.read_text())["kinematics"]
+    # rebuild the URDF from the kinematics file the way ur_description does
+    text = ur10_urdf()
+    import xml.etree.ElementTree as ET
+    root = ET.fromstring(text)
+    for segment, joint in zip(("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2",
+                               "wrist_3"),
+                              ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+                               "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")):
+        origin = root.find(f"joint[@name='{joint}']/origin")
+        v = values[segment]
+        origin.set("xyz", f"{v['x']!r} {v['y']!r} {v['z']!r}")
+        origin.set("rpy", f"{v['roll']!r} {v['pitch']!r} {v['yaw']!r}")
+    rebuilt = write(tmp_path, "rebuilt.urdf", ET.tostring(root, encoding="unicode"))
+    q = np.array([0.3, -1.2, 1.1, -0.4, 1.3, 0.2])
+    assert np.abs(_pin_frames(rebuilt, ["tool0"], q)[0]
+                  - _pin_frames(urdf_file, ["tool0"], q)[0]).max() < 1e-12
