@@ -150,6 +150,7 @@ class CalibrationResult:
     unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
     recommended: str = "final"  # "final" | "geometric": the model held-out data support
     recommendation: str = ""  # why, in words
+    profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
 
     @property
     def warning(self) -> str:
@@ -206,6 +207,8 @@ class CalibrationResult:
                               self.unexplained.to_json(units.length_scale, units.length))
         if self.selection:
             out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
+        if self.profile is not None:
+            out["profile"] = self.profile.to_json(units, self.fit, self.validation)
         return out
 
     def __repr__(self) -> str:

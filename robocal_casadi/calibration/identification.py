@@ -169,7 +169,8 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False) -> CalibrationResult:
+              progress: bool = False, parameters: Sequence[str] | None = None
+              ) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
@@ -183,7 +184,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
     closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
-    a number >= 0.
+    a number >= 0. ``parameters`` (robot parameter names) restricts the robot parameters
+    that may be fitted, e.g. to a controller's set (``profiles``); the others are held at
+    nominal. Default: all of them.
     """
     method = choice(method, METHODS, "method")
     loss = choice(loss, LOSSES, "loss")
@@ -206,9 +209,16 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     models = models_for(datasets)
     problem = Problem(robot, models, effects)
     x0 = problem.initial()
+    candidates = None
+    if parameters is not None:
+        allowed = set(parameters)
+        robot_names = set(problem.kinematics.registry.names)
+        open_ = problem.mask("robot", "effects", "mounted")
+        candidates = [n for i, n in enumerate(problem.unknowns.names)
+                      if open_[i] and (n not in robot_names or n in allowed)]
 
     nominal = solve(problem, x0, problem.mask("placement"), method=method, loss=loss)
-    identifiability = analyse_identifiability(problem, nominal.x)
+    identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
         from .selection import select_by_condition
@@ -220,7 +230,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
             problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)
-            identifiability = analyse_identifiability(problem, nominal.x)
+            identifiability = analyse_identifiability(problem, nominal.x, candidates)
     if not identifiability.identifiable:
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
@@ -234,7 +244,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
-    revised = analyse_identifiability(problem, geometric.x)
+    revised = analyse_identifiability(problem, geometric.x, candidates)
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)

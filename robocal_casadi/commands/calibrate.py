@@ -16,12 +16,14 @@ import json
 import math
 import shutil
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
 from ..calibration import METHODS, calibrate
 from ..output import atomic_directory
+from ..profiles import PROFILES, ProfileCost, profile_parameters
 from ..results import CalibrationResult
 from ..robot import save_robot
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
@@ -47,6 +49,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "condition number by more than the fraction G, e.g. 0.05")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to the geometric fit (default 200)")
+    parser.add_argument("--profile", choices=PROFILES, default=None,
+                        help="fit only the robot parameters this controller accepts "
+                             "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
+                             "offsets, base and tool) and report what that costs")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
     add_force(parser)
@@ -108,11 +114,25 @@ def summary(result: CalibrationResult) -> str:
         lines.append("effects: none added")
     if result.effects:
         lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
+    if result.profile is not None:
+        lines.append(result.profile.sentence(units, result.fit, result.validation))
     if result.unexplained is not None:
         lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
     else:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
+
+
+def profiled(datasets, validation, profile: str, options: dict) -> CalibrationResult:
+    """The calibration restricted to ``profile``'s parameters, carrying what the
+    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    allowed = profile_parameters(profile, datasets[0].robot)
+    free = calibrate(datasets, validation, **options)
+    restricted = calibrate(datasets, validation, parameters=allowed, **options)
+    held = tuple(n for n in free.identifiability.identifiable
+                 if n in free.robot_nominal.parameters() and n not in allowed)
+    cost = ProfileCost(profile, allowed, held, free.fit, free.validation)
+    return replace(restricted, profile=cost)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -136,10 +156,13 @@ def run(args: argparse.Namespace) -> int:
         seen[key] = dataset.path
     not_replacing_inputs(args.out, [p for d in datasets + validation
                                     for p in (d.path, d.data_path, d.robot_path)])
-    result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
-                       loss=args.loss, select_growth=args.select_growth,
-                       max_iterations=args.max_iterations,
-                       progress=sys.stderr.isatty())
+    options = dict(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
+                   select_growth=args.select_growth, max_iterations=args.max_iterations,
+                   progress=sys.stderr.isatty())
+    if args.profile is None:
+        result = calibrate(datasets, validation, **options)
+    else:
+        result = profiled(datasets, validation, args.profile, options)
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
