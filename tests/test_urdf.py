@@ -290,3 +290,28 @@ def test_ur_calibration_file(tmp_path):
     q = np.array([0.3, -1.2, 1.1, -0.4, 1.3, 0.2])
     assert np.abs(_pin_frames(rebuilt, ["tool0"], q)[0]
                   - _pin_frames(urdf_file, ["tool0"], q)[0]).max() < 1e-12
+
+
+# ----------------------------------------------------------------------------- DH equivalent
+
+
+@pytest.mark.parametrize("text, tip", [(ur10_urdf(), "tool0"), (panda_urdf(), "panda_hand")],
+                         ids=["ur10", "panda"])
+def test_dh_equivalent_has_the_same_kinematics(tmp_path, text, tip):
+    from robocal_casadi.urdf import dh_equivalent
+
+    robot = load_robot(write(tmp_path, "r.urdf", text), tip_link=tip)
+    equivalent = dh_equivalent(robot)
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(-2.5, 2.5, (8, robot.dof))
+    for q in Q:
+        ours = Kinematics(equivalent.robot).tool_poses(q)[0]
+        assert np.abs(ours - pinocchio_frame(text, tip, q)).max() < 1e-12
+    parallel = [i + 1 for i, j in enumerate(equivalent.robot.joints) if j.has_beta]
+    if "ur10" in text:
+        # axes 2, 3 and 4 are parallel: DH's a2, a3 and Hayati beta on joints 2 and 3
+        assert parallel == [2, 3] and len(equivalent.notes) == 2
+        assert sorted(abs(j.a) for j in equivalent.robot.joints)[-2:] == pytest.approx(
+            [0.5723, 0.612])
+    else:
+        assert parallel == [] and equivalent.notes == ()

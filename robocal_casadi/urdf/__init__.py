@@ -6,6 +6,7 @@ and modified DH equivalents) and ``writer`` (calibrated robot -> URDF, UR kinema
 
 from .chain import frame_of, is_urdf, read_urdf_robot, robot_from_document
 from .document import UrdfDocument, read_document
+from .equivalent import DhEquivalent, dh_equivalent
 
-__all__ = ["UrdfDocument", "frame_of", "is_urdf", "read_document", "read_urdf_robot",
+__all__ = ["DhEquivalent", "UrdfDocument", "dh_equivalent", "frame_of", "is_urdf", "read_document", "read_urdf_robot",
            "robot_from_document"]
