@@ -37,8 +37,8 @@ KINDS = ("cross_bar", "artifact_touches", "sphere_laser", "tracker_points")
 BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
-COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "base_link",
-               "tip_link")
+COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
+               "base_link", "tip_link")
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
 BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),

@@ -100,6 +100,18 @@ class RmsSummary:
 
 
 @dataclass(frozen=True)
+class ErrorTerm:
+    """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
+    components x, y, z), ``"surface"`` (signed distance from a surface), ``"distance"``
+    (measured minus known length between ``points``), ``"perpendicular"`` (``AC.BD / L``
+    for ``points`` A, C, B, D) or ``"error"``; ``pose`` is the placement id, -1 for none."""
+
+    kind: str
+    pose: int = -1
+    points: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class DatasetResiduals:
     """Per-measurement errors [m] of one dataset under each model, for reports.
 
@@ -116,6 +128,11 @@ class DatasetResiduals:
     joints: np.ndarray | None
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     payload_com: np.ndarray | None = None  # [m], flange frame, where the dataset gives one
+    # Signed parts of each error, per model ("nominal", "geometric", "final"): N x 3 [m],
+    # x, y, z of a position error in ``frame``, column 0 alone (NaN after) for a scalar.
+    components: dict[str, np.ndarray] = field(default_factory=dict)
+    terms: tuple[ErrorTerm, ...] = ()  # what each error is (empty: not recorded)
+    frame: str = ""  # frame of the position components: "instrument" or "base"
 
     def __repr__(self) -> str:
         rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")  # noqa: E731

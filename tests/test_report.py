@@ -237,15 +237,16 @@ def test_page_is_self_contained(full_report):
 def test_every_section_is_present(full_report):
     _, path = full_report
     ids = {attrs.get("id") for tag, attrs in read_page(path).tags if tag == "section"}
-    assert ids == {"conclusion", "robot-data", "identifiability", "parameters", "errors",
-                   "effects", "sphere", "instrument"}
+    assert ids == {"conclusion", "accuracy", "applying", "robot-data", "identifiability",
+                   "parameters", "errors", "effects", "sphere", "instrument", "appendix"}
 
 
 def test_every_image_is_a_png_with_content(full_report):
     _, path = full_report
     images = [attrs for tag, attrs in read_page(path).tags if tag == "img"]
-    # singular values, distribution, joints + order for fit and for validation, 2 effects
-    assert len(images) == 1 + 1 + 2 * 2 + 2
+    # singular values, histogram, distribution, joints + order for fit and for validation,
+    # 2 effects
+    assert len(images) == 1 + 2 + 2 * 2 + 2
     for attrs in images:
         data = base64.b64decode(attrs["src"].split(",", 1)[1], validate=True)
         assert data[:8] == b"\x89PNG\r\n\x1a\n"
@@ -286,26 +287,30 @@ def test_per_dataset_errors_match_numpy(full_report):
     assert float(rows["all fit data"][5]) == pytest.approx(_rms(pooled) * 1e3, rel=6e-4)
 
 
-def test_parameter_table_in_file_units_with_held_parameters_greyed(full_report):
+def test_parameter_table_in_file_units_with_held_parameters_folded(full_report):
     result, path = full_report
     page = read_page(path)
     rows = body_rows(page, "parameters")
-    assert len(rows) == len(result.parameters)
+    held = body_rows(page, "parameters-held")
+    assert set(rows) == {p.name for p in result.parameters if p.identifiable}
+    assert set(held) == set(HELD_AT_NOMINAL)
     for p in result.parameters:
-        row = rows[p.name]
         scale = 1e-3 if p.quantity == "length" else np.pi / 180
         resolution = 1e-4 if p.quantity == "length" else 1e-5
+        row = rows[p.name] if p.identifiable else held[p.name]
         assert row[1] == ("mm" if p.quantity == "length" else "deg")
         assert float(row[2]) == pytest.approx(p.nominal / scale, abs=resolution)
-        assert float(row[3]) == pytest.approx(p.estimate / scale, abs=resolution)
-        assert float(row[4]) == pytest.approx((p.estimate - p.nominal) / scale, abs=resolution)
         if p.identifiable:
+            assert float(row[3]) == pytest.approx(p.estimate / scale, abs=resolution)
+            assert float(row[4]) == pytest.approx((p.estimate - p.nominal) / scale,
+                                                  abs=resolution)
             assert float(row[5]) == pytest.approx(p.std / scale, rel=5e-3)
         else:
-            assert row[5] == "-" and p.reason in row[6]
-    greyed = {r[0] for r, muted in zip(page.tables["parameters"], page.muted["parameters"])
-              if muted}
-    assert greyed == set(HELD_AT_NOMINAL)
+            assert p.reason in row[3]
+    assert all(page.muted["parameters-held"][1:])
+    text = path.read_text(encoding="utf-8")
+    block = text[text.index('<details id="parameters-held">'):]
+    assert '<table class="parameters-held">' in block[:block.index("</details>")]
 
 
 def test_identifiability_lists_what_was_not_identifiable(full_report):
@@ -347,38 +352,40 @@ def test_conclusion_states_the_held_out_figures():
     assert f"to {np.percentile(magnitude, 99) * 1e3:.3g} mm, over 150 measurements" in headline
 
 
-def test_report_in_metres_and_radians_without_validation_or_effects(tmp_path):
+def test_report_of_a_metre_file_shows_millimetres_and_states_the_file_unit(tmp_path):
     result = synthetic_result(Units("m", "rad"), validation=False, effects=False)
     path = write_report(result, tmp_path / "r.html", title="Cell 4 robot")
     page = read_page(path)
-    assert any(tag == "title" for tag, _ in page.tags) and "Cell 4 robot" in path.read_text()
+    text = path.read_text(encoding="utf-8")
+    assert any(tag == "title" for tag, _ in page.tags) and "Cell 4 robot" in text
     headline = body_rows(page, "headline")
     assert list(headline) == ["fit"]
-    assert float(headline["fit"][3]) == pytest.approx(result.fit.rms_final, rel=6e-4)
+    assert float(headline["fit"][3]) == pytest.approx(result.fit.rms_final * 1e3, rel=6e-4)
     a2 = body_rows(page, "parameters")["a2"]
-    assert a2[1] == "m" and float(a2[3]) == pytest.approx(result.parameter("a2").estimate,
-                                                          abs=1e-7)
+    assert a2[1] == "mm" and float(a2[3]) == pytest.approx(
+        result.parameter("a2").estimate * 1e3, abs=1e-4)
     alpha1 = body_rows(page, "parameters")["alpha1"]
     assert alpha1[1] == "rad" and float(alpha1[2]) == pytest.approx(-np.pi / 2, abs=1e-7)
+    units = next(t for kind, t in page.paragraphs if kind == "units")
+    assert "in mm" in units and "robot file is in length m, angle rad" in units
     texts = " ".join(t for _, t in page.paragraphs)
     assert "No held-out data was given" in texts
     assert "Diagnosis added no effect" in texts
     ids = {attrs.get("id") for tag, attrs in page.tags if tag == "section"}
     assert "sphere" not in ids
-    # the conclusion writes the millimetre-sized errors of a metre file in mm
     conclusion = next(t for kind, t in page.paragraphs if kind == "conclusion")
     assert f"to {result.fit.rms_final * 1e3:.3g} mm RMS" in conclusion
     assert " m RMS" not in conclusion
 
 
-def test_pdf_beside_the_page(tmp_path):
+def test_matplotlib_pdf_beside_the_page(tmp_path):
     result = synthetic_result(validation=False, effects=False)
-    path = write_report(result, tmp_path / "report.html", pdf=True)
+    path = write_report(result, tmp_path / "report.html", pdf=True, printer="matplotlib")
     pdf = path.with_suffix(".pdf").read_bytes()
     assert pdf.startswith(b"%PDF") and pdf.rstrip().endswith(b"%%EOF")
     pages = len(re.findall(rb"/Type\s*/Page\b", pdf))
     plots = len(re.findall(r"<img\b", path.read_text(encoding="utf-8")))
-    assert plots == 4 and pages >= plots + 2  # every plot on its own page, and the text
+    assert plots == 5 and 4 <= pages <= plots + 6
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report.html", "report.pdf"]
 
 

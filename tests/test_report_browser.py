@@ -7,6 +7,8 @@ Skipped when Chromium is not installed (``apt-get install chromium``; ``.ci/run`
 from __future__ import annotations
 
 import re
+import shutil
+from pathlib import Path
 
 import matplotlib.image
 import numpy as np
@@ -15,8 +17,8 @@ from test_report import synthetic_result
 
 from robocal_casadi.report import find_chromium, page_state, screenshot_report, write_report
 
-pytestmark = pytest.mark.skipif(find_chromium() is None,
-                                reason="Chromium not installed (apt-get install chromium)")
+needs_chromium = pytest.mark.skipif(find_chromium() is None,
+                                    reason="Chromium not installed (apt-get install chromium)")
 
 
 @pytest.fixture(scope="module")
@@ -30,6 +32,7 @@ def state(report):
     return page_state(report)
 
 
+@needs_chromium
 def test_page_loads_with_every_image_decoded(report, state):
     images_in_file = len(re.findall(r"<img\b", report.read_text(encoding="utf-8")))
     assert images_in_file > 0
@@ -39,6 +42,7 @@ def test_page_loads_with_every_image_decoded(report, state):
     assert int(state["page-height"]) > 2000  # many sections and figures, not an empty page
 
 
+@needs_chromium
 def test_screenshot_is_a_non_blank_png(report, tmp_path):
     png = screenshot_report(report, tmp_path / "shots" / "report.png", height=2000)
     data = png.read_bytes()
@@ -54,6 +58,7 @@ def test_screenshot_is_a_non_blank_png(report, tmp_path):
     assert accent.sum() > 500
 
 
+@needs_chromium
 def test_full_page_screenshot_is_as_tall_as_the_page(report, state, tmp_path):
     height = int(state["page-height"])
     png = screenshot_report(report, tmp_path / "full.png")
@@ -64,6 +69,7 @@ def _pages(pdf: bytes) -> int:
     return len(re.findall(rb"/Type\s*/Page\b", pdf))
 
 
+@needs_chromium
 def test_printing_unfolds_the_full_diagnosis_table(tmp_path):
     """The full candidate table is folded on screen; printed, it is all there: the page
     prints to more pages than the same page with that block taken out, and as many as
@@ -89,3 +95,56 @@ def test_printing_unfolds_the_full_diagnosis_table(tmp_path):
         pages[name] = _pages(pdf)
     assert pages["removed"] > 0
     assert pages["folded"] == pages["opened"] > pages["removed"], pages
+
+
+def _page_texts(pdf: Path) -> list[str]:
+    """Each page's text (pdftotext, poppler-utils), whitespace collapsed."""
+    import subprocess
+
+    text = subprocess.run(["pdftotext", "-layout", str(pdf), "-"], capture_output=True,
+                          text=True, check=True).stdout
+    return [" ".join(page.split()) for page in text.split("\f")]
+
+
+def _images_per_page(pdf: Path) -> dict[int, int]:
+    import subprocess
+
+    listing = subprocess.run(["pdfimages", "-list", str(pdf)], capture_output=True, text=True,
+                             check=True).stdout.splitlines()[2:]
+    counts: dict[int, int] = {}
+    for line in listing:
+        page = int(line.split()[0])
+        counts[page] = counts.get(page, 0) + 1
+    return counts
+
+
+@pytest.mark.skipif(shutil.which("pdftotext") is None or shutil.which("pdfimages") is None,
+                    reason="poppler-utils not installed (apt-get install poppler-utils)")
+@pytest.mark.parametrize("printer", [pytest.param("chromium", marks=needs_chromium),
+                                     "matplotlib"])
+def test_printed_pages_keep_tables_whole_and_figures_with_captions(tmp_path, printer):
+    """On the PDF's pages: a table's caption and its last row are on one page, and a
+    figure's caption is on a page that holds an image."""
+    from robocal_casadi.report import build_document
+
+    result = synthetic_result(validation=False, effects=False)
+    path = write_report(result, tmp_path / "report.html", pdf=True, printer=printer)
+    pdf = path.with_suffix(".pdf")
+    pages = _page_texts(pdf)
+    images = _images_per_page(pdf)
+    document = build_document(result)
+    blocks = [b for s in document.sections for b in s.blocks]
+    blocks += [inner for b in blocks if type(b).__name__ == "Details" for inner in b.blocks]
+    tables = [b for b in blocks if type(b).__name__ == "Table" and 0 < len(b.rows) <= 25]
+    plots = [b for b in blocks if type(b).__name__ == "Plot"]
+    assert tables and plots
+    for table in tables:
+        caption = " ".join(table.caption.split())[:40]
+        last = table.rows[-1][0]
+        assert any(caption in page and last in page[page.index(caption):] for page in pages), \
+            f"table {table.name!r} split over pages"
+    for plot in plots:
+        words = " ".join(plot.caption.split())[:50]
+        holding = [k + 1 for k, page in enumerate(pages) if words in page]
+        assert holding, f"caption of {plot.name!r} not found"
+        assert all(images.get(k, 0) > 0 for k in holding), f"{plot.name!r} caption without image"

@@ -129,14 +129,29 @@ def _free_mask(problem: Problem, identifiability: Identifiability) -> np.ndarray
 
 def _residuals(problem: Problem, x_nominal, x_geometric, x_final) -> list[DatasetResiduals]:
     out = []
+    stages = [(problem, x) for x in (x_nominal, x_geometric, x_final)]
     errors = [problem.errors(x) for x in (x_nominal, x_geometric, x_final)]
+    parts = _components(stages)
     for k, model in enumerate(problem.models):
         dataset = model.dataset
         out.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
-            payload_com=dataset.payload_com))
+            payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
+            frame=model.component_frame))
+    return out
+
+
+def _components(stages) -> list[dict[str, np.ndarray]]:
+    """Per dataset, the signed error parts (N x 3) [m] under nominal, geometric, final."""
+    out: list[dict[str, np.ndarray]] = []
+    for name, (problem, x) in zip(("nominal", "geometric", "final"), stages):
+        pieces = problem.split(problem.residual(x))
+        for k, (model, r) in enumerate(zip(problem.models, pieces)):
+            if len(out) <= k:
+                out.append({})
+            out[k][name] = model.error_components(r)
     return out
 
 
@@ -412,13 +427,15 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
     errors = [p.errors(x) for p, x in stages]
     summary = RmsSummary(*(_rms(e) for e in errors))
     residuals = []
+    parts = _components(stages)
     for k, model in enumerate(stages[-1][0].models):
         dataset = model.dataset
         residuals.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
-            payload_com=dataset.payload_com))
+            payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
+            frame=model.component_frame))
     return summary, residuals
 
 

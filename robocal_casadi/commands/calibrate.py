@@ -54,9 +54,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
                              "offsets, base and tool) and report what that costs")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
-    parser.add_argument("--pdf", action="store_true", help="also write report.pdf")
     add_force(parser)
     add_allow_outside_data(parser)
+    parser.add_argument("--pdf", action="store_true",
+                        help="also write report.pdf (printed by headless Chromium when "
+                             "installed)")
+    report = parser.add_argument_group(
+        "report fields", "shown at the top of report.html; each overrides the same field "
+        "of a dataset file's report: block")
+    for option, meta, text in (("--customer", "NAME", "customer"),
+                               ("--robot-serial", "SERIAL", "robot serial number"),
+                               ("--instrument", "TEXT", "measuring instrument"),
+                               ("--operator", "NAME", "who measured"),
+                               ("--date", "DATE", "date of measurement"),
+                               ("--logo", "FILE", "logo image (PNG, JPEG or SVG)")):
+        report.add_argument(option, metavar=meta, help=text)
+    report.add_argument("--report-templates", type=Path, metavar="DIR",
+                        help="folder of Jinja2 templates replacing the report's own "
+                             "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
 def _clean(value):
@@ -71,8 +86,10 @@ def _clean(value):
 
 
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
-                  pdf: bool = False, keep: tuple[str, ...] = ()) -> None:
-    """Write the contract's three files into ``out`` atomically; the files named in
+                  pdf: bool = False, keep: tuple[str, ...] = (), info=None,
+                  templates: Path | None = None) -> None:
+    """Write the contract's three files into ``out`` atomically (``info``: the report's
+    customer fields, ``templates``: a folder of report templates); the files named in
     ``keep`` that ``out`` already holds are carried over into the new folder."""
     with atomic_directory(out) as staging:
         for name in keep:
@@ -83,7 +100,8 @@ def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
         if report:
             from ..report import write_report
 
-            write_report(result, staging / "report.html", pdf=pdf)
+            write_report(result, staging / "report.html", pdf=pdf, info=info,
+                         templates=templates)
 
 
 def summary(result: CalibrationResult) -> str:
@@ -135,6 +153,25 @@ def profiled(datasets, validation, profile: str, options: dict) -> CalibrationRe
     return replace(restricted, profile=cost)
 
 
+def report_info(args: argparse.Namespace, datasets: list):
+    """The report's customer fields: the datasets' ``report:`` blocks in turn, then the
+    command-line options, each overriding what came before."""
+    from ..report.info import ReportInfo, check_logo, info_from_dataset_file
+
+    info = ReportInfo()
+    for dataset in datasets:
+        info = info.merged(info_from_dataset_file(dataset.path))
+    given = {name: getattr(args, name) for name in ("customer", "robot_serial", "instrument",
+                                                    "operator", "date")
+             if getattr(args, name, None)}
+    if getattr(args, "logo", None):
+        given["logo"] = check_logo(args.logo)
+    if args.report_templates is not None and not args.report_templates.is_dir():
+        raise InputError("is not a folder of report templates", file=args.report_templates,
+                         where="--report-templates")
+    return info.merged(ReportInfo(**given))
+
+
 def run(args: argparse.Namespace) -> int:
     output_folder(args.out, force=args.force, inputs=[*args.datasets, *args.validate])
     if args.max_iterations < 1:
@@ -154,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"the same dataset is given twice ({seen[key]} and {dataset.path}); "
                              "a dataset is either fitted or held out, once", file=dataset.path)
         seen[key] = dataset.path
+    info = report_info(args, datasets + validation)
     not_replacing_inputs(args.out, [p for d in datasets + validation
                                     for p in (d.path, d.data_path, d.robot_path)])
     options = dict(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
@@ -163,7 +201,8 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(datasets, validation, **options)
     else:
         result = profiled(datasets, validation, args.profile, options)
-    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf)
+    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
+                  templates=args.report_templates)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
           + ("" if args.no_report else ", report.html"))

@@ -201,6 +201,33 @@ class ArtifactModel(MeasurementModel):
     def error_rows(self) -> np.ndarray:
         return self._layout()[0]
 
+    component_frame = "base"
+
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Touch minus socket x, y, z (world frame) for touches; the signed length or
+        perpendicularity error in column 0 (NaN after) for the rest [m]."""
+        _, sizes = self._layout()
+        residual = np.asarray(residual, float).ravel()
+        out = np.full((len(sizes), 3), np.nan)
+        start = 0
+        for i, size in enumerate(sizes):
+            out[i, :size] = residual[start:start + size]
+            start += size
+        return out
+
+    def error_terms(self) -> tuple:
+        """``position`` per touch, then per placement its distances and perpendiculars."""
+        from ..results import ErrorTerm
+
+        terms = [ErrorTerm("position", socket.pose, (socket.name,))
+                 for socket in self.sockets if socket.unknown_index is not None
+                 for _ in socket.rows]
+        for pose in self._poses():
+            terms += [ErrorTerm("distance", pose, (a, b)) for a, b, _ in self._distances(pose)]
+            terms += [ErrorTerm("perpendicular", pose, tuple(entry))
+                      for entry in self._perpendiculars(pose)]
+        return tuple(terms)
+
 
 class CrossBarModel(ArtifactModel):
     """The cross-shaped bar: an artifact whose four sockets are touched once per pose."""

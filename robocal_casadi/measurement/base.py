@@ -77,6 +77,22 @@ class MeasurementModel(ABC):
         """For each entry of ``errors``, the data row it belongs to (-1 if none)."""
         return np.full(len(self.errors(np.zeros(self.residual_size()))), -1)
 
+    component_frame = ""  # frame of 3-D error components ("instrument", "base")
+
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Signed parts of each error (N x 3) [m]: by default the error itself in
+        column 0 and NaN after; models with 3-D or signed errors say more."""
+        errors = self.errors(residual)
+        out = np.full((len(errors), 3), np.nan)
+        out[:, 0] = errors
+        return out
+
+    def error_terms(self) -> tuple:
+        """What each entry of ``errors`` is (``results.ErrorTerm``)."""
+        from ..results import ErrorTerm
+
+        return (ErrorTerm("error"),) * len(self.error_rows())
+
     @abstractmethod
     def residual_size(self) -> int:
         """Length of the residual column."""

@@ -148,6 +148,18 @@ class SphereLaserModel(MeasurementModel):
     def error_rows(self) -> np.ndarray:
         return np.arange(self.count)
 
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Signed distance of each laser point from the sphere surface [m] (outside
+        positive) in column 0, NaN after."""
+        out = np.full((self.count, 3), np.nan)
+        out[:, 0] = np.asarray(residual, float).ravel()[:self.count]
+        return out
+
+    def error_terms(self) -> tuple:
+        from ..results import ErrorTerm
+
+        return (ErrorTerm("surface"),) * self.count
+
 
 def laser_of(mounted) -> tuple[np.ndarray, np.ndarray]:
     """``(p0 [m], unit n)`` from mounted values ``[x, y, z, nx, ny, nz]`` (flange frame)."""

@@ -98,3 +98,14 @@ class TrackerModel(MeasurementModel):
 
     def error_rows(self) -> np.ndarray:
         return np.arange(self.dataset.rows)
+
+    component_frame = "instrument"
+
+    def error_components(self, residual: np.ndarray) -> np.ndarray:
+        """Measured minus predicted x, y, z of each point (N x 3) [m], instrument frame."""
+        return np.asarray(residual, float).reshape(-1, 3).copy()
+
+    def error_terms(self) -> tuple:
+        from ..results import ErrorTerm
+
+        return (ErrorTerm("position"),) * self.dataset.rows

@@ -10,8 +10,10 @@ that did not converge).
 from __future__ import annotations
 
 from ..results import CalibrationResult
+from .accuracy import recommended
 from .effect_views import effect_title
 from .numbers import ErrorStats, error_noun, format_number, pooled
+from .unexplained import sentence as unexplained_sentence
 
 OVERFIT_RATIO = 2.0  # held-out RMS above this multiple of the fit RMS earns a warning
 POOR_CONDITION = 1e4  # condition numbers above this earn a warning
@@ -19,12 +21,13 @@ CONVERGED_WORDS = ("converged", "success", "ok", "solve_succeeded")
 
 
 def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
-    """The conclusion as a few short paragraphs, the headline first."""
-    units = result.units
-    # Errors and corrections are millimetre-sized: a file in metres reads them in mm here
-    # (the tables keep the file's unit).
-    unit = "mm" if units.length == "m" else units.length
-    scale = 1e-3 if units.length == "m" else units.length_scale
+    """The conclusion as a few short paragraphs, the headline first.
+
+    When the model with effects did worse on held-out data than the geometric one (the
+    result's ``recommended`` is ``"geometric"``), that comes first.
+    """
+    # Errors and corrections are millimetre-sized: the report shows them in mm.
+    unit, scale = "mm", 1e-3
 
     def length(value_si: float) -> str:
         return f"{format_number(value_si / scale, 3)} {unit}"
@@ -43,6 +46,19 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
         headline += (f" (99th percentile from {length(before.p99)} to {length(after.p99)}, "
                      f"over {after.count} measurements)")
     paragraphs = [headline + "."]
+    if result.effects and recommended(result) == "geometric":
+        worse = ""
+        if result.validation is not None:
+            worse = (f" ({length(result.validation.rms_final)} RMS with the effects against "
+                     f"{length(result.validation.rms_geometric)} without)")
+        paragraphs.insert(0, f"Use the geometric calibration alone: on held-out data the "
+                             f"model with the effects diagnosis found predicts worse than "
+                             f"the geometry without them{worse}. robot_calibrated.yaml "
+                             f"carries that geometry; do not apply the effects.")
+        paragraphs[1] = paragraphs[1].replace(
+            f"to {length(summary.rms_final)} RMS",
+            f"to {length(summary.rms_final)} RMS with the effects, "
+            f"{length(summary.rms_geometric)} with the geometry alone")
     if not held_out:
         paragraphs.append("No held-out data was given, so this shows how well the model fits, "
                           "not how well it predicts new poses; calibrate with --validate to "
@@ -69,6 +85,10 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
         text += " Largest corrections: " + ", ".join(changes) + "."
     paragraphs.append(text)
 
+    unexplained = unexplained_sentence(result)
+    if unexplained:
+        paragraphs.append(unexplained)
+
     warnings = []
     if held_out and result.fit.rms_final > 0 and \
             result.validation.rms_final > OVERFIT_RATIO * result.fit.rms_final:
@@ -92,12 +112,12 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
 def _largest_changes(result: CalibrationResult, per_quantity: int = 2) -> list[str]:
     """The identified lengths and angles that moved most, ``per_quantity`` of each."""
     units = result.units
-    moved = []
+    moved = []  # lengths in mm, angles in the file's unit
     for quantity in ("length", "angle"):
         entries = [p for p in result.parameters if p.identifiable and p.quantity == quantity]
         entries.sort(key=lambda p: abs(p.estimate - p.nominal), reverse=True)
         scale, unit = units.scale(quantity), units.unit_name(quantity)
-        if quantity == "length" and units.length == "m":
+        if quantity == "length":
             scale, unit = 1e-3, "mm"
         for p in entries[:per_quantity]:
             change = (p.estimate - p.nominal) / scale

@@ -86,6 +86,7 @@ class Section:
     anchor: str
     title: str
     blocks: tuple[Block, ...]
+    appendix: bool = False  # reference material after the main text (solver details)
 
     def __repr__(self) -> str:
         return f"Section({self.anchor!r}, {len(self.blocks)} blocks)"
@@ -98,6 +99,9 @@ class Document:
     title: str
     subtitle: str
     sections: tuple[Section, ...]
+    facts: tuple[tuple[str, str], ...] = ()  # the customer's fields: (title, value)
+    logo: str | None = None  # a data: URI
+    units_note: str = ""  # the report's units and the file's, in words
 
     def __repr__(self) -> str:
         return f"Document({self.title!r}, sections={[s.anchor for s in self.sections]})"

@@ -1,7 +1,9 @@
 """The report as one self-contained HTML page, and ``write_report``.
 
-Plots are embedded as base64 PNG ``data:`` URIs, the style sheet and a small script are
-inline: the page needs no network and no other file. The script marks ``<body>`` with
+The page is built from Jinja2 templates (``templates/``), which an integrator may
+replace one by one to brand the report. Plots are embedded as base64 PNG ``data:`` URIs,
+the style sheet and a small script are inline: the page needs no network and no other
+file. The script marks ``<body>`` with
 ``data-images-total``, ``data-images-loaded`` (images with a decoded bitmap),
 ``data-page-height`` [CSS px] and ``data-report-ready="true"`` once every image has
 loaded, so a headless browser can check the page (``report.browser``).
@@ -10,72 +12,19 @@ loaded, so a headless browser can check the page (``report.browser``).
 from __future__ import annotations
 
 import base64
-import html
 from datetime import datetime, timezone
 from pathlib import Path
+
+import jinja2
+from markupsafe import Markup
 
 from ..errors import InputError
 from ..output import atomic_file
 from ..results import CalibrationResult
 from .content import Details, Document, Paragraph, Plot, Section, Table
 from .figures import png_bytes
+from .info import ReportInfo
 from .sections import build_document
-
-CSS = """
-:root { --ink: #1d2733; --muted: #8a939c; --line: #d5dbe1; --accent: #1f6fb2;
-        --band: #f4f6f8; }
-* { box-sizing: border-box; }
-body { margin: 0; color: var(--ink); background: #fff; line-height: 1.45;
-       font: 15px/1.45 -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; }
-main { max-width: 1100px; margin: 0 auto; padding: 24px 28px 48px; }
-header { border-bottom: 3px solid var(--accent); margin-bottom: 12px; }
-h1 { font-size: 1.7em; margin: 0 0 4px; }
-.subtitle, .stamp { color: var(--muted); margin: 0 0 10px; }
-nav { background: var(--band); padding: 8px 12px; border-radius: 4px; margin: 12px 0 8px; }
-nav a { color: var(--accent); margin-right: 14px; text-decoration: none; white-space: nowrap; }
-section { margin-top: 26px; }
-h2 { font-size: 1.3em; border-bottom: 1px solid var(--line); padding-bottom: 4px; }
-p.conclusion { font-size: 1.12em; background: #eaf2fa; border-left: 4px solid var(--accent);
-               padding: 10px 14px; }
-p.note { color: #5b6570; font-size: 0.92em; }
-.table-wrap { overflow-x: auto; margin: 12px 0 18px; }
-table { border-collapse: collapse; font-size: 0.9em; min-width: 40%; }
-caption { text-align: left; font-weight: 600; padding: 4px 0; }
-th, td { border-bottom: 1px solid var(--line); padding: 4px 10px; vertical-align: top; }
-th { background: var(--band); text-align: left; }
-td.number, th.number { text-align: right; font-variant-numeric: tabular-nums; }
-td.number { white-space: nowrap; }
-table.diagnosis td, table.diagnosis-summary td { white-space: nowrap; }
-table.diagnosis, table.diagnosis-summary { font-size: 0.82em; }
-tr.muted td { color: var(--muted); font-style: italic; }
-figure { margin: 14px 0 22px; }
-figure img { display: block; max-width: 100%; height: auto; border: 1px solid var(--line); }
-figcaption { color: #5b6570; font-size: 0.9em; margin-top: 4px; max-width: 880px; }
-h3 { font-size: 1.08em; margin: 22px 0 6px; }
-details { margin: 8px 0 18px; }
-details > summary { cursor: pointer; color: var(--accent); font-weight: 600; padding: 4px 0; }
-@media print {
-  body { font-size: 11pt; }
-  main { max-width: none; padding: 0; }
-  nav { display: none; }
-  section { break-before: auto; }
-  figure, table, p.conclusion { break-inside: avoid; page-break-inside: avoid; }
-  table.diagnosis, table.parameters, table.not-identifiable { break-inside: auto;
-                                                              page-break-inside: auto; }
-  .table-wrap { overflow: visible; }
-  table.diagnosis, table.diagnosis-summary { font-size: 7.5pt; }
-  table.diagnosis td, table.diagnosis-summary td { white-space: normal; padding: 2px 5px; }
-  table.diagnosis th, table.diagnosis-summary th { padding: 2px 5px; }
-  h3 { break-after: avoid; page-break-after: avoid; }
-  h2 { break-after: avoid; page-break-after: avoid; }
-  a { color: inherit; }
-  details > summary { color: inherit; }
-  details::details-content { content-visibility: visible; display: block; }
-  tr { break-inside: avoid; page-break-inside: avoid; }
-  thead { display: table-header-group; }
-}
-@page { size: A4; margin: 16mm 14mm; }
-"""
 
 READY_SCRIPT = """
 (function () {
@@ -106,116 +55,105 @@ READY_SCRIPT = """
 
 
 def write_report(result: CalibrationResult, path: str | Path, *, title: str | None = None,
-                 pdf: bool = False) -> Path:
+                 pdf: bool = False, info: ReportInfo | None = None,
+                 templates: str | Path | None = None, printer: str = "auto") -> Path:
     """Write the report of ``result`` to ``path`` (one self-contained HTML file).
 
-    With ``pdf=True`` the same content goes to a PDF beside it (``path`` with suffix
-    ``.pdf``). Files are written whole or not at all. Returns the HTML path.
+    ``info`` carries the customer's fields and logo; ``templates`` is a folder whose
+    ``report.html.j2``, ``blocks.html.j2``, ``brand.html.j2`` or ``report.css`` replace
+    the package's own (see ``templates/report.html.j2``). With ``pdf=True`` the page is
+    also printed to a PDF beside it (``path`` with suffix ``.pdf``): by headless Chromium
+    when it is installed (``printer="auto"`` or ``"chromium"``), else laid out with
+    matplotlib (``printer="matplotlib"``). Files are written whole or not at all.
+    Returns the HTML path.
     """
     if not isinstance(result, CalibrationResult):
         raise TypeError(f"result: expected a CalibrationResult, got {type(result).__name__}")
+    if printer not in PRINTERS:
+        raise ValueError(f"printer: expected one of {', '.join(PRINTERS)}, got {printer!r}")
     path = Path(path)
     if path.is_dir():
         raise InputError("is a folder; give the report's file name, e.g. report.html",
                          file=path)
-    document = build_document(result, title)
-    page = render_html(document)
+    environment = template_environment(templates)
+    document = build_document(result, title, info)
+    page = render_html(document, environment)
     pdf_path = path.with_suffix(".pdf")
-    if pdf:
-        from .pdf import write_pdf
-
-        write_pdf(document, pdf_path)
     with atomic_file(path) as staging:
         staging.write_text(page, encoding="utf-8")
         staging.chmod(0o644)  # a report is for reading; the staging file starts private
+        if pdf:
+            _print(document, staging, pdf_path, printer)
     return path
 
 
-def render_html(document: Document) -> str:
+PRINTERS = ("auto", "chromium", "matplotlib")
+
+
+def _print(document: Document, page: Path, pdf_path: Path, printer: str) -> None:
+    """The PDF of the page: Chromium prints the HTML as a browser would; without it, the
+    matplotlib layout of the same document."""
+    from .browser import find_chromium, print_pdf
+
+    if printer == "chromium" or (printer == "auto" and find_chromium() is not None):
+        staged = page.with_name(f".{pdf_path.stem}-print.html")  # Chromium wants .html
+        try:
+            staged.write_bytes(page.read_bytes())
+            print_pdf(staged, pdf_path)
+        finally:
+            staged.unlink(missing_ok=True)
+        return
+    from .pdf import write_pdf
+
+    write_pdf(document, pdf_path)
+
+
+def template_environment(templates: str | Path | None = None) -> jinja2.Environment:
+    """Jinja2 environment over the package's templates, ``templates`` searched first."""
+    loaders: list[jinja2.BaseLoader] = []
+    if templates is not None:
+        folder = Path(templates)
+        if not folder.is_dir():
+            raise InputError("is not a folder of report templates", file=folder)
+        loaders.append(jinja2.FileSystemLoader(str(folder)))
+    loaders.append(jinja2.FileSystemLoader(str(TEMPLATES)))
+    return jinja2.Environment(loader=jinja2.ChoiceLoader(loaders), autoescape=True,
+                              undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
+
+
+def render_html(document: Document, environment: jinja2.Environment | None = None) -> str:
     """The page for ``document``: a complete HTML5 string with everything inline."""
+    environment = environment or template_environment()
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    nav = " ".join(f'<a href="#{_attr(s.anchor)}">{_text(s.title)}</a>' for s in document.sections)
-    body = "\n".join(_section(s) for s in document.sections)
-    return f"""<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{_text(document.title)}</title>
-<style>{CSS}</style>
-</head>
-<body>
-<main>
-<header>
-<h1>{_text(document.title)}</h1>
-<p class="subtitle">{_text(document.subtitle)}</p>
-<p class="stamp">Written {stamp} by robocal_casadi.</p>
-</header>
-<nav>{nav}</nav>
-{body}
-</main>
-<script>{READY_SCRIPT}</script>
-</body>
-</html>
-"""
+    css = environment.loader.get_source(environment, "report.css")[0]
+    sections = [{"anchor": s.anchor, "title": s.title, "appendix": s.appendix,
+                 "blocks": [_view(b) for b in s.blocks]} for s in document.sections]
+    return environment.get_template("report.html.j2").render(
+        document=document, sections=sections, css=Markup(css),
+        script=Markup(READY_SCRIPT), stamp=stamp)
+
+
+TEMPLATES = Path(__file__).with_name("templates")
 
 
 # ----------------------------------------------------------------------------- blocks
 
 
-def _section(section: Section) -> str:
-    parts = [f'<section id="{_attr(section.anchor)}">', f"<h2>{_text(section.title)}</h2>"]
-    parts += [_block(block) for block in section.blocks]
-    parts.append("</section>")
-    return "\n".join(parts)
-
-
-def _block(block) -> str:
+def _view(block) -> dict:
+    """What the templates need of one block: its fields, and a figure drawn to a PNG."""
     if isinstance(block, Paragraph):
-        if block.kind == "heading":
-            return f"<h3>{_text(block.text)}</h3>"
-        return f'<p class="{_attr(block.kind)}">{_text(block.text)}</p>'
+        return {"type": "paragraph", "kind": block.kind, "text": block.text}
     if isinstance(block, Table):
-        return _table(block)
+        return {"type": "table", "name": block.name, "caption": block.caption,
+                "header": block.header, "rows": block.rows, "muted": block.muted,
+                "numeric": block.numeric}
     if isinstance(block, Plot):
-        return _figure(block)
+        figure = block.draw()
+        width, height = (int(round(v)) for v in figure.get_size_inches() * figure.dpi)
+        data = base64.b64encode(png_bytes(figure)).decode("ascii")
+        return {"type": "figure", "name": block.name, "caption": block.caption,
+                "uri": f"data:image/png;base64,{data}", "width": width, "height": height}
     if isinstance(block, Details):
-        inner = "\n".join(_block(b) for b in block.blocks)
-        return (f'<details id="{_attr(block.name)}"><summary>{_text(block.summary)}</summary>'
-                f"\n{inner}\n</details>")
+        return {"type": "details", "name": block.name, "summary": block.summary,
+                "blocks": [_view(b) for b in block.blocks]}
     raise TypeError(f"unknown report block {block!r}")  # pragma: no cover
-
-
-def _table(table: Table) -> str:
-    head = "".join(f'<th{_number_class(n)}>{_text(h)}</th>'
-                   for h, n in zip(table.header, table.numeric))
-    rows = []
-    for row, muted in zip(table.rows, table.muted):
-        cells = "".join(f"<td{_number_class(n)}>{_text(c)}</td>"
-                        for c, n in zip(row, table.numeric))
-        opening = '<tr class="muted">' if muted else "<tr>"
-        rows.append(f"{opening}{cells}</tr>")
-    return (f'<div class="table-wrap"><table class="{_attr(table.name)}">'
-            f"<caption>{_text(table.caption)}</caption><thead><tr>{head}</tr></thead>"
-            f"<tbody>{''.join(rows)}</tbody></table></div>")
-
-
-def _figure(plot: Plot) -> str:
-    figure = plot.draw()
-    width, height = (int(round(v)) for v in figure.get_size_inches() * figure.dpi)
-    data = base64.b64encode(png_bytes(figure)).decode("ascii")
-    return (f'<figure id="figure-{_attr(plot.name)}"><img src="data:image/png;base64,{data}" '
-            f'width="{width}" height="{height}" alt="{_attr(plot.caption)}">'
-            f"<figcaption>{_text(plot.caption)}</figcaption></figure>")
-
-
-def _number_class(numeric: bool) -> str:
-    return ' class="number"' if numeric else ""
-
-
-def _text(value: str) -> str:
-    return html.escape(str(value), quote=False)
-
-
-def _attr(value: str) -> str:
-    return html.escape(str(value), quote=True)

@@ -127,3 +127,9 @@ def quantity_of_placement(name: str) -> str:
     if last in ("nx", "ny", "nz") or "direction" in name.lower():
         return "none"
     return "length"
+
+
+def display_units(units: Units) -> Units:
+    """The units the report shows: lengths in mm whatever the file uses (errors and
+    corrections are millimetre-sized), angles in the file's angle unit."""
+    return Units("mm", units.angle)

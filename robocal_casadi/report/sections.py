@@ -3,7 +3,8 @@
 Each ``*_section`` function returns one ``Section`` (or None when it has nothing to
 say); ``build_document`` puts them in reading order: conclusion first, then robot and
 data, identifiability, parameters, error before and after, effects, sphere and laser,
-instrument. All numbers are shown in the robot file's units (``result.units``).
+instrument, and an appendix with the solver's details. Lengths are shown in mm whatever
+the file's unit (``numbers.display_units``), angles in the file's angle unit.
 """
 
 from __future__ import annotations
@@ -19,8 +20,15 @@ from . import figures
 from .content import Details, Document, Paragraph, Plot, Section, Table
 from .conclusion import conclusion_paragraphs
 from .effect_views import effect_models_of, effect_title, effect_view
+from .unexplained import unexplained_blocks
+from . import kind_figures
+from .accuracy import accuracy_rows, delivered, judged_on, recommended
+from .info import ReportInfo
 from .numbers import (
+    MODEL_TITLES,
     ErrorStats,
+    error_noun,
+    display_units,
     errors_of,
     format_fixed,
     format_number,
@@ -36,19 +44,28 @@ CONVENTION_TITLES = {"dh": "standard Denavit-Hartenberg (dh)",
                      "mdh": "modified Denavit-Hartenberg, Craig (mdh)"}
 
 
-def build_document(result: CalibrationResult, title: str | None = None) -> Document:
-    """The whole report of ``result`` as a ``Document``."""
+def build_document(result: CalibrationResult, title: str | None = None,
+                   info: ReportInfo | None = None) -> Document:
+    """The whole report of ``result`` as a ``Document``; ``info`` the customer's fields."""
+    info = info or ReportInfo()
     robot = result.robot_nominal
     title = title or f"Calibration report: {robot.name}"
     convention = CONVENTION_TITLES.get(robot.convention, robot.convention)
-    subtitle = (f"{robot.dof}-axis robot, {convention}"
-                f"; data: {', '.join(result.datasets)}; units: {result.units.length}, "
-                f"{result.units.angle}")
-    candidates = (conclusion_section(result), robot_and_data_section(result),
-                  identifiability_section(result), parameters_section(result),
-                  errors_section(result), effects_section(result), sphere_section(result),
-                  instrument_section(result))
-    return Document(title, subtitle, tuple(s for s in candidates if s is not None))
+    subtitle = (f"{robot.dof}-axis robot, {convention}; data: {', '.join(result.datasets)}")
+    shown = display_units(result.units)
+    file_units = f"length {result.units.length}, angle {result.units.angle}"
+    units_note = (f"Lengths in this report are in {shown.length} and angles in {shown.angle}; "
+                  f"the robot file is in {file_units}"
+                  + (", as are result.json and robot_calibrated.yaml." if
+                     result.units.length != shown.length else "."))
+    candidates = (conclusion_section(result), accuracy_section(result),
+                  applying_section(result), robot_and_data_section(result),
+                  errors_section(result), parameters_section(result), effects_section(result),
+                  identifiability_section(result), sphere_section(result),
+                  instrument_section(result), appendix_section(result))
+    facts = info.facts() + (("robot", robot.name),)
+    return Document(title, subtitle, tuple(s for s in candidates if s is not None),
+                    facts=facts, logo=info.logo_uri(), units_note=units_note)
 
 
 # ----------------------------------------------------------------------------- sections
@@ -62,7 +79,7 @@ def conclusion_section(result: CalibrationResult) -> Section:
 
 def headline_table(result: CalibrationResult) -> Table:
     """RMS and 99th percentile of the error, nominal / geometric / final, fit and validation."""
-    units = result.units
+    units = display_units(result.units)
     unit = units.length
     rows, muted = [], []
     groups = [("fit", result.fit, result.residuals)]
@@ -103,13 +120,75 @@ def robot_and_data_section(result: CalibrationResult) -> Section:
     data_table = Table("datasets", "Datasets", ("dataset", "role", "kind", "data rows",
                                                 "errors", "extra columns"), tuple(rows),
                        numeric=(False, False, False, True, True, False))
-    blocks: list = [robot_table, data_table]
+    return Section("robot-data", "Robot and data", (robot_table, data_table))
+
+
+def appendix_section(result: CalibrationResult) -> Section | None:
+    """The solver's details, for the engineer who checks the computation."""
     solver = [(SOLVER_TITLES.get(str(k), str(k).replace("_", " ")),
                format_number(v, 3) if isinstance(v, float) else _scalar_text(v))
               for k, v in result.solver.items() if isinstance(v, (int, float, str, bool))]
-    if solver:
-        blocks.append(Table("solver", "Solver", ("item", "value"), tuple(solver)))
-    return Section("robot-data", "Robot and data", tuple(blocks))
+    if not solver:
+        return None
+    return Section("appendix", "Appendix: solver details", (
+        Paragraph("How the least-squares problem was solved; these numbers check the "
+                  "computation and say nothing about the robot's accuracy.", "note"),
+        Table("solver", "Solver", ("item", "value"), tuple(solver))), appendix=True)
+
+
+def accuracy_section(result: CalibrationResult) -> Section:
+    """Mean, RMS, 99th percentile and maximum of the error, before and after (ISO 9283)."""
+    units = display_units(result.units)
+    noun = error_noun(result.residuals + result.validation_residuals)
+    rows, muted = [], []
+    same = not result.effects
+    for row in accuracy_rows(result):
+        if same and row.model == "geometric":
+            continue  # equal to final when diagnosis added nothing
+        a = row.accuracy
+        model = "calibrated" if same and row.model == "final" else MODEL_TITLES[row.model]
+        rows.append((row.role, model, str(a.count),
+                     *(format_number(v / units.length_scale) for v in (a.mean, a.rms, a.p99,
+                                                                       a.max))))
+        muted.append(row.model == "nominal")
+    table = Table("accuracy", f"Accuracy summary, {noun} [{units.length}]",
+                  ("data", "model", "errors", "mean", "RMS", "99th percentile", "maximum"),
+                  tuple(rows), tuple(muted), (False, False, True, True, True, True, True))
+    text = (f"In the spirit of ISO 9283: statistics of the {noun} magnitude over every "
+            f"measurement, for the robot as designed (nominal) and as calibrated. "
+            + ("Held-out data were not used in the fit: they show what a customer will see "
+               "on new poses." if result.validation is not None else
+               "No held-out data were given: these figures show how well the model fits "
+               "the data it was fitted on."))
+    return Section("accuracy", "Accuracy summary", (Paragraph(text), table))
+
+
+def applying_section(result: CalibrationResult) -> Section:
+    """What each output file delivers, and how to apply it."""
+    units = display_units(result.units)
+    role, _ = judged_on(result)
+    rows = tuple((d.output, d.contents,
+                  *(format_number(v / units.length_scale) for v in (d.accuracy.rms,
+                                                                    d.accuracy.p99,
+                                                                    d.accuracy.max)))
+                 for d in delivered(result))
+    table = Table("delivered", f"Accuracy each output delivers, on the {role} data "
+                  f"[{units.length}]", ("output", "what it contains", "RMS", "99th percentile",
+                                         "maximum"), rows,
+                  numeric=(False, False, True, True, True))
+    blocks: list = [Paragraph(
+        "robot_calibrated.yaml is the robot file with the calibrated geometry, in the units "
+        "of the file given; it replaces the nominal model in the controller or in the "
+        "offline programming system. It carries no effects: a controller that loads it "
+        "alone delivers the geometric calibration's accuracy. result.json lists every "
+        "parameter with its standard error and the effects found; an effect improves the "
+        "robot only where the controller applies it."), table]
+    choice = recommended(result)
+    if result.effects and choice == "geometric":
+        blocks.append(Paragraph("Use the geometry alone: on held-out data the model with "
+                                "effects did worse than the geometric calibration.",
+                                "conclusion"))
+    return Section("applying", "Applying the result", tuple(blocks))
 
 
 def identifiability_section(result: CalibrationResult) -> Section:
@@ -124,8 +203,10 @@ def identifiability_section(result: CalibrationResult) -> Section:
                            "Jacobian (log scale)", partial(figures.singular_values, ident)))
     if ident.unidentifiable:
         rows = tuple((name, reason) for name, reason in ident.unidentifiable.items())
-        blocks.append(Table("not-identifiable", "Not identifiable, held at nominal",
-                            ("parameter", "why"), rows))
+        blocks.append(Details("not-identifiable", f"{len(rows)} parameters not identifiable, "
+                              f"held at nominal, with the reason",
+                              (Table("not-identifiable", "Not identifiable, held at nominal",
+                                     ("parameter", "why"), rows),)))
     else:
         blocks.append(Paragraph("Every candidate parameter is identifiable.", "note"))
     if ident.combinations:
@@ -136,32 +217,49 @@ def identifiability_section(result: CalibrationResult) -> Section:
 
 
 def parameters_section(result: CalibrationResult) -> Section:
-    units = result.units
-    rows, muted = [], []
-    for p in result.parameters:
+    units = display_units(result.units)
+    geometric = {p.name: p for p in (getattr(result, "parameters_geometric", None) or ())
+                 if hasattr(p, "estimate")}
+    with_geometric = bool(geometric) and bool(result.effects)
+
+    def row(p) -> tuple[str, ...]:
         scale = units.scale(p.quantity)
         decimals = parameter_decimals(units, p.quantity)
-        change = (p.estimate - p.nominal) / scale
-        change_text = format_fixed(change, decimals)
+        change_text = format_fixed((p.estimate - p.nominal) / scale, decimals)
         if change_text not in ("0",) and not change_text.startswith("-"):
             change_text = "+" + change_text
-        status = "identified" if p.identifiable else \
-            f"held at nominal: {p.reason or 'not identifiable'}"
-        rows.append((p.name, units.unit_name(p.quantity) or "-",
-                     format_fixed(p.nominal / scale, decimals),
-                     format_fixed(p.estimate / scale, decimals), change_text,
-                     format_number(None if p.std is None else p.std / scale, 3), status))
-        muted.append(not p.identifiable)
-    table = Table("parameters", "Geometric parameters", ("parameter", "unit", "nominal",
-                  "estimate", "change", "standard error", "status"), tuple(rows), tuple(muted),
-                  (False, False, True, True, True, True, False))
-    note = Paragraph("Standard errors come from the covariance of the least-squares fit; "
-                     "grey rows were not identifiable and keep their nominal values.", "note")
-    return Section("parameters", "Parameters", (table, note))
+        cells = [p.name, units.unit_name(p.quantity) or "-",
+                 format_fixed(p.nominal / scale, decimals),
+                 format_fixed(p.estimate / scale, decimals), change_text,
+                 format_number(None if p.std is None else p.std / scale, 3)]
+        if with_geometric:
+            other = geometric.get(p.name)
+            cells.append("-" if other is None else format_fixed(other.estimate / scale, decimals))
+        return tuple(cells)
+
+    header = ["parameter", "unit", "nominal", "estimate", "change", "standard error"]
+    numeric = [False, False, True, True, True, True]
+    if with_geometric:
+        header.append("estimate, geometric fit alone")
+        numeric.append(True)
+    identified = [p for p in result.parameters if p.identifiable]
+    held = [p for p in result.parameters if not p.identifiable]
+    blocks: list = [Table("parameters", "Identified geometric parameters", tuple(header),
+                          tuple(row(p) for p in identified), numeric=tuple(numeric)),
+                    Paragraph("Standard errors come from the covariance of the least-squares "
+                              "fit.", "note")]
+    if held:
+        reasons = tuple(row(p)[:3] + (p.reason or "not identifiable",) for p in held)
+        blocks.append(Details("parameters-held", f"{len(held)} parameters held at nominal "
+                              f"(the data cannot determine them)",
+                              (Table("parameters-held", "Held at nominal",
+                                     ("parameter", "unit", "nominal", "why"), reasons,
+                                     (True,) * len(reasons), (False, False, True, False)),)))
+    return Section("parameters", "Parameters", tuple(blocks))
 
 
 def errors_section(result: CalibrationResult) -> Section:
-    units = result.units
+    units = display_units(result.units)
     unit = units.length
     header = ("dataset", "role", "errors", "RMS nominal", "RMS geometric", "RMS final",
               "95th percentile final", "99th percentile final", "max final")
@@ -187,30 +285,83 @@ def errors_section(result: CalibrationResult) -> Section:
     ]
     plot_groups = tuple((f"{role} data", residuals) for role, residuals in groups if residuals)
     if plot_groups:
+        blocks.append(Plot("error-histogram", "Histogram of the error magnitude before "
+                           "(nominal robot) and after calibration, logarithmic bins",
+                           partial(kind_figures.magnitude_histogram, plot_groups, units)))
         blocks.append(Plot("error-distribution", "Cumulative distribution of the error "
                            "magnitude (log scale): the further left, the better",
                            partial(figures.error_distribution, plot_groups, units)))
     for role, residuals in groups:
-        mapped = [r for r in residuals if (np.asarray(r.rows) >= 0).any()]
-        names = mapped[0].label if len(mapped) == 1 else f"{role} data"
-        if any(r.joints is not None for r in mapped):
-            blocks.append(Plot(f"joints-{role}", f"{names} ({role}): error against each joint "
-                               f"reading; structure left in the calibrated error is what the "
-                               f"model still lacks",
-                               partial(figures.error_against_joints, tuple(mapped),
-                                       result.robot_nominal, units, names)))
-        if mapped:
-            against = " and against temperature" if any("temperature" in r.extras
-                                                        for r in mapped) else ""
-            blocks.append(Plot(f"order-{role}", f"{names} ({role}): error magnitude over the "
-                               f"measurements in the order taken{against}; a drift or a step "
-                               f"between datasets shows here",
-                               partial(figures.error_over_rows, tuple(mapped), units, names)))
+        blocks += kind_blocks(result, role, residuals, units)
+    blocks += unexplained_blocks(result, units)
     return Section("errors", "Error before and after", tuple(blocks))
 
 
+def kind_blocks(result: CalibrationResult, role: str, residuals: tuple, units: Units) -> list:
+    """The plots each kind of data in ``residuals`` calls for, before and after."""
+    blocks: list = []
+    mapped = [r for r in residuals if (np.asarray(r.rows) >= 0).any()]
+    names = mapped[0].label if len(mapped) == 1 else f"{role} data"
+    if kind_figures.has_kind(residuals, "position"):
+        positioned = [r for r in residuals if kind_figures.has_kind((r,), "position")]
+        label = positioned[0].label if len(positioned) == 1 else f"{role} data"
+        blocks.append(Paragraph(f"Position errors, {label} ({role})", "heading"))
+        blocks.append(Plot(f"axes-{role}", f"{label} ({role}): the x, y and z parts of the "
+                           f"position error before and after; a mean away from zero is a "
+                           f"bias, a wide spread a scatter",
+                           partial(kind_figures.position_axes, tuple(positioned), units)))
+        with_joints = [r for r in positioned if r.joints is not None]
+        if with_joints:
+            positions = _flange_positions(result, with_joints)
+            blocks.append(Plot(f"workspace-{role}", f"{label} ({role}): error magnitude "
+                               f"across the workspace, at the flange positions of the "
+                               f"calibrated robot; a colour gradient shows where in the cell "
+                               f"the model is weakest",
+                               partial(kind_figures.workspace, tuple(with_joints),
+                                       tuple(positions), units, label)))
+    if kind_figures.has_kind(residuals, "distance") or \
+            kind_figures.has_kind(residuals, "perpendicular"):
+        measured = tuple(r for r in residuals if kind_figures.has_kind((r, ), "distance")
+                         or kind_figures.has_kind((r,), "perpendicular"))
+        blocks.append(Paragraph(f"Lengths and perpendicularity ({role})", "heading"))
+        blocks.append(Plot(f"lengths-{role}", f"{role} data: the error of each known length "
+                           f"(measured minus known, L) and of the perpendicularity (AC.BD / L) "
+                           f"for every placement, before and after",
+                           partial(kind_figures.placement_lengths, measured, units)))
+    if kind_figures.has_kind(residuals, "surface"):
+        scans = tuple(r for r in residuals if kind_figures.has_kind((r,), "surface"))
+        blocks.append(Paragraph(f"Distance from the sphere surface ({role})", "heading"))
+        blocks.append(Plot(f"scan-{role}", f"{role} data: signed distance of each laser point "
+                           f"from the sphere surface over the scan, before and after",
+                           partial(kind_figures.sphere_scan, scans, units)))
+    if any(r.joints is not None for r in mapped):
+        blocks.append(Paragraph(f"Against the joints and over time ({role})", "heading"))
+        blocks.append(Plot(f"joints-{role}", f"{names} ({role}): error magnitude against each "
+                           f"joint reading before and after; structure left in the calibrated "
+                           f"error is what the model still lacks",
+                           partial(kind_figures.magnitude_against_joints, tuple(mapped),
+                                   result.robot_nominal, units, names)))
+    if mapped:
+        against = " and against temperature" if any("temperature" in r.extras
+                                                    for r in mapped) else ""
+        blocks.append(Plot(f"order-{role}", f"{names} ({role}): error magnitude over the "
+                           f"measurements in the order taken{against}; a drift or a step "
+                           f"between datasets shows here",
+                           partial(figures.error_over_rows, tuple(mapped), units, names)))
+    return blocks
+
+
+def _flange_positions(result: CalibrationResult, residuals) -> list[np.ndarray]:
+    """Flange positions [m] (rows x 3, base frame) of the calibrated robot per dataset."""
+    from ..kinematics import Kinematics
+
+    kinematics = Kinematics(result.robot_calibrated)
+    return [kinematics.flange_poses(np.asarray(r.joints, dtype=float))[:, :3, 3]
+            for r in residuals]
+
+
 def effects_section(result: CalibrationResult) -> Section:
-    units = result.units
+    units = display_units(result.units)
     blocks: list = []
     if not result.effects:
         blocks.append(Paragraph("Diagnosis added no effect beyond the geometric model: "
@@ -345,7 +496,7 @@ def sphere_section(result: CalibrationResult) -> Section | None:
                if r.kind == "sphere_laser"]
     if not spheres:
         return None
-    units = result.units
+    units = display_units(result.units)
     laser = {k: v for k, v in result.mounted.items()
              if any(word in k.lower() for word in ("laser", "origin", "direction", "beam"))}
     laser = laser or dict(result.mounted)
@@ -371,7 +522,7 @@ def sphere_section(result: CalibrationResult) -> Section | None:
 def instrument_section(result: CalibrationResult) -> Section | None:
     if not result.mounted and not result.placement:
         return None
-    units = result.units
+    units = display_units(result.units)
     blocks: list = [Paragraph("Mounted: what is fixed to the robot (probe, reflector, laser), "
                               "shared by all datasets. Placement: where the instrument sits in "
                               "the room, fitted per dataset.", "note")]
