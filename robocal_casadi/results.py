@@ -168,6 +168,7 @@ class CalibrationResult:
     recommended: str = "final"  # "final" | "geometric": the model held-out data support
     recommendation: str = ""  # why, in words
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
+    delivered: Any = None  # ``effect_model.geometry_only``: RMS [m] each output delivers
 
     @property
     def warning(self) -> str:
@@ -226,6 +227,10 @@ class CalibrationResult:
             out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
         if self.profile is not None:
             out["profile"] = self.profile.to_json(units, self.fit, self.validation)
+        if self.delivered is not None:
+            from .effect_model import delivered_json
+
+            out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
         return out
 
     def __repr__(self) -> str:

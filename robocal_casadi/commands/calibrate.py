@@ -22,6 +22,7 @@ from pathlib import Path
 from ..datasets import load_dataset
 from ..errors import InputError
 from ..calibration import METHODS, calibrate
+from ..effect_model import delivered_lines, geometry_only, save_effects
 from ..output import atomic_directory
 from ..profiles import PROFILES, ProfileCost, profile_parameters
 from ..results import CalibrationResult
@@ -97,6 +98,7 @@ def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                 shutil.copy2(out / name, staging / name)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
+        save_effects(result, staging)
         if report:
             from ..report import write_report
 
@@ -134,6 +136,8 @@ def summary(result: CalibrationResult) -> str:
         lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
     if result.profile is not None:
         lines.append(result.profile.sentence(units, result.fit, result.validation))
+    if result.delivered is not None:
+        lines += delivered_lines(result.delivered, s, units.length)
     if result.unexplained is not None:
         lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
     else:
@@ -201,9 +205,11 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(datasets, validation, **options)
     else:
         result = profiled(datasets, validation, args.profile, options)
+    result = replace(result, delivered=geometry_only(result, datasets, validation))
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
                   templates=args.report_templates)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
-          + ("" if args.no_report else ", report.html"))
+          + (", effects_calibrated.yaml" if (args.out / "effects_calibrated.yaml").is_file()
+             else "") + ("" if args.no_report else ", report.html"))
     return 0

@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError, RobocalError
+from ..parameters import length_names
 from .base import Effect, RowContext
 from .checks import column
 
@@ -83,8 +84,7 @@ class ThermalDrift(Effect):
                              where=self.column)
         change = theta[0] * (row.extras[self.column] - reference)
         entries = {}
-        for i in range(1, row.robot.dof + 1):
-            for stem in ("d", "a"):
-                index = row.registry.index(f"{stem}{i}")
-                entries[index] = change * row.p[index]
+        for name in length_names(row.robot):  # d_i, a_i in DH; x_i, y_i, z_i in URDF
+            index = row.registry.index(name)
+            entries[index] = change * row.p[index]
         return column({}, row.robot.dof), column(entries, len(row.registry))
