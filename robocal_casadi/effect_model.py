@@ -232,7 +232,8 @@ def row_values(model: EffectModel, table, *, payload: float | None = None,
         elif name == "payload" and not model.payload:
             out[name] = np.asarray(0.0)  # the calibration saw no payload either
         else:
-            raise InputError(f"the identified effects need a {name!r} column (or --{name})",
+            option = f" (or --{name})" if name in options else ""
+            raise InputError(f"the identified effects need a {name!r} column{option}",
                              file=table.path, where="line 1")
         if not np.all(np.isfinite(out[name])):
             raise InputError(f"{name} must be finite numbers", file=table.path, where=name)

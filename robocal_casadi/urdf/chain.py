@@ -27,6 +27,8 @@ def is_urdf(path: str | Path) -> bool:
     path = Path(path)
     if path.suffix.lower() in (".urdf", ".xacro"):
         return True
+    if not path.is_file():  # a pipe or device is never opened here (the reader refuses it)
+        return False
     try:
         with path.open("rb") as handle:
             start = handle.read(64).lstrip(b"\xef\xbb\xbf \t\r\n")
