@@ -27,9 +27,8 @@ import numpy as np
 
 from robocal_casadi.calibration import (Problem, analyse_identifiability, calibrate, diagnosis,
                                         models_for, solve)
+from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.calibration.selection import dataset_rows
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m]
@@ -131,6 +130,7 @@ def real_cases(shared: Path) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1,000 rows only")
+    parser.add_argument("--real-only", action="store_true", help="the real data splits only")
     parser.add_argument("--shared", type=Path,
                         default=Path(__file__).resolve().parents[2] / "shared" / "data",
                         help="folder of the real data sets (default: ../shared/data, else "
@@ -138,6 +138,8 @@ def main() -> None:
     args = parser.parse_args()
     sizes = (1000,) if args.quick else (1000, 10000)
     cases = real_cases(args.shared)
+    if args.real_only:
+        sizes = ()
     with tempfile.TemporaryDirectory() as folder:
         for rows in sizes:
             for label, effects in (("compliance", {"joint_compliance": COMPLIANCE}),

@@ -27,6 +27,7 @@ from .candidates import Candidate, generate
 from .indices import DESCRIPTIONS, canonical, index_value, scaling, score
 from .information import Information
 from .reach import Workspace
+from .refine import refine_plan
 from .rows import RowModel
 from .selection import exchange, greedy, random_designs
 from .setup import PlanSetup, setup_from_dataset
@@ -149,8 +150,6 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     spectrum = info.spectrum(chosen, scaling(index))
     refined = False
     if refine:
-        from .refine import refine_plan
-
         for _ in range(refine_rounds):
             better = refine_plan(setup, workspace, row_model, info, chosen_candidates, index)
             if better is None:

@@ -11,8 +11,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from robocal_casadi.calibration import Problem, analyse_identifiability
 from robocal_casadi.datasets import Dataset
 from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.measurement import model_for
 
 from .candidates import Candidate
 
@@ -36,9 +38,6 @@ def planned_dataset(dataset: Dataset, candidates, kinematics: Kinematics | None 
 def engine_identifiability(dataset: Dataset, candidates, names=None):
     """The engine's ``Identifiability`` of the plan made of ``candidates`` at the nominal
     robot (``names``: the parameters to judge; default all robot and mounted ones)."""
-    from robocal_casadi.calibration import Problem, analyse_identifiability
-    from robocal_casadi.measurement import model_for
-
     planned = planned_dataset(dataset, candidates)
     problem = Problem(planned.robot, [model_for(planned, "plan")])
     return analyse_identifiability(problem, problem.initial(), names)

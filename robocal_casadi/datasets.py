@@ -18,20 +18,21 @@ to the fit and is refused as a likely misspelling.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Union
 
 import numpy as np
 
+from .effects.motion import with_directions
 from .errors import InputError
 from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, cut, file_kind,
                      file_name, load_yaml, mapping, quantities, quantity, referenced_file,
-                     require, resolved, units_of, vector)
+                     require, resolved, vector)
 from .robot import Robot, load_robot
 from .table import Table, read_table
 from .transforms import matrix_from_quaternion
-from .units import Units
+from .units import Units, units_of
 
 KINDS = ("cross_bar", "artifact_touches", "sphere_laser", "tracker_points")
 BAR_POINTS = ("A", "B", "C", "D")
@@ -119,6 +120,21 @@ class TrackerPoints(DatasetBase):
 
 
 Dataset = Union[ArtifactTouches, SphereLaser, TrackerPoints]
+
+
+def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
+    """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
+    mask = np.asarray(mask, dtype=bool)
+    # the directions of motion belong to the full table's order: computed before cutting
+    extras = with_directions(dataset.joints, dataset.extras)
+    changes = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
+    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
+        value = getattr(dataset, name, None)
+        if value is not None:
+            changes[name] = np.asarray(value)[mask]
+    if getattr(dataset, "point", None):
+        changes["point"] = tuple(p for p, keep in zip(dataset.point, mask) if keep)
+    return replace(dataset, **changes)
 
 
 # ----------------------------------------------------------------------------- loading

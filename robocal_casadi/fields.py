@@ -283,26 +283,6 @@ def _resolved(path: Path) -> Path:
         return Path(os.path.abspath(path))
 
 
-def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
-    """The file's ``units`` mapping as ``Units``; wrong types and unknown keys refused."""
-    from .units import ANGLE_SCALE, LENGTH_SCALE, parse_units
-
-    value = mapping(require(content, key, file=file), file=file, where=key,
-                    hint="like {length: mm, angle: deg}")
-    check_keys(value, ("length", "angle"), file=file, where=key)
-    for name, known in (("length", LENGTH_SCALE), ("angle", ANGLE_SCALE)):
-        if name not in value:
-            raise InputError(f"missing required key; expected one of {sorted(known)}",
-                             file=file, where=f"{key}.{name}")
-        if value[name] is None:
-            raise InputError(f"no {name} unit given; expected one of {sorted(known)}",
-                             file=file, where=f"{key}.{name}")
-        if not isinstance(value[name], str):
-            raise InputError(f"unknown {name} unit {cut(value[name])}; expected one of "
-                             f"{sorted(known)}", file=file, where=f"{key}.{name}")
-    return parse_units(value, file=file, key=key)
-
-
 def number(value: Any, *, file: str | Path | None, where: str) -> float:
     """A finite float; booleans, strings, NaN and infinities are refused."""
     if isinstance(value, str) and _FLOAT_TEXT.fullmatch(value.strip()):

@@ -42,6 +42,7 @@ import numpy as np
 from .checks import array, choice, count, positive
 from .errors import InputError
 from .kinematics import Kinematics
+from .least_squares import Damping, Tolerances, levenberg_marquardt
 
 MODES = ("pose", "flange_pose", "point")
 METHODS = ("lm", "ipopt")
@@ -50,6 +51,11 @@ ORIENTATION_TOLERANCE = 1e-10  # [rad]
 DEFAULT_ORIENTATION_WEIGHT = 0.1  # [m/rad], the soft preference in point mode
 STALL_WINDOW = 8  # LM stops when the cost fell by less than STALL_DECREASE over this many steps
 STALL_DECREASE = 1e-3
+STEP_TOLERANCE = 1e-15  # step relative to the joints, at rounding level
+# Joint angles share one unit, so Levenberg's damping (mu I) keeps the step's direction in
+# joint space; the gentle start and slow release let the search stay on the branch the
+# seed is nearest to.
+JOINT_DAMPING = Damping(scaling="identity", initial=1e-6, decrease=5.0)
 SEED_SPAN_PRISMATIC = 1.0  # [m] half-width of random seeds of a prismatic joint without limits
 
 
@@ -396,50 +402,19 @@ def _better(candidate: IKResult, best: IKResult) -> bool:
 
 def _levenberg_marquardt(evaluate, q0, lower, upper, max_iterations: int,
                          stop: float = 1e-14) -> tuple[np.ndarray, int, str]:
-    """Minimise ``|r(q)|^2`` within ``[lower, upper]``; returns (q, iterations, reason).
+    """The shared kernel within ``[lower, upper]``; returns (q, iterations, reason).
 
     Steps are clipped onto the bounds; a joint at a bound whose descent direction points
-    outwards is held for that step. Stops when ``|r| <= stop`` [m], when steps stall, or
-    after ``max_iterations``.
+    outwards is held for that step. Stops when ``|r| <= stop`` [m], when the cost stalls
+    (``STALL_DECREASE`` over ``STALL_WINDOW`` steps), or after ``max_iterations``.
     """
-    q = np.clip(np.asarray(q0, dtype=float), lower, upper)
-    r, J = evaluate(q)
-    cost = float(r @ r)
-    damping = 1e-6
-    history = [cost]
-    for iteration in range(1, max_iterations + 1):
-        if math.sqrt(cost) <= stop:
-            return q, iteration - 1, "converged"
-        earlier = history[-STALL_WINDOW - 1] if len(history) > STALL_WINDOW else math.inf
-        if cost > (1.0 - STALL_DECREASE) * earlier:
-            return q, iteration - 1, "stalled in a local minimum"
-        gradient = J.T @ r
-        held = ((q <= lower) & (gradient > 0)) | ((q >= upper) & (gradient < 0))
-        free = ~held
-        if not free.any():
-            return q, iteration - 1, "every joint held at a limit"
-        Jf = J[:, free]
-        normal = Jf.T @ Jf
-        improved = False
-        while damping < 1e12:
-            step = np.zeros_like(q)
-            step[free] = np.linalg.solve(normal + damping * np.eye(len(normal)), -Jf.T @ r)
-            candidate = np.clip(q + step, lower, upper)
-            r_new, J_new = evaluate(candidate)
-            cost_new = float(r_new @ r_new)
-            if cost_new < cost:
-                stalled = np.max(np.abs(candidate - q)) <= 1e-15 * (1.0 + np.max(np.abs(q)))
-                q, r, J, cost = candidate, r_new, J_new, cost_new
-                history.append(cost)
-                damping = max(damping / 5.0, 1e-12)
-                improved = True
-                if stalled:
-                    return q, iteration, "steps stalled"
-                break
-            damping *= 10.0
-        if not improved:
-            return q, iteration, "no further decrease (local minimum or limit)"
-    return q, max_iterations, "iteration limit"
+    tolerances = Tolerances(xtol=STEP_TOLERANCE, residual_floor=stop,
+                            stall=(STALL_WINDOW, STALL_DECREASE))
+    fit = levenberg_marquardt(lambda q, jacobian: evaluate(q), q0, bounds=(lower, upper),
+                              max_iterations=max_iterations, tolerances=tolerances,
+                              damping=JOINT_DAMPING)
+    reason = fit.word if fit.status == 4 else f"{fit.word}: {fit.message}"
+    return fit.x, fit.iterations, reason
 
 
 _CACHE: "weakref.WeakKeyDictionary[Kinematics, dict]" = weakref.WeakKeyDictionary()

@@ -19,6 +19,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from .codegen import BatchFunction, compiled
 from .parameters import ParameterRegistry
 from .robot import Robot
 from .transforms import pose_from_xyz_rpy, rot_x, rot_y, rot_z, translation
@@ -197,8 +198,6 @@ class Kinematics:
         """
         cache = self.__dict__.setdefault("_compiled", {})
         if name not in cache:
-            from .codegen import compiled
-
             function = getattr(self, name)
             symbols = function.sx_in()
             renamed = ca.Function(f"{name}_compiled", symbols, function.call(symbols),
@@ -216,8 +215,6 @@ class Kinematics:
         """
         cache = self.__dict__.setdefault("_batches", {})
         if (name, chunk) not in cache:
-            from .codegen import BatchFunction
-
             cache[name, chunk] = BatchFunction(getattr(self, name), ("q",), chunk)
         return cache[name, chunk]
 

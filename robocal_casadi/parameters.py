@@ -13,12 +13,14 @@ base_rx, base_ry, base_rz``; the tool (flange to tool) ``tool_x ... tool_rz``. `
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Iterable, Sequence
+from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
 from .errors import InputError
-from .robot import Frame, Robot
+
+if TYPE_CHECKING:  # the robot builds its registry from this module: names only, no import
+    from .robot import Frame, Robot
 
 JOINT_PARAMETERS = (("theta", "angle"), ("d", "length"), ("a", "length"), ("alpha", "angle"),
                     ("beta", "angle"))
@@ -121,7 +123,8 @@ class ParameterRegistry:
         frames = {}
         for frame_name in frames_of(robot):
             v = [float(values[self.index(f"{frame_name}_{stem}")]) for stem, _ in FRAME_PARAMETERS]
-            frames[frame_name] = Frame(tuple(v[:3]), tuple(v[3:]))  # type: ignore[arg-type]
+            frames[frame_name] = replace(getattr(robot, frame_name), xyz=tuple(v[:3]),
+                                         rpy=tuple(v[3:]))
         return replace(robot, joints=tuple(joints), **frames)
 
 

@@ -32,6 +32,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pinocchio as pin
 
+from .output import atomic_file
 from .robot import Robot
 from .transforms import rot_x, rot_y, rot_z, rpy_from_matrix, translation
 
@@ -226,8 +227,6 @@ def urdf_text(robot: Robot) -> str:
 
 def export_urdf(robot: Robot, path: str | Path) -> None:
     """Write ``robot`` as a URDF file (see ``urdf_text``), readable by pinocchio."""
-    from .output import atomic_file
-
     with atomic_file(path) as staging:
         staging.write_text(urdf_text(robot))
 

@@ -82,7 +82,95 @@ class EffectFinding:
                     for k, v in self.evidence.items()}
         return {"name": self.name, "joints": list(self.joints),
                 "parameters": {k: float(v) for k, v in self.parameters.items()},
+                "std": {k: None if v is None or not np.isfinite(v) else float(v)
+                        for k, v in self.std.items()},
                 "unit": self.unit, "evidence": evidence}
+
+
+@dataclass(frozen=True)
+class PriorSummary:
+    """How the estimate weighed data against tolerances (see ``prior``).
+
+    ``rule`` is ``"prior"`` (maximum a posteriori) or ``"fraction"`` (least squares with
+    weak parameters held); ``noise`` [m] the residual's standard deviation estimated from
+    distinct readings (NaN when they leave no degree of freedom); per prior parameter its
+    ``tolerance`` [SI of ``quantities``] and the data's share of its estimate (1: data
+    alone, 0: prior alone).
+    """
+
+    rule: str
+    noise: float
+    tolerance: dict[str, float] = field(default_factory=dict)
+    data_share: dict[str, float] = field(default_factory=dict)
+    quantities: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def dominated(self) -> tuple[str, ...]:
+        """Parameters whose estimate owes more to the prior than to the data."""
+        from .calibration.prior import DOMINATED_SHARE
+
+        return tuple(n for n, s in self.data_share.items()
+                     if np.isfinite(s) and s < DOMINATED_SHARE)
+
+    def entry(self, name: str, units: Units) -> dict:
+        """``tolerance`` (file units), ``data_share`` and ``prior_dominated`` of ``name``."""
+        if name not in self.tolerance:
+            return {}
+        share = self.data_share.get(name, float("nan"))
+        return {"tolerance": self.tolerance[name] / units.scale(self.quantities[name]),
+                "data_share": float(share) if np.isfinite(share) else None,
+                "prior_dominated": name in self.dominated}
+
+    def to_json(self, units: Units) -> dict:
+        return {"rule": self.rule,
+                "noise": self.noise / units.length_scale if np.isfinite(self.noise) else None,
+                "unit": units.length, "dominated": list(self.dominated)}
+
+
+@dataclass(frozen=True)
+class SphereEstimate:
+    """A sphere's centre [m] (base frame) with standard errors, and its radius [m]."""
+
+    label: str
+    role: str  # "fit" | "validation"
+    centre: tuple[float, float, float]
+    centre_std: tuple[float | None, ...] | None
+    radius: float
+
+    def to_json(self, units: Units) -> dict:
+        s = units.length_scale
+        return {"dataset": self.label, "role": self.role,
+                "centre": [c / s for c in self.centre],
+                "centre_std": None if self.centre_std is None else
+                [None if c is None else c / s for c in self.centre_std],
+                "radius": self.radius / s, "unit": units.length}
+
+
+PERCENTILES = (50, 95, 99)
+
+
+def error_statistics(errors: np.ndarray, scale: float = 1.0) -> dict:
+    """RMS, percentiles and maximum of the error lengths ``errors`` [m], divided by ``scale``."""
+    e = np.abs(np.asarray(errors, float)) / scale
+    if not e.size:
+        return {"count": 0}
+    out = {"count": int(e.size), "rms": float(np.sqrt(np.mean(e**2)))}
+    for p in PERCENTILES:
+        out[f"p{p}"] = float(np.percentile(e, p))
+    out["max"] = float(e.max())
+    return out
+
+
+def _per_dataset(residuals, units: Units) -> list[dict]:
+    """Per dataset: RMS at each stage and the final model's percentiles and maximum."""
+    s = units.length_scale
+    out = []
+    for r in residuals:
+        rms = {f"rms_{stage}": error_statistics(getattr(r, f"errors_{stage}"), s).get("rms")
+               for stage in ("nominal", "geometric", "final")}
+        out.append({"dataset": r.label, "kind": r.kind, **rms,
+                    "final": error_statistics(r.errors_final, s)})
+    return out
 
 
 @dataclass(frozen=True)
@@ -167,6 +255,9 @@ class CalibrationResult:
     unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
     recommended: str = "final"  # "final" | "geometric": the model held-out data support
     recommendation: str = ""  # why, in words
+    prior: PriorSummary | None = None
+    spheres: tuple[SphereEstimate, ...] = ()
+    notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
     delivered: Any = None  # ``effect_model.geometry_only``: RMS [m] each output delivers
 
@@ -197,20 +288,29 @@ class CalibrationResult:
         out: dict[str, Any] = {
             "datasets": list(self.datasets),
             "convention": self.robot_nominal.convention,
-            "parameters": [p.to_json(units) for p in self.parameters],
+            "parameters": [self._parameter_json(p, units) for p in self.parameters],
             "condition_number": float(self.condition_number),
             "effects": [e.to_json(units) for e in self.effects],
-            "fit": self.fit.to_json(units),
+            "fit": {**self.fit.to_json(units),
+                    "datasets": _per_dataset(self.residuals, units)},
         }
         if self.validation is not None:
-            out["validation"] = self.validation.to_json(units)
+            out["validation"] = {**self.validation.to_json(units),
+                                 "datasets": _per_dataset(self.validation_residuals, units)}
         out["mounted"] = {}
         for name, (value, std) in self.mounted.items():
             quantity = self.mounted_quantities.get(name, "length")
             scale = units.scale(quantity)
             out["mounted"][name] = {"estimate": value / scale,
                                     "std": None if std is None else std / scale,
-                                    "unit": units.unit_name(quantity)}
+                                    "unit": units.unit_name(quantity),
+                                    **(self.prior.entry(name, units) if self.prior else {})}
+        if self.prior is not None:
+            out["prior"] = self.prior.to_json(units)
+        if self.spheres:
+            out["spheres"] = [s.to_json(units) for s in self.spheres]
+        if self.notes:
+            out["notes"] = list(self.notes)
         out["identifiability"] = {
             "identifiable": list(self.identifiability.identifiable),
             "not_identifiable": dict(self.identifiability.unidentifiable),
@@ -232,6 +332,12 @@ class CalibrationResult:
 
             out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
         return out
+
+    def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
+        entry = parameter.to_json(units)
+        if self.prior is not None and parameter.identifiable:
+            entry.update(self.prior.entry(parameter.name, units))
+        return entry
 
     def __repr__(self) -> str:
         u = self.units

@@ -36,12 +36,22 @@ import yaml
 from .errors import InputError
 from .fields import (MAX_LENGTH, check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
                      vector)
-from .units import SI, Units
+from .parameters import ParameterRegistry
+from .transforms import pose_from_xyz_rpy
+from .units import SI, Units, units_of
 
 JOINT_TYPES = ("revolute", "prismatic")
 CONVENTIONS = ("dh", "mdh", "urdf")
-JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com"}
-ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity")
+JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com", "tolerance"}
+ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity", "tolerance")
+JOINT_TOLERANCE_KEYS = {"theta": "angle", "d": "length", "a": "length", "alpha": "angle",
+                        "beta": "angle"}
+# Top-level ``tolerance:`` keys: a kind of parameter (``prior.DEFAULT_TOLERANCE``) each.
+TOLERANCE_KEYS = {"length": ("dh_length", "length"), "angle": ("dh_angle", "angle"),
+                  "base_xyz": ("base_xyz", "length"), "base_rpy": ("base_rpy", "angle"),
+                  "tool_xyz": ("tool_xyz", "length"), "tool_rpy": ("tool_rpy", "angle"),
+                  "instrument": ("instrument_length", "length"),
+                  "direction": ("instrument_direction", "angle")}
 URDF_JOINT_KEYS = {"name", "child", "type", "xyz", "rpy", "axis", "limits", "mass", "com"}
 URDF_ROBOT_KEYS = ROBOT_KEYS + ("flange", "urdf")
 MAX_MASS = 1e5  # kg, a link heavier than this is a typo
@@ -82,8 +92,6 @@ class Frame:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def matrix(self) -> np.ndarray:
-        from .transforms import pose_from_xyz_rpy
-
         return pose_from_xyz_rpy(self.xyz, self.rpy)
 
 
@@ -141,6 +149,9 @@ class Robot:
     has_base: bool = False
     has_tool: bool = False
     has_gravity: bool = False
+    # Prior tolerances [SI] by parameter name (``theta2``) or kind (``dh_length``), as the
+    # file gave them; see ``prior``.
+    tolerance: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
     flange: Frame = field(default_factory=Frame)
     urdf: UrdfSource | None = field(default=None, compare=False)  # where, not what
 
@@ -186,10 +197,8 @@ class Robot:
             [self.units.angle_scale if j.revolute else self.units.length_scale for j in self.joints]
         )
 
-    def parameters(self):
+    def parameters(self) -> ParameterRegistry:
         """The parameter registry of this robot (see ``parameters.ParameterRegistry``)."""
-        from .parameters import ParameterRegistry
-
         return ParameterRegistry.for_robot(self)
 
     def parameter_vector(self) -> np.ndarray:
@@ -232,8 +241,6 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     key written with no value (``tool:``) counts as absent. A joint's ``mass`` and ``com``
     go together.
     """
-    from .fields import units_of
-
     if content.get("convention") == "urdf":
         return _urdf_robot_from_dict(content, file=file)
     check_keys(content, ROBOT_KEYS, file=file, expected="a robot file")
@@ -261,6 +268,10 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         if max(abs(g) for g in gravity) > MAX_GRAVITY:
             raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
                              file=file, where="gravity")
+    tolerance = _tolerance_from_dict(content.get("tolerance"), units, file=file)
+    for i, raw in enumerate(raw_joints, start=1):
+        tolerance.update(_joint_tolerance(raw.get("tolerance"), i, units, file=file,
+                                          where=f"joints[{i - 1}] (joint {i}).tolerance"))
     name = content.get("name")
     if name is None:
         name = Path(file).stem if file else "robot"
@@ -280,7 +291,57 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         has_base=content.get("base") is not None,
         has_tool=content.get("tool") is not None,
         has_gravity=content.get("gravity") is not None,
+        tolerance=tolerance,
     )
+
+
+def _tolerance_value(raw: Any, scale: float, kind: str, unit: str, *, file, where: str) -> float:
+    """A positive tolerance in SI from ``raw`` in the file's ``unit``."""
+    value = quantity(raw, scale, kind, file=file, where=where, unit=unit)
+    if not value > 0:
+        raise InputError(f"a tolerance must be positive, got {raw!r} {unit}", file=file,
+                         where=where)
+    return value
+
+
+def _tolerance_from_dict(raw: Any, units: Units, *, file) -> dict[str, float]:
+    """The top-level ``tolerance:`` block: per kind of parameter, file units -> SI."""
+    if raw is None:
+        return {}
+    mapping(raw, file=file, where="tolerance", hint="{length: 0.5, angle: 0.1, ...}")
+    check_keys(raw, tuple(TOLERANCE_KEYS), file=file, where="tolerance")
+    out = {}
+    for key, value in raw.items():
+        if value is None:
+            continue
+        target, kind = TOLERANCE_KEYS[key]
+        scale, unit = units.scale(kind), units.unit_name(kind)
+        out[target] = _tolerance_value(value, scale, kind, unit, file=file,
+                                       where=f"tolerance.{key}")
+    for frame in ("base", "tool"):
+        for part, stems in (("xyz", ("x", "y", "z")), ("rpy", ("rx", "ry", "rz"))):
+            if f"{frame}_{part}" in out:
+                value = out.pop(f"{frame}_{part}")
+                out.update({f"{frame}_{stem}": value for stem in stems})
+    return out
+
+
+def _joint_tolerance(raw: Any, joint: int, units: Units, *, file, where: str
+                     ) -> dict[str, float]:
+    """A joint's ``tolerance: {a: 0.5, theta: 0.1}``: by parameter name, file units -> SI."""
+    if raw is None:
+        return {}
+    mapping(raw, file=file, where=where, hint="{theta: 0.1, d: 0.5, a: 0.5, alpha: 0.1}")
+    check_keys(raw, tuple(JOINT_TOLERANCE_KEYS), file=file, where=where)
+    out = {}
+    for key, value in raw.items():
+        if value is None:
+            continue
+        kind = JOINT_TOLERANCE_KEYS[key]
+        out[f"{key}{joint}"] = _tolerance_value(value, units.scale(kind), kind,
+                                                units.unit_name(kind), file=file,
+                                                where=f"{where}.{key}")
+    return out
 
 
 def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
@@ -355,8 +416,6 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
     """A robot file in the ``urdf`` convention (what ``robot_to_dict`` writes for a robot
     read from a URDF file): joints ``{name, child, type, xyz, rpy, axis, limits, mass,
     com}``, ``flange: {xyz, rpy}`` and ``urdf: {file, base_link, tip_link}``."""
-    from .fields import units_of
-
     check_keys(content, URDF_ROBOT_KEYS, file=file, expected="a robot file")
     units = units_of(content, file=file)
     raw_joints = require(content, "joints", file=file)
@@ -451,7 +510,7 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
     if robot.convention == "urdf":
         return _urdf_robot_to_dict(robot, units)
     joints = []
-    for joint in robot.joints:
+    for i, joint in enumerate(robot.joints, start=1):
         entry: dict[str, Any] = {"type": joint.type}
         entry["theta"] = to_file_units(joint.theta, A)
         entry["d"] = to_file_units(joint.d, L)
@@ -466,6 +525,11 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
             entry["mass"] = joint.mass
         if joint.com is not None:
             entry["com"] = [to_file_units(c, L) for c in joint.com]
+        own = {stem: to_file_units(robot.tolerance[f"{stem}{i}"], units.scale(kind))
+               for stem, kind in JOINT_TOLERANCE_KEYS.items()
+               if f"{stem}{i}" in robot.tolerance}
+        if own:
+            entry["tolerance"] = own
         joints.append(entry)
     content: dict[str, Any] = {
         "name": robot.name,
@@ -480,6 +544,14 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
                             "rpy": [to_file_units(v, A) for v in frame.rpy]}
     if robot.has_gravity or tuple(robot.gravity) != (0.0, 0.0, -9.81):
         content["gravity"] = list(robot.gravity)
+    block = {}
+    for key, (target, kind) in TOLERANCE_KEYS.items():
+        name = target if not target.startswith(("base", "tool")) else \
+            target.replace("xyz", "x").replace("rpy", "rx")
+        if name in robot.tolerance:
+            block[key] = to_file_units(robot.tolerance[name], units.scale(kind))
+    if block:
+        content["tolerance"] = block
     return content
 
 

@@ -8,8 +8,10 @@ contract dataset: ``robot.yaml`` (the nominal robot), ``dataset.yaml``, its tabl
 
 The simulator is independent of the estimator: its only model is the forward
 kinematics of the true robot (``Kinematics``), inverse kinematics of the true robot for
-the set-ups where the robot has to reach something (``ik``), and pinocchio's gravity
-torques for compliance.
+the set-ups where the robot has to reach something (``ik``), pinocchio's gravity torques
+for compliance, and each registered effect's numpy truth (``Effect.simulated_dq`` and
+``Effect.simulated_dp``, written from the definition, never the estimator's CasADi
+``delta``).
 
 Joint readings written are the READ values (what the controller reports); the
 measurements come from the true robot at the true joint values
@@ -23,13 +25,19 @@ with, per joint j (1-based) named in an effect:
   row's ``payload`` [kg] at ``payload_com`` [m] (flange frame), ``c_j`` [rad/Nm] >= 0;
 * ``joint_cyclic``: ``dq_j = a1 sin q_j + b1 cos q_j + a2 sin 2q_j + b2 cos 2q_j`` [rad];
 * ``joint_scale``: ``dq_j = s_j q_j``;
+* ``joint_coupling`` (joint j driven by joint k): ``dq_j = s sin q_k + c cos q_k`` [rad];
+* ``backlash``: ``dq_j = -(b_j / 2) direction_j`` [rad], ``direction_j`` the sign of the
+  change of joint j's reading from the previous row written (the last direction where it
+  did not change, 0 on the first row);
 * ``thermal_drift``: every DH length ``d_i``, ``a_i`` of the true robot becomes
   ``L (1 + k (T - T_ref))``, ``k`` [1/K], ``T`` the row's ``temperature`` [C], ``T_ref``
   the simulator's ``reference_temperature`` (written to the truth file).
 
 Where the robot must reach a point (touches, laser poses), inverse kinematics of the
 true robot gives ``q_true`` and the reading is found by solving the relation above for
-``q_read`` (fixed-point iteration, to 1e-14 rad).
+``q_read`` (fixed-point iteration, to 1e-14 rad). With backlash the readings are then
+found again in the order written, each row's direction from its own reading and the
+previous row's (``TrueRobot.readings_in_order``).
 
 ``noise`` [m] is, per kind: tracker_points, the standard deviation of each measured
 coordinate; cross_bar and artifact_touches, of each coordinate of the probe's seat in
@@ -47,19 +55,20 @@ import numpy as np
 
 from .checks import choice, count, positive
 from .datasets import KINDS, Dataset, load_dataset
+from .effects import EFFECTS, Effect, TrueWorld
+from .effects.motion import direction_column, is_direction_column
 from .errors import InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .output import atomic_directory, written_by_robocal
 from .progress import Progress
-from .parameters import length_names, perturbed_stems
+from .parameters import perturbed_stems
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
 from .transforms import (invert, matrix_from_quaternion, pose_from_xyz_rpy,
                          quaternion_from_matrix, rot_z, rpy_from_matrix)
 from .units import Units
 
-EFFECT_NAMES = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift")
 TABLES = {"cross_bar": "touches.csv", "artifact_touches": "touches.csv",
           "sphere_laser": "scan.csv", "tracker_points": "points.csv"}
 READINGS = ("joints", "pendant")
@@ -75,41 +84,42 @@ DEFAULT_LASER_DIRECTION = (0.0, 0.0, 1.0)
 
 @dataclass(frozen=True)
 class TrueEffects:
-    """Effects of the true robot (see the module docstring for the definitions).
+    """Effects of the true robot: ``entries`` of (effect, true values by parameter name, SI),
+    one per registered effect type, in the registry's order (see the module docstring)."""
 
-    ``compliance`` joint -> c [rad/Nm]; ``cyclic`` joint -> (a1, b1, a2, b2) [rad];
-    ``scale`` joint -> s [1]; ``thermal`` k [1/K] or None. Joints are 1-based.
-    """
+    entries: tuple[tuple[Effect, Mapping[str, float]], ...] = ()
 
-    compliance: Mapping[int, float] = field(default_factory=dict)
-    cyclic: Mapping[int, tuple[float, float, float, float]] = field(default_factory=dict)
-    scale: Mapping[int, float] = field(default_factory=dict)
-    thermal: float | None = None
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(effect.name for effect, _ in self.entries)
+
+    def get(self, name: str) -> tuple[Effect, Mapping[str, float]] | None:
+        return next(((e, v) for e, v in self.entries if e.name == name), None)
 
     @property
     def any_joint_effect(self) -> bool:
-        return bool(self.compliance or self.cyclic or self.scale)
+        return any(effect.per != "column" for effect, _ in self.entries)
+
+    @property
+    def sequential(self) -> bool:
+        """Whether an effect depends on the order of the readings (backlash)."""
+        return any(is_direction_column(c) for effect, _ in self.entries
+                   for c in effect.required_columns())
 
     def as_dict(self) -> dict:
         """The contract's effect names with estimator-style parameter names (SI)."""
         out: dict[str, Any] = {}
-        if self.compliance:
-            out["joint_compliance"] = {"joints": sorted(self.compliance), "unit": "rad/Nm",
-                                       "parameters": {f"c{j}": float(v) for j, v in
-                                                      sorted(self.compliance.items())}}
-        if self.cyclic:
-            out["joint_cyclic"] = {"joints": sorted(self.cyclic), "unit": "rad",
-                                   "parameters": {f"{h}_{j}": float(v) for j, c in
-                                                  sorted(self.cyclic.items())
-                                                  for h, v in zip(("a1", "b1", "a2", "b2"), c)}}
-        if self.scale:
-            out["joint_scale"] = {"joints": sorted(self.scale), "unit": "1",
-                                  "parameters": {f"s{j}": float(v) for j, v in
-                                                 sorted(self.scale.items())}}
-        if self.thermal is not None:
-            out["thermal_drift"] = {"joints": [], "unit": "1/K", "column": "temperature",
-                                    "parameters": {"k_T": float(self.thermal)}}
+        for effect, values in self.entries:
+            entry: dict[str, Any] = {"joints": sorted(set(effect.joints)), "unit": effect.unit}
+            if getattr(effect, "column", None):
+                entry["column"] = effect.column  # type: ignore[attr-defined]
+            if getattr(effect, "drivers", None):
+                entry["drivers"] = {int(j): int(k) for j, k in effect.pairs}  # type: ignore
+            entry["parameters"] = {n: float(values[n]) for n in effect.parameter_names()}
+            out[effect.name] = entry
         return out
+
+
 
 
 @dataclass(frozen=True)
@@ -204,49 +214,75 @@ def true_parameters(robot: Robot, geometric_errors, rng: np.random.Generator
     return nominal + errors, named
 
 
-def _joint_map(spec, name: str, robot: Robot, width: int = 1) -> dict:
-    if not isinstance(spec, Mapping):
-        raise InputError(f"expected a mapping joint -> value, got {spec!r}",
-                         where=f"effects.{name}")
-    out = {}
-    for joint, value in spec.items():
-        j = int(joint)
-        if not 1 <= j <= robot.dof:
-            raise InputError(f"joint {j} out of range 1..{robot.dof}", where=f"effects.{name}")
-        values = np.atleast_1d(np.asarray(value, dtype=float))
-        if values.shape != (width,) or not np.all(np.isfinite(values)):
-            raise InputError(f"joint {j}: expected {width} finite number(s), got {value!r}",
-                             where=f"effects.{name}")
-        out[j] = float(values[0]) if width == 1 else tuple(float(v) for v in values)
-    return out
+def _entry_values(spec, cls, where: str) -> tuple[float, ...]:
+    width = len(cls.simulation_default)
+    try:
+        values = None if isinstance(spec, Mapping) else np.atleast_1d(np.asarray(spec,
+                                                                              dtype=float))
+    except (TypeError, ValueError):
+        values = None
+    if values is None or values.shape != (width,) or not np.all(np.isfinite(values)):
+        raise InputError(f"expected {width} finite number(s), got {spec!r}", where=where)
+    return tuple(float(v) for v in values)
 
 
 def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
-    """``{"joint_compliance": {j: c}, "joint_cyclic": {j: (a1, b1, a2, b2)},
-    "joint_scale": {j: s}, "thermal_drift": k}`` (SI) as ``TrueEffects``."""
-    effects = dict(effects or {})
-    unknown = set(effects) - set(EFFECT_NAMES)
-    if unknown:
-        raise InputError(f"unknown effect(s) {sorted(unknown)}; expected some of "
-                         f"{list(EFFECT_NAMES)}", where="effects")
-    compliance = _joint_map(effects.get("joint_compliance", {}), "joint_compliance", robot)
-    if any(c < 0 for c in compliance.values()):
-        raise InputError("compliance must not be negative", where="effects.joint_compliance")
-    if compliance and not robot.has_inertia:
-        raise InputError("joint_compliance needs 'mass' and 'com' on every joint of the robot "
-                         "file to simulate gravity torques", where="effects.joint_compliance")
-    cyclic = _joint_map(effects.get("joint_cyclic", {}), "joint_cyclic", robot, width=4)
-    scale = _joint_map(effects.get("joint_scale", {}), "joint_scale", robot)
-    thermal = effects.get("thermal_drift")
-    if thermal is not None:
-        if isinstance(thermal, Mapping):
-            thermal = thermal.get("k_T", thermal.get("k"))
-        try:
-            thermal = float(thermal)  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            raise InputError(f"expected a coefficient k [1/K], got {thermal!r}",
-                             where="effects.thermal_drift") from None
-    return TrueEffects(compliance, cyclic, scale, thermal)  # type: ignore[arg-type]
+    """The true effects from ``{name: spec}`` (SI), names from the effect registry.
+
+    ``spec`` per joint effect: ``{joint: value(s)}`` with as many values as the effect's
+    ``simulation_default`` (``joint_compliance`` ``{j: c}``, ``joint_cyclic``
+    ``{j: (a1, b1, a2, b2)}``, ``joint_scale`` ``{j: s}``, ``backlash`` ``{j: b}``);
+    ``joint_coupling`` ``{(j, k): (s, c)}`` or ``{"j@k": (s, c)}`` (joint j driven by k);
+    ``thermal_drift`` a coefficient ``k`` [1/K] (or ``{"k_T": k}``).
+    """
+    entries = []
+    for name, spec in dict(effects or {}).items():
+        if name not in EFFECTS:
+            raise InputError(f"unknown effect(s) [{name!r}]; expected some of "
+                             f"{list(EFFECTS)}", where="effects")
+        cls = EFFECTS[name]
+        where = f"effects.{name}"
+        if cls.per == "column":
+            value = spec
+            if isinstance(spec, Mapping):
+                value = next(iter(spec.values()), None) if len(spec) == 1 else spec
+            try:
+                value = float(value)  # type: ignore[arg-type]
+            except (TypeError, ValueError):
+                raise InputError(f"expected a coefficient k [1/K], got {spec!r}",
+                                 where=where) from None
+            effect = cls.for_simulation(())
+            values = effect.simulation_values((value,))
+        else:
+            if not isinstance(spec, Mapping):
+                raise InputError(f"expected a mapping joint -> value, got {spec!r}", where=where)
+            keys, values = [], {}
+            for key, value in spec.items():
+                key = cls.simulation_key(key, robot, where)
+                unit = cls.for_simulation((key,))
+                values.update(unit.simulation_values(_entry_values(value, cls, where)))
+                keys.append(key)
+            if not keys:
+                continue
+            effect = cls.for_simulation(keys)
+        effect.check_simulation(robot, values)
+        entries.append((effect, values))
+    order = list(EFFECTS)
+    entries.sort(key=lambda entry: order.index(entry[0].name))
+    return TrueEffects(tuple(entries))
+
+
+def directions_in_order(Q_read: np.ndarray) -> np.ndarray:
+    """The simulator's directions of motion (N x dof) of readings in written order: the sign
+    of each row's change from the row before, the previous direction where nothing
+    changed, 0 at the start."""
+    Q_read = np.atleast_2d(Q_read)
+    out = np.zeros(Q_read.shape)
+    for i in range(1, len(Q_read)):
+        for j in range(Q_read.shape[1]):
+            change = Q_read[i, j] - Q_read[i - 1, j]
+            out[i, j] = out[i - 1, j] if change == 0 else math.copysign(1.0, change)
+    return out
 
 
 # ----------------------------------------------------------------------------- the true robot
@@ -262,54 +298,91 @@ class TrueRobot:
         self.reference_temperature = reference_temperature
         self.payload_com = payload_com
         self.kinematics = Kinematics(robot)
-        registry = self.kinematics.registry
-        self._lengths = registry.indices(length_names(robot))
+        self.world = TrueWorld(robot, np.asarray(payload_com, dtype=float),
+                               float(reference_temperature))
 
     def parameters(self, temperature: float | None) -> np.ndarray:
         """True geometric vector [SI] at ``temperature`` [C] (thermal drift on d_i, a_i)."""
         p = self.kinematics.nominal.copy()
-        if self.effects.thermal is not None and temperature is not None:
-            p[self._lengths] *= 1.0 + self.effects.thermal * (temperature
-                                                              - self.reference_temperature)
-        return p
+        row = {"temperature": temperature}
+        change = np.zeros_like(p)
+        for effect, values in self.effects.entries:
+            dp = effect.simulated_dp(self.world, p, row, values)
+            if dp is not None:
+                change += dp
+        return p + change
 
-    def joint_delta(self, Q_read: np.ndarray, payload: np.ndarray) -> np.ndarray:
-        """``sum dq(q_read)`` (N x dof) [rad or m] of the joint effects."""
+    def play(self) -> np.ndarray:
+        """Per joint, how far the order of the readings may move them (backlash) [rad]."""
+        out = np.zeros(self.robot.dof)
+        for effect, values in self.effects.entries:
+            if any(is_direction_column(c) for c in effect.required_columns()):
+                for name, value in values.items():
+                    out[effect.joints[effect.parameter_names().index(name)] - 1] += abs(value)
+        return out
+
+    def joint_delta(self, Q_read: np.ndarray, payload: np.ndarray,
+                    directions: np.ndarray | None = None) -> np.ndarray:
+        """``sum dq(q_read)`` (N x dof) [rad or m] of the joint effects; ``directions``
+        (N x dof) of motion for backlash (0 where None)."""
         Q_read = np.atleast_2d(Q_read)
+        directions = np.zeros(Q_read.shape) if directions is None else np.atleast_2d(directions)
+        extras = {"payload": np.broadcast_to(np.asarray(payload, dtype=float), (len(Q_read),))}
+        for j in range(1, self.robot.dof + 1):
+            extras[direction_column(j)] = directions[:, j - 1]
         dq = np.zeros_like(Q_read)
-        e = self.effects
-        if e.compliance:
-            from .pinocchio_model import gravity_torques
-
-            torques = gravity_torques(self.robot, Q_read, payload, self.payload_com)
-            for j, c in e.compliance.items():
-                dq[:, j - 1] -= c * torques[:, j - 1]
-        for j, (a1, b1, a2, b2) in e.cyclic.items():
-            q = Q_read[:, j - 1]
-            dq[:, j - 1] += (a1 * np.sin(q) + b1 * np.cos(q)
-                             + a2 * np.sin(2 * q) + b2 * np.cos(2 * q))
-        for j, s in e.scale.items():
-            dq[:, j - 1] += s * Q_read[:, j - 1]
+        for effect, values in self.effects.entries:
+            dq += effect.simulated_dq(self.world, Q_read, extras, values)
         return dq
 
     def true_joints(self, Q_read: np.ndarray, payload: np.ndarray) -> np.ndarray:
-        """``q_true = q_read + dq(q_read)`` (N x dof)."""
+        """``q_true = q_read + dq(q_read)`` (N x dof), ``Q_read`` in the order written."""
         Q_read = np.atleast_2d(np.asarray(Q_read, dtype=float))
-        return Q_read + self.joint_delta(Q_read, payload)
+        return Q_read + self.joint_delta(Q_read, payload, directions_in_order(Q_read))
 
-    def readings(self, q_true: np.ndarray, payload: float) -> np.ndarray:
-        """The reading ``q_read`` with ``true_joints(q_read) = q_true`` (fixed point) [rad or m]."""
+    def readings(self, q_true: np.ndarray, payload: float,
+                 direction: np.ndarray | None = None) -> np.ndarray:
+        """The reading ``q_read`` with ``q_true = q_read + dq(q_read)`` (fixed point) [rad or m],
+        at the given ``direction`` of motion (0 where None)."""
         q_true = np.asarray(q_true, dtype=float)
         if not self.effects.any_joint_effect:
             return q_true.copy()
         q = q_true.copy()
+        directions = None if direction is None else np.asarray(direction)[None]
         for _ in range(100):
-            updated = q_true - self.joint_delta(q[None], np.array([payload]))[0]
+            updated = q_true - self.joint_delta(q[None], np.array([payload]), directions)[0]
             if np.max(np.abs(updated - q)) < 1e-14:
                 return updated
             q = updated
         raise InputError("the joint effects are too large to invert (fixed point does not "
                          "converge)", where="effects")
+
+    def readings_in_order(self, Q_true: np.ndarray, payloads) -> np.ndarray:
+        """The readings (N x dof) of true joints ``Q_true`` measured in this order: each
+        row's direction of motion follows from its own reading and the previous one."""
+        Q_true = np.atleast_2d(np.asarray(Q_true, dtype=float))
+        out = np.zeros(Q_true.shape)
+        last = np.zeros(self.robot.dof)
+        for i, (q_true, payload) in enumerate(zip(Q_true, payloads)):
+            direction = np.zeros(self.robot.dof)
+            if i:
+                change = np.sign(q_true - Q_true[i - 1])
+                direction = np.where(change != 0, change, last)
+            for _ in range(20):
+                q = self.readings(q_true, float(payload), direction)
+                found = direction
+                if i:
+                    change = np.sign(q - out[i - 1])
+                    found = np.where(change != 0, change, last)
+                if np.array_equal(found, direction):
+                    break
+                direction = found
+            else:
+                raise InputError(f"row {i + 1}: the joint moves less than its backlash, so its "
+                                 "direction of motion has no consistent reading", where="effects")
+            out[i], last = q, direction
+        return out
+
 
     def flange_poses(self, Q_true: np.ndarray, temperatures: np.ndarray | None) -> np.ndarray:
         """True world flange poses (N x 4 x 4) [m]."""
@@ -373,7 +446,7 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     true_effects = parse_effects(effects, nominal)
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
-    if temperature is None and true_effects.thermal is not None:
+    if temperature is None and true_effects.get("thermal_drift") is not None:
         temperature = (reference_temperature - 2.0, reference_temperature + 6.0)
 
     setup = _Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
@@ -461,7 +534,21 @@ class _Setup:
         """Joint limits shrunk by 1e-6 of the range: readings after effects stay inside."""
         lower, upper = self.nominal.lower_limits, self.nominal.upper_limits
         inset = np.where(np.isfinite(upper - lower), 1e-6 * (upper - lower), 0.0)
+        inset = inset + self.world.play()  # readings move by up to the play with the order
         return lower + inset, upper - inset
+
+    def in_order(self, Q_read: list, Q_true: list, payloads: list) -> np.ndarray:
+        """The readings of the rows in written order: as found row by row, or, with an
+        effect of the order of motion (backlash), found again in that order from the true
+        joints (the direction of each row follows from its reading and the previous one)."""
+        if not self.world.effects.sequential:
+            return np.array(Q_read)
+        out = self.world.readings_in_order(np.array(Q_true), payloads)
+        outside = [i for i, q in enumerate(out) if not self.within_limits(q)]
+        if outside:
+            raise InputError(f"with backlash, row {outside[0] + 1}'s reading leaves the joint "
+                             "limits; use a smaller backlash", where="effects.backlash")
+        return out
 
     def within_limits(self, q: np.ndarray) -> bool:
         robot = self.nominal
@@ -591,7 +678,7 @@ def _touches(setup: _Setup) -> _Generated:
     per_socket = 1 if setup.kind == "cross_bar" else max(1, setup.touches)
     ik = inverse_kinematics(world.kinematics, "point")
     bounds = setup.bounds()
-    poses, points, Q_read, payloads, temperatures = [], [], [], [], []
+    poses, points, Q_read, Q_true, payloads, temperatures = [], [], [], [], [], []
     sockets_truth: dict[int, dict[str, np.ndarray]] = {}
     attempts = 0
     with Progress(f"simulate {setup.kind}", total=setup.rows,
@@ -628,21 +715,23 @@ def _touches(setup: _Setup) -> _Generated:
                     q_read = world.readings(result.q, payload)
                     if not setup.within_limits(q_read):
                         break
-                    placed.append((name, q_read, payload))
+                    placed.append((name, q_read, payload, result.q))
                 else:
                     continue
                 break
             if len(placed) != len(names) * per_socket:
                 continue  # out of reach: skip this placement
-            for name, q_read, payload in placed:
+            for name, q_read, payload, q_true in placed:
                 poses.append(index)
                 points.append(name)
                 Q_read.append(q_read)
+                Q_true.append(q_true)
                 payloads.append(payload)
                 temperatures.append(temperature)
             sockets_truth[index] = dict(zip(names, positions))
             bar.update(len(sockets_truth))
     bar_length = float(setup.bar_length)
+    Q_read = setup.in_order(Q_read, Q_true, payloads)
 
     def fields(units: Units) -> dict:
         out: dict[str, Any] = {"probe": {"xyz": _in(units, DEFAULT_PROBE)}}
@@ -652,7 +741,7 @@ def _touches(setup: _Setup) -> _Generated:
         return out
 
     return _Generated(
-        Q_read=np.array(Q_read), extras=_extras(payloads, temperatures, setup),
+        Q_read=Q_read, extras=_extras(payloads, temperatures, setup),
         mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
         leading={"pose": poses, "point": points})
 
@@ -718,7 +807,7 @@ def _sphere_laser(setup: _Setup) -> _Generated:
             break
     centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
 
-    Q_read, payloads, temperatures, distances = [], [], [], []
+    Q_read, Q_true, payloads, temperatures, distances = [], [], [], [], []
     attempts = 0
     with Progress("simulate sphere_laser", total=setup.rows) if setup.progress else _Quiet() as bar:
         while len(Q_read) < setup.rows:
@@ -758,11 +847,12 @@ def _sphere_laser(setup: _Setup) -> _Generated:
             if not np.isfinite(distance):
                 continue
             Q_read.append(q_read)
+            Q_true.append(result.q)
             payloads.append(payload)
             temperatures.append(temperature)
             distances.append(distance + rng.normal(0.0, setup.noise))
             bar.update(len(Q_read))
-    Q_read_array = np.array(Q_read)
+    Q_read_array = setup.in_order(Q_read, Q_true, payloads)
     pendant = None
     if setup.readings == "pendant":
         flanges = Kinematics(robot).flange_poses(Q_read_array)

@@ -34,6 +34,8 @@ import casadi as ca
 import numpy as np
 
 from .errors import InputError, SolverError
+from .kinematics import Kinematics
+from .least_squares import Tolerances, levenberg_marquardt
 
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order
@@ -215,51 +217,30 @@ def _step(origin, direction, centre, delta):
 
 def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iterations: int,
                          gradient_tolerance: float = 1e-8, step_tolerance: float = 1e-12):
-    """Marquardt-scaled LM; returns ``(origin, direction, centre, iterations, status)``.
+    """The shared kernel on ``(origin, direction, centre)``; returns ``(origin, direction,
+    centre, iterations, status)``.
 
-    Converged when every column of ``J`` is orthogonal to ``r`` within
+    Steps are taken in ``[p0, a, b, c]`` with the direction moved in its tangent plane
+    (``_step``). Converged when every column of ``J`` is orthogonal to ``r`` within
     ``gradient_tolerance`` (cosine, as MINPACK's ``gtol``), when the RMS residual is below
-    ``EXACT_FIT`` (noise-free data), or when an accepted step changes the residual by less
-    than ``step_tolerance`` of its norm.
+    ``EXACT_FIT`` (noise-free data), or when a step falls below ``step_tolerance`` of the
+    scaled state.
     """
-    damping = 1e-3
-    r, J = scan.residual_and_jacobian(origin, direction, centre, tangent_basis(direction))
-    cost = r @ r
-    status = "max_iterations"
-    iteration = 0
-    for iteration in range(1, max_iterations + 1):
-        A = J.T @ J
-        g = J.T @ r
-        diag = np.maximum(np.diag(A), 1e-300)
-        if (np.max(np.abs(g) / np.sqrt(diag)) <= gradient_tolerance * np.sqrt(cost)
-                or cost <= len(r) * EXACT_FIT ** 2):
-            status, iteration = "converged", iteration - 1
-            break
-        improved = small = False
-        for _ in range(30):
-            try:
-                delta = np.linalg.solve(A + damping * np.diag(diag), -g)
-            except np.linalg.LinAlgError:
-                damping *= 10.0
-                continue
-            trial = _step(origin, direction, centre, delta)
-            r_new, J_new = scan.residual_and_jacobian(*trial, tangent_basis(trial[1]))
-            cost_new = r_new @ r_new
-            if np.isfinite(cost_new) and cost_new <= cost:
-                origin, direction, centre = trial
-                small = np.sqrt(diag) @ np.abs(delta) <= step_tolerance * np.sqrt(cost)
-                r, J, cost = r_new, J_new, cost_new
-                damping = max(damping / 5.0, 1e-12)
-                improved = True
-                break
-            damping *= 10.0
-        if not improved:
-            status = "stalled"
-            break
-        if small:
-            status = "converged"
-            break
-    return origin, direction, centre, iteration, status
+    def evaluate(state, jacobian: bool):
+        return scan.residual_and_jacobian(*state, tangent_basis(state[1]))
+
+    def retract(state, delta):
+        return _step(*state, delta)
+
+    def coordinates(state):
+        return np.concatenate([state[0], np.zeros(2), state[2]])
+
+    tolerances = Tolerances(gtol=gradient_tolerance, xtol=step_tolerance,
+                            residual_floor=np.sqrt(len(scan)) * EXACT_FIT)
+    fit = levenberg_marquardt(evaluate, (origin, direction, centre),
+                              max_iterations=max_iterations, tolerances=tolerances,
+                              retract=retract, coordinates=coordinates)
+    return (*fit.x, fit.iterations, fit.word)
 
 
 # ----------------------------------------------------------------------------- IPOPT
@@ -444,8 +425,6 @@ def fit_dataset(dataset, *, method: str = "lm", robot=None) -> SensorFit:
     """
     poses = dataset.flange_poses
     if poses is None:
-        from .kinematics import Kinematics
-
         poses = Kinematics(robot or dataset.robot).flange_poses(dataset.joints)
     try:
         return fit_sensor(poses, dataset.distance, dataset.radius,

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
-from .fields import cut
+from .fields import check_keys, cut, mapping, require
 
 LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
 ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -75,3 +75,21 @@ def parse_units(value: Any, *, file: str | Path | None, key: str = "units") -> U
             where=f"{key}.angle",
         )
     return Units(length, angle)
+
+
+def units_of(content: dict, *, file: str | Path | None, key: str = "units"):
+    """The file's ``units`` mapping as ``Units``; wrong types and unknown keys refused."""
+    value = mapping(require(content, key, file=file), file=file, where=key,
+                    hint="like {length: mm, angle: deg}")
+    check_keys(value, ("length", "angle"), file=file, where=key)
+    for name, known in (("length", LENGTH_SCALE), ("angle", ANGLE_SCALE)):
+        if name not in value:
+            raise InputError(f"missing required key; expected one of {sorted(known)}",
+                             file=file, where=f"{key}.{name}")
+        if value[name] is None:
+            raise InputError(f"no {name} unit given; expected one of {sorted(known)}",
+                             file=file, where=f"{key}.{name}")
+        if not isinstance(value[name], str):
+            raise InputError(f"unknown {name} unit {cut(value[name])}; expected one of "
+                             f"{sorted(known)}", file=file, where=f"{key}.{name}")
+    return parse_units(value, file=file, key=key)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import Problem, calibrate, diagnosis, models_for, solve
+from robocal_casadi.effects import EFFECTS
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.simulate import simulate
 
@@ -117,7 +118,7 @@ def test_clean_data_add_nothing(tmp_path, seed):
     # every candidate was tested and none was supported
     decisions = {entry["decision"] for entry in result.diagnosis}
     assert "added" not in decisions
-    assert {entry["effect"] for entry in result.diagnosis} == set(diagnosis.EFFECT_TYPES)
+    assert {entry["effect"] for entry in result.diagnosis} == set(EFFECTS)
 
 
 @pytest.mark.slow

@@ -318,7 +318,8 @@ def test_exact_derivatives_match_finite_differences(effect_name, robot_name):
 
 
 def test_registry_names_every_contract_effect():
-    assert set(EFFECTS) == {"joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift"}
+    assert set(EFFECTS) == {"joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift",
+                            "joint_coupling", "backlash"}
     for name, cls in EFFECTS.items():
         assert cls.name == name
 
@@ -333,3 +334,90 @@ def test_bad_joints_and_names_are_refused():
         Evaluator(JointCyclic((3,)), robot)
     with pytest.raises(InputError, match="twice"):
         Evaluator(JointScale((2, 2)), robot)
+
+
+# ----------------------------------------------------------------------- coupling, backlash
+
+
+def test_coupling_matches_its_definition():
+    from robocal_casadi.effects import JointCoupling
+
+    robot = ROBOTS["industrial_6r"]()
+    effect = JointCoupling((4, 5, 4), drivers=(6, 6, 1))
+    assert effect.parameter_names() == ("sin4_q6", "cos4_q6", "sin5_q6", "cos5_q6",
+                                        "sin4_q1", "cos4_q1")
+    evaluate = Evaluator(effect, robot)
+    theta = np.array([3e-4, -1e-4, 2e-4, 5e-5, -4e-4, 1e-4])
+    q = np.array([0.3, -0.5, 0.8, 1.1, -0.7, 2.5])
+    dq, dp = evaluate(q, theta)
+    expected = np.zeros(6)
+    expected[3] = 3e-4 * np.sin(2.5) - 1e-4 * np.cos(2.5) - 4e-4 * np.sin(0.3) + 1e-4 * np.cos(0.3)
+    expected[4] = 2e-4 * np.sin(2.5) + 5e-5 * np.cos(2.5)
+    np.testing.assert_allclose(dq, expected, atol=1e-18)
+    assert not dp.any()
+    with pytest.raises(InputError, match="cannot drive itself"):
+        JointCoupling((4,), drivers=(4,))
+    with pytest.raises(InputError, match="one driver per joint"):
+        JointCoupling((4, 5), drivers=(6,))
+    with pytest.raises(InputError, match="prismatic"):
+        Evaluator(JointCoupling((1,), drivers=(3,)), ROBOTS["prismatic_rrp"]())
+
+
+def test_coupling_candidates_are_the_ordered_pairs_of_revolute_joints():
+    from robocal_casadi.effects import JointCoupling
+
+    pairs = [u.pairs[0] for u in JointCoupling.candidates(ROBOTS["industrial_6r"](), {})]
+    assert len(pairs) == 30 and len(set(pairs)) == 30 and all(j != k for j, k in pairs)
+    rrp = [u.pairs[0] for u in JointCoupling.candidates(ROBOTS["prismatic_rrp"](), {})]
+    revolute = [j for j, joint in enumerate(ROBOTS["prismatic_rrp"]().joints, 1) if joint.revolute]
+    assert sorted(rrp) == sorted((j, k) for j in revolute for k in revolute if j != k)
+
+
+def test_backlash_is_half_the_play_against_the_direction_of_motion():
+    from robocal_casadi.effects import Backlash
+
+    robot = ROBOTS["industrial_6r"]()
+    effect = Backlash((2, 5))
+    assert effect.required_columns() == ("direction_q2", "direction_q5")
+    evaluate = Evaluator(effect, robot, columns=("direction_q2", "direction_q5", "payload"))
+    q = np.array([0.3, -0.5, 0.8, 1.1, -0.7, 2.5])
+    for d2, d5 in ((1.0, -1.0), (0.0, 1.0), (-1.0, 0.0)):
+        dq, dp = evaluate.f(q, evaluate.nominal, [4e-4, 1e-3], d2, d5, 0.0, np.zeros(3))
+        np.testing.assert_allclose(np.asarray(dq).ravel(),
+                                   [0, -2e-4 * d2, 0, 0, -5e-4 * d5, 0], atol=1e-18)
+
+
+def test_directions_of_motion_follow_the_row_order():
+    from robocal_casadi.effects.motion import directions_of_motion
+
+    Q = np.array([[0.0, 1.0], [0.2, 1.0], [0.2, 0.5], [0.1, 0.5], [0.1, 0.7], [0.1, 0.7]])
+    np.testing.assert_array_equal(directions_of_motion(Q), [[0, 0], [1, 0], [1, -1], [-1, -1],
+                                                            [-1, 1], [-1, 1]])
+    assert directions_of_motion(Q[:1]).tolist() == [[0.0, 0.0]]
+
+
+def test_data_selection_keeps_the_directions_of_the_full_table():
+    """Rows cut out of a table keep the directions they had in it, so a selected subset
+    is fitted with the same per-row inputs as the whole."""
+    from dataclasses import dataclass
+
+    from robocal_casadi.datasets import dataset_rows
+    from robocal_casadi.effects.motion import direction_values, directions_of_motion
+
+    rng = np.random.default_rng(2)
+    Q = rng.normal(size=(12, 3))
+
+    @dataclass(frozen=True)
+    class Table:  # what dataset_rows needs of a dataset
+        joints: np.ndarray
+        extras: dict
+
+    full = Table(Q, {"temperature": np.arange(12.0)})
+    mask = np.zeros(12, dtype=bool)
+    mask[[0, 3, 4, 9, 10]] = True
+    part = dataset_rows(full, mask)
+    for j in (1, 2, 3):
+        np.testing.assert_array_equal(direction_values(part, f"direction_q{j}"),
+                                      directions_of_motion(Q)[mask, j - 1])
+    # recomputing on the subset would differ: the test distinguishes the two
+    assert not np.array_equal(directions_of_motion(Q[mask]), directions_of_motion(Q)[mask])

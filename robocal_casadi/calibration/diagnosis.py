@@ -19,6 +19,8 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
    validation), and the extrapolating schemes that hold out contiguous ranges of each
    joint, clusters of configurations and whole datasets. All come from per-fold Gram
    matrices, so testing every candidate costs one Jacobian.
+   The held-out RMS must fall by at least ``MIN_GAIN`` (1%): an effect too small to
+   matter is not worth the risk of carrying it outside the fit region.
 4. Does it extrapolate? The held-out squared error summed over the extrapolating schemes
    must drop, and no single scheme may grow it by more than ``EXTRAPOLATION_TOLERANCE``:
    an effect that only fits the region it was fitted in (a periodic term bending to the
@@ -61,7 +63,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from ..effects import make_effect
+from ..effects import EFFECTS
 from ..effects.base import Effect
 from ..progress import Progress
 from ..results import EffectFinding, Identifiability
@@ -75,10 +77,10 @@ INVISIBLE = 1e-9  # [m] RMS change of a typical-size effect below which the data
 FOLDS = 5
 IMITATED = 0.01  # relative remaining norm below which the geometry nearly imitates a column
 CONFOUNDED = 0.9  # share of each other's explained residual two rival effects both explain
+MIN_GAIN = 0.01  # an effect must lower the held-out RMS by at least this fraction
 RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
 EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
-EFFECT_TYPES = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift")
 THERMAL_COLUMNS = ("temperature", "time")
 
 
@@ -111,6 +113,7 @@ class CandidateTest(Mapping):
     extrapolation: float = float("nan")  # held-out SSE after / before, extrapolating folds
     worst_region: str = ""  # the extrapolating scheme the candidate helps least
     estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
+    label: str = ""  # the candidate as the effect names it (e.g. a coupling's driver)
 
     def __getitem__(self, key: str):
         if key not in self._keys():
@@ -175,6 +178,7 @@ class _Candidate:
     names: tuple[str, ...]  # parameter names in the problem
     typical: float
     column: str | None = None  # thermal: which data column
+    unit: Effect | None = None  # the one-unit effect tested (a joint, a pair, a column)
 
 
 def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
@@ -198,31 +202,16 @@ def _candidates(problem: Problem, extras: dict) -> tuple[list[_Candidate], list[
     taken = set(problem.unknowns.names)
     candidates: list[_Candidate] = []
     effects: list[Effect] = []
-    for name in EFFECT_TYPES:
-        if name == "thermal_drift":
-            for column in THERMAL_COLUMNS:
-                if column not in extras:
-                    continue
-                effect = make_effect(name, (), robot, {column: extras[column]})
-                if set(effect.parameter_names()) & taken:
-                    continue
-                candidates.append(_Candidate(name, (), effect.parameter_names(),
-                                             effect.typical, column))  # type: ignore[attr-defined]
-                effects.append(effect)
-            continue
-        joints = []
-        for j in range(1, robot.dof + 1):
-            if name == "joint_cyclic" and not robot.joints[j - 1].revolute:
-                continue
-            single = make_effect(name, (j,), robot, extras)
-            names = single.parameter_names()
+    for cls in EFFECTS.values():
+        groups: dict[str | None, list[Effect]] = {}
+        for unit in cls.candidates(robot, extras):
+            names = unit.parameter_names()
             if not names or set(names) & taken:
                 continue
-            candidates.append(_Candidate(name, (j,), names,
-                                         single.typical))  # type: ignore[attr-defined]
-            joints.append(j)
-        if joints:
-            effects.append(make_effect(name, tuple(joints), robot, extras))
+            column = getattr(unit, "column", None)
+            candidates.append(_Candidate(cls.name, unit.joints, names, unit.typical, column, unit))
+            groups.setdefault(column, []).append(unit)
+        effects += [cls.merged(units, robot, extras) for units in groups.values()]
     return candidates, effects
 
 
@@ -414,6 +403,9 @@ class _Screening:
         after = self._cv(held_out)
         if np.isfinite(self.cv_before) and not after < self.cv_before:
             return "not supported"
+        if np.isfinite(self.cv_before) and after > (1.0 - MIN_GAIN) * self.cv_before:
+            return (f"too small to matter (held-out RMS -{100 * (1 - after / self.cv_before):.2g}"
+                    f"%, below {100 * MIN_GAIN:.2g}%)")
         total, worst, ratio = self.extrapolation(held_out)
         if np.isfinite(total) and (total >= 1.0 or ratio > 1.0 + EXTRAPOLATION_TOLERANCE):
             return (f"does not extrapolate (held out {worst}: squared error x{ratio:.3g}; "
@@ -437,37 +429,14 @@ class _Screening:
 
 def _implausible(effect: Effect, values: dict[str, float]) -> str:
     """'' when ``values`` (SI) are what real robots show for ``effect``, else why not."""
-    check = getattr(effect, "implausibility", None)
-    if check is not None:
-        return check(values) or ""
-    return _fallback_implausibility(effect.name, values)
+    return effect.implausibility(values) or ""
 
 
-def _fallback_implausibility(name: str, values: dict[str, float]) -> str:
-    degree = math.pi / 180
-    if name == "joint_compliance":
-        for key, value in values.items():
-            if key.startswith("c") and key[1:].isdigit() and not 0 < value <= 1e-4:
-                return f"{key} = {value:.3g} rad/Nm outside (0, 1e-4] rad/Nm"
-    if name == "joint_cyclic":
-        joints = sorted({key.split("_")[1] for key in values})
-        for j in joints:
-            for harmonic in ("1", "2"):
-                amplitude = math.hypot(values.get(f"a{harmonic}_{j}", 0.0),
-                                       values.get(f"b{harmonic}_{j}", 0.0))
-                if amplitude > 0.05 * degree:
-                    return (f"joint {j} harmonic {harmonic}: {amplitude / degree:.3g} deg "
-                            f"above 0.05 deg")
-    if name == "joint_scale":
-        for key, value in values.items():
-            if abs(value) > 2e-3:
-                return f"{key} = {value:.3g} beyond +-0.2%"
-    if name == "thermal_drift":
-        for key, value in values.items():
-            limit = 3e-5 if key == "k_T" else 1e-6
-            if abs(value) > limit:
-                return f"{key} = {value:.3g} beyond {limit:.0e}"
-    return ""
+def _label(candidate: _Candidate) -> str:
+    """The candidate as its effect names it (a coupling shows its driving joint)."""
+    if candidate.unit is not None:
+        return candidate.unit.label
+    return f"{candidate.effect}{list(candidate.joints)}"
 
 
 def _total(held_out: Sequence[float]) -> float:
@@ -551,8 +520,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                           and screening.overlap(s, t) > CONFOUNDED
                           and screening.overlap(t, s) > CONFOUNDED]
                 if rivals:
-                    names = ", ".join(f"{t.candidate.effect}{list(t.candidate.joints)}"
-                                      for t in rivals)
+                    names = ", ".join(_label(t.candidate) for t in rivals)
                     decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
                     continue
                 trial_free = free | _mask_of(big, s.kept)
@@ -587,7 +555,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
                     rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
                     cv_rms_after=after, decision=decisions[id(s)] or "not supported",
-                    extrapolation=total, worst_region=worst, estimate=s.values))
+                    extrapolation=total, worst_region=worst, estimate=s.values,
+                    label=_label(s.candidate)))
             if accepted is None:
                 break
             s, solution, r_new, J_new, trial_free, bic, after = accepted
@@ -612,14 +581,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
 def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,
            steps: list[_Step], extras: dict, method: str, loss: str):
     """The problem with the declared and the added effects only, solved jointly."""
-    joints: dict[tuple[str, str | None], list[int]] = {}
+    units: dict[tuple[str, str | None], list[Effect]] = {}
     for step in steps:
         key = (step.candidate.effect, step.candidate.column)
-        joints.setdefault(key, []).extend(step.candidate.joints)
+        units.setdefault(key, []).append(step.candidate.unit)  # type: ignore[arg-type]
     added: list[Effect] = []
-    for (name, column), js in joints.items():
+    for (name, column), group in units.items():
         data = {column: extras[column]} if column else extras
-        added.append(make_effect(name, tuple(sorted(js)), problem.robot, data))
+        added.append(EFFECTS[name].merged(group, problem.robot, data))
     effects = tuple(problem.effects) + tuple(added)
     final = sibling_problem(problem, effects)
     x_final = embed(big, x, final)
@@ -688,7 +657,7 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
         errors = {n: float(std[problem.unknowns.index(n)]) for n in kept}
         effect = next(e for e in problem.effects if e.name == name
                       and set(kept) <= set(e.parameter_names()))
-        text = _describe(name, effect, joints, values, units)
+        text = effect.describe(values, units)
         scale = units.length_scale
         numbers = evidence[key]
         held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
@@ -699,41 +668,3 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
                                       unit=effect.unit, evidence=dict(numbers), std=errors,
                                       summary=summary))
     return findings
-
-
-def _joint_list(joints: Sequence[int]) -> str:
-    if len(joints) == 1:
-        return f"joint {joints[0]}"
-    return "joints " + ", ".join(str(j) for j in joints[:-1]) + f" and {joints[-1]}"
-
-
-def _verb(joints) -> str:
-    return "deflects" if len(tuple(joints)) == 1 else "deflect"
-
-
-def _describe(name: str, effect: Effect, joints, values: dict, units) -> str:
-    """One sentence of what the parameters say, in the robot file's units."""
-    if name == "joint_compliance":
-        if getattr(effect, "lumped", False):
-            return (f"{_joint_list(joints)} {_verb(joints)} under gravity (lumped link masses: "
-                    f"{len(values)} terms)")
-        parts = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
-        return f"{_joint_list(joints)} {_verb(joints)} under gravity ({parts} {effect.unit})"
-    if name == "joint_cyclic":
-        parts = []
-        for j in joints:
-            first = math.hypot(values.get(f"a1_{j}", 0.0), values.get(f"b1_{j}", 0.0))
-            second = math.hypot(values.get(f"a2_{j}", 0.0), values.get(f"b2_{j}", 0.0))
-            a = units.angle_scale
-            parts.append(f"joint {j}: {first / a:.3g} {units.angle} once and {second / a:.3g} "
-                         f"{units.angle} twice per turn")
-        return "periodic reading error, " + "; ".join(parts)
-    if name == "joint_scale":
-        parts = "; ".join(f"joint {k[1:]} turns (1 + {v:.3g}) times its reading"
-                          for k, v in values.items())
-        return f"gear-ratio error: {parts}"
-    if name == "thermal_drift":
-        (key, value), = values.items()
-        per = "K" if key == "k_T" else "s"
-        return f"link lengths grow by {value:.3g} per {per} ({key})"
-    return ", ".join(f"{k} = {v:.3g}" for k, v in values.items())

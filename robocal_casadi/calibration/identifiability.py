@@ -14,12 +14,13 @@ columns nearly as good, the earlier one in a preference order wins. A column is
   one of linearly dependent columns"); the combination is reported as a base-parameter
   relation.
 
-"Zero" is exact up to ``RANK_TOLERANCE``; a parameter whose own part is below
-``PRACTICAL_TOLERANCE`` of its effect is treated the same way, with the fraction in the
-reason: the data cannot determine it (its standard error would be a hundred times that
-of a well-determined one) and it is better held at its nominal value than fitted to
-noise. The condition number is that of the identifiable columns after projection, each
-scaled to unit length.
+"Zero" is exact up to ``EXACT_TOLERANCE`` (``tolerance=EXACT_TOLERANCE``: only null
+directions are held, the rest is left to the prior, see ``prior``). With the default
+``PRACTICAL_TOLERANCE`` a parameter whose own part is below 1% of its effect is treated
+the same way, with the fraction in the reason: its standard error would be a hundred
+times that of a well-determined one, and without a prior it is better held at its
+nominal value than fitted to noise. The condition number is that of the identifiable
+columns after projection, each scaled to unit length.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from ..errors import SolverError
 from ..results import Identifiability
 
 RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
+EXACT_TOLERANCE = 10 * RANK_TOLERANCE  # hold only what is exactly undeterminable
 PRACTICAL_TOLERANCE = 1e-2  # own part below which the data cannot determine a parameter
 PREFERENCE_BAND = 0.5  # a preferred column may be picked if it has half the best remaining norm
 

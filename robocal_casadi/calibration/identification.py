@@ -14,6 +14,8 @@
 
 from __future__ import annotations
 
+import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
@@ -25,11 +27,14 @@ from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
 from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
-                       RmsSummary)
-from . import unexplained
+                       PriorSummary, RmsSummary, SphereEstimate)
+from . import diagnosis, unexplained
 from .degeneracy import check_dataset, check_finite
-from .identifiability import PRACTICAL_TOLERANCE, analyse
+from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
+from .prior import (DOMINATED_SHARE, SIGMA_ITERATIONS, SIGMA_SETTLED, Posterior, Prior,
+                    PriorProblem, copy_weights, duplicate_rows, posterior, tolerance_of)
 from .problem import Problem
+from .selection import select_by_condition
 from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
@@ -181,11 +186,14 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
     return {problem.unknowns.names[i]: float(x[i]) for i in np.flatnonzero(keep)}
 
 
+RULES = ("prior", "fraction")
+
+
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False, parameters: Sequence[str] | None = None
-              ) -> CalibrationResult:
+              progress: bool = False, rule: str = "prior",
+              parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
@@ -195,15 +203,25 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     than that fraction are dropped first, as in the bar patent (``selection``); what was
     dropped is in ``result.selection``.
 
+    ``rule`` decides which parameters the data estimate. ``"prior"`` (default): every
+    parameter that is not exactly undeterminable (no effect, absorbed by the placement,
+    an exact combination of others), by maximum a posteriori against the robot's
+    tolerances (``prior``); the parameters the prior dominates are flagged. ``"fraction"``:
+    every parameter with at least ``PRACTICAL_TOLERANCE`` of its effect its own, by least
+    squares, the rest held at nominal. Either way the least-squares fit of the second kind
+    runs first: it checks that the data determine what they must and sets the noise level.
+    Standard errors count repeated identical readings once (a warning on stderr says so).
+
     Arguments are checked at the door (``ArgumentError``, a ``ValueError``): ``method`` one
     of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
     closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
-    a number >= 0. ``parameters`` (robot parameter names) restricts the robot parameters
-    that may be fitted, e.g. to a controller's set (``profiles``); the others are held at
-    nominal. Default: all of them.
+    a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
+    restricts the robot parameters that may be fitted, e.g. to a controller's set
+    (``profiles``); the others are held at nominal. Default: all of them.
     """
     method = choice(method, METHODS, "method")
+    rule = choice(rule, RULES, "rule")
     loss = choice(loss, LOSSES, "loss")
     max_iterations = count(max_iterations, "max_iterations")
     if select_growth is not None:
@@ -236,8 +254,6 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
-        from .selection import select_by_condition
-
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
                                         growth=select_growth)
         if any(selection.dropped.values()):
@@ -276,17 +292,47 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
             f"iterations (--max-iterations)",
             stats={"iterations": geometric.iterations, "status": geometric.status})
 
+    # The least-squares fit above, on the parameters with a fair share of their own, also
+    # gives the noise level the prior is weighed against.
+    distinct, repeated, units_of_data = duplicate_rows(problem)
+    notes = []
+    if repeated:
+        notes.append(_warn_duplicates(repeated, units_of_data))
+    prior = None
+    if rule == "prior":
+        noise = posterior(problem.jacobian(geometric.x, geometric.free),
+                          problem.residual(geometric.x), np.flatnonzero(geometric.free), None,
+                          rows=distinct).sigma
+        determined = identifiability
+        identifiability, geometric, prior = _map_geometric(
+            problem, nominal.x, geometric.x, noise, distinct, method=method, loss=loss,
+            max_iterations=max_iterations, candidates=candidates)
+        # The condition number describes the data: that of the parameters with a fair share
+        # of their effect their own (the weak ones lean on the prior, not on the data).
+        identifiability = replace(identifiability,
+                                  condition_number=determined.condition_number)
+        free = geometric.free
+        if geometric.status != "converged":
+            raise SolverError(
+                f"{datasets[0].path.name}: the maximum a posteriori calibration ({method}) did "
+                f"not converge: {geometric.status} after {geometric.iterations} iterations",
+                stats={"iterations": geometric.iterations, "status": geometric.status})
+    dominated = _dominated(problem, geometric, prior, distinct)
+
     final_problem, final, findings, tested = problem, geometric, (), ()
     if diagnose:
-        from . import diagnosis  # the diagnosis builds on this module
-
         # An effect must also be usable on the held-out data: columns they all carry.
         available = None
         if validation:
             available = set.intersection(*(set(d.extras) for d in validation))
-        outcome = diagnosis.run(problem, geometric, identifiability, method=method, loss=loss,
+        # What the prior dominates stays where the prior put it while effects are sought:
+        # an unweighted refit would let it wander along the direction the data lack.
+        searched = _holding(geometric, problem.unknowns.indices(sorted(dominated)))
+        outcome = diagnosis.run(problem, searched, identifiability, method=method, loss=loss,
                                 available_columns=available)
         final_problem, final = outcome.problem, outcome.solution
+        if final is searched:
+            final = geometric
         findings, tested = outcome.added, outcome.tested
 
     x_nominal_final = _embed(problem, nominal.x, final_problem)
@@ -295,23 +341,41 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     fit = RmsSummary(problem.rms(nominal.x), problem.rms(geometric.x),
                      final_problem.rms(final.x))
 
-    validation_summary, validation_residuals = None, ()
+    validation_summary, validation_residuals, validation_placement = None, (), None
     if validation:
-        validation_summary, validation_residuals = _validate(
+        validation_summary, validation_residuals, validation_placement = _validate(
             robot, list(validation), problem, geometric.x, final_problem, final.x)
 
-    std = final.std
+    # Standard errors at the final estimate, from distinct readings only, with the prior
+    # on every parameter it weighs (held ones included).
     names = final_problem.unknowns.names
+    free_final = final.free.copy()
+    free_final[final_problem.unknowns.indices(sorted(dominated))] = True
+    final_prior = _prior_in(final_problem, prior)
+    final_distinct, _, _ = duplicate_rows(final_problem)
+    statistics = posterior(final_problem.jacobian(final.x, free_final),
+                           final_problem.residual(final.x), np.flatnonzero(free_final),
+                           final_prior, rows=final_distinct)
+    std = np.full(len(names), np.nan)
+    std[free_final] = statistics.std
+    if not np.isfinite(statistics.sigma):
+        notes.append("the distinct readings leave no degree of freedom to estimate the noise: "
+                     "no standard errors")
+    prior_summary = _prior_summary(final_problem, final_prior, statistics, rule)
     parameters = _estimates(problem, identifiability, final.x, std)
     parameters_geometric = _estimates(problem, identifiability, geometric.x, geometric.std)
     unexplained = find_unexplained(final_problem, final.x, final.free)
     recommended, recommendation = recommend(fit, validation_summary, bool(findings))
     mounted_slice = final_problem.slices["mounted"]
-    mounted = {names[i]: (float(final.x[i]), float(std[i]) if np.isfinite(std[i]) else None)
+    mounted = {names[i]: (float(final.x[i]), _finite(std[i]))
                for i in range(mounted_slice.start, mounted_slice.stop)}
     placement_slice = final_problem.slices["placement"]
     placement = {names[i]: float(final.x[i])
                  for i in range(placement_slice.start, placement_slice.stop)}
+    findings = tuple(replace(f, std={n: _finite(std[final_problem.unknowns.index(n)])
+                                     for n in f.parameters}) for f in findings)
+    spheres = _spheres(final_problem, final.x, std, "fit") + \
+        _spheres_of(validation, validation_residuals, validation_placement)
     chosen = final.x if recommended == "final" else geometric.x
     calibrated = robot.with_parameters(chosen[problem.slices["robot"]])
     return CalibrationResult(
@@ -340,7 +404,121 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         unexplained=unexplained,
         recommended=recommended,
         recommendation=recommendation,
+        prior=prior_summary,
+        spheres=spheres,
+        notes=tuple(notes),
     )
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def _warn_duplicates(repeated: int, units: int) -> str:
+    """One line on stderr (and the note for result.json) about repeated readings."""
+    note = (f"{repeated} of {units} units of data (placements or readings) repeat an earlier "
+            f"one exactly; standard errors count each distinct reading once")
+    print(f"warning: {note}", file=sys.stderr)
+    return note
+
+
+def _prior_of(problem: Problem, free: np.ndarray, sigma: float) -> Prior:
+    """The prior on the free robot and mounted parameters, centred on their start values."""
+    start = problem.initial()
+    index, tolerance = [], []
+    for i in np.flatnonzero(free & problem.mask("robot", "mounted")):
+        name = problem.unknowns.names[i]
+        t = tolerance_of(name, problem.unknowns.quantity(name), problem.robot)
+        if t is not None:
+            index.append(i)
+            tolerance.append(t)
+    index = np.array(index, dtype=int)
+    return Prior(tuple(problem.unknowns.names[i] for i in index), index, start[index],
+                 np.array(tolerance, float), sigma)
+
+
+def _prior_in(problem: Problem, prior: Prior | None) -> Prior | None:
+    """``prior`` in the layout of ``problem`` (same names; effects may shift the indices)."""
+    if prior is None:
+        return None
+    return Prior(prior.names, problem.unknowns.indices(prior.names), prior.centre,
+                 prior.tolerance, prior.sigma)
+
+
+def _dominated(problem: Problem, solution: Solution, prior: Prior | None, distinct) -> set[str]:
+    """Names of the parameters whose estimate the prior dominates (data share < 1/2)."""
+    if prior is None or not len(prior.index):
+        return set()
+    statistics = posterior(problem.jacobian(solution.x, solution.free), solution.residual,
+                           np.flatnonzero(solution.free), prior, rows=distinct)
+    return {name for name, share in zip(prior.names, statistics.share)
+            if np.isfinite(share) and share < DOMINATED_SHARE}
+
+
+def _holding(solution: Solution, held: np.ndarray) -> Solution:
+    """``solution`` with the unknowns ``held`` (indices) no longer free."""
+    if not len(held):
+        return solution
+    free = solution.free.copy()
+    free[held] = False
+    keep = free[solution.free]
+    return replace(solution, free=free, covariance=solution.covariance[np.ix_(keep, keep)])
+
+
+def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
+                   rule: str) -> PriorSummary:
+    """What the prior did: tolerances and the data's share per parameter, noise level."""
+    if prior is None:
+        return PriorSummary(rule=rule, noise=statistics.sigma)
+    share = dict(zip(prior.names, (float(s) for s in statistics.share)))
+    return PriorSummary(rule=rule, noise=statistics.sigma,
+                        tolerance=dict(zip(prior.names, map(float, prior.tolerance))),
+                        data_share=share,
+                        quantities={n: problem.unknowns.quantity(n) for n in prior.names})
+
+
+def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,
+               *, method: str, loss: str, max_iterations: int):
+    """MAP estimate over ``x[free]``; the noise level re-estimated until it settles."""
+    for _ in range(SIGMA_ITERATIONS):
+        solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
+                         method=method, loss=loss, max_iterations=max_iterations)
+        x = solution.x
+        r = problem.residual(x)
+        statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,
+                               rows=distinct)
+        settled = abs(statistics.sigma / prior.sigma - 1.0) < SIGMA_SETTLED
+        if not np.isfinite(statistics.sigma) or settled:
+            break
+        prior = prior.with_sigma(statistics.sigma)
+    covariance = np.nan_to_num(statistics.covariance, nan=0.0)
+    return replace(solution, residual=r, cost=0.5 * float(r @ r), covariance=covariance), prior
+
+
+def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
+                   distinct, *, method: str, loss: str, max_iterations: int, candidates=None):
+    """Identifiability with exact dependencies only, and the MAP fit of the rest
+    (``candidates``: the unknowns that may be fitted, default all)."""
+    if not np.isfinite(sigma) or sigma <= 0:
+        sigma = max(problem.rms(x_start), 1e-12)
+    identifiability = analyse_identifiability(problem, x_nominal, candidates,
+                                              tolerance=EXACT_TOLERANCE)
+    free = _free_mask(problem, identifiability)
+    solution, prior = _map_solve(problem, x_start, free, _prior_of(problem, free, sigma),
+                                 distinct, method=method, loss=loss,
+                                 max_iterations=max_iterations)
+    revised = analyse_identifiability(problem, solution.x, candidates,
+                                      tolerance=EXACT_TOLERANCE)
+    if set(revised.identifiable) > set(identifiability.identifiable):
+        free = _free_mask(problem, revised)
+        candidate, candidate_prior = _map_solve(
+            problem, solution.x, free, _prior_of(problem, free, prior.sigma), distinct,
+            method=method, loss=loss, max_iterations=max_iterations)
+        # Released at the estimate but barely there: where the fit with them does not
+        # settle (a few placements, noise-sized dependencies), they stay held.
+        if candidate.status == "converged":
+            identifiability, solution, prior = revised, candidate, candidate_prior
+    return identifiability, solution, prior
 
 
 def _estimates(problem: Problem, identifiability: Identifiability, x: np.ndarray,
@@ -353,7 +531,7 @@ def _estimates(problem: Problem, identifiability: Identifiability, x: np.ndarray
         rows.append(ParameterEstimate(
             name=name, quantity=problem.kinematics.registry.quantities[i],
             nominal=float(nominal_vector[i]), estimate=float(x[i]),
-            std=float(std[i]) if identified else None, identifiable=identified,
+            std=_finite(std[i]) if identified else None, identifiable=identified,
             reason=identifiability.unidentifiable.get(name)))
     return rows
 
@@ -436,7 +614,34 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
             joints=dataset.joints, extras=dict(dataset.extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
             frame=model.component_frame))
-    return summary, residuals
+    final_problem, x_val = stages[-1]
+    placement = final_problem.slices["placement"]
+    fitted = {final_problem.unknowns.names[i]: float(x_val[i])
+              for i in range(placement.start, placement.stop)}
+    return summary, residuals, (final_problem, x_val, fitted)
+
+
+def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str) -> tuple:
+    """Sphere centre [m] (base frame, with standard errors) and radius [m] per sphere dataset."""
+    out = []
+    for model in problem.models:
+        if model.dataset.kind != "sphere_laser":
+            continue
+        index = problem.placement_indices(model)
+        centre_std = None if std is None else [_finite(std[i]) for i in index]
+        out.append(SphereEstimate(label=model.label, role=role,
+                                  centre=tuple(float(x[i]) for i in index),
+                                  centre_std=None if centre_std is None else tuple(centre_std),
+                                  radius=float(model.dataset.radius)))
+    return tuple(out)
+
+
+def _spheres_of(validation, residuals, fitted) -> tuple:
+    """The spheres of the validation datasets, their centres fitted again there."""
+    if not validation or not fitted:
+        return ()
+    problem, x, _ = fitted
+    return _spheres(problem, x, None, "validation")
 
 
 Solution = Solution

@@ -20,7 +20,9 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from ..codegen import BatchFunction
 from ..effects.base import Effect, RowContext
+from ..effects.motion import direction_values, is_direction_column
 from ..errors import InputError
 from ..kinematics import Kinematics
 from ..measurement.base import MeasurementModel
@@ -158,6 +160,8 @@ class Problem:
         for i, column in enumerate(self.columns):
             if column in dataset.extras:
                 extras[i] = np.asarray(dataset.extras[column], dtype=float)
+            elif is_direction_column(column):  # derived from the full table's row order
+                extras[i] = direction_values(dataset, column)
             elif column != "payload":
                 raise InputError(f"effect needs a {column!r} column", file=dataset.data_path)
         payload_com = dataset.payload_com if dataset.payload_com is not None else np.zeros(3)
@@ -249,14 +253,10 @@ class Problem:
 
     @cached_property
     def _point_batch(self):
-        from ..codegen import BatchFunction
-
         return BatchFunction(self._row[0], per_row=("q", "extras", "offset"), chunk=256)
 
     @cached_property
     def _row_batch(self):
-        from ..codegen import BatchFunction
-
         rows = max((m.dataset.rows for m in self.models), default=0)
         return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
                              compile=rows >= COMPILE_ROWS)
@@ -278,8 +278,6 @@ class Problem:
         point = row(q, extras, p, theta, model.row_offset(data, mounted), payload_com,
                     effect_constants)
         r = model.row_residual(point, data, mounted, placement, constants)
-        from ..codegen import BatchFunction
-
         unknowns = ca.vertcat(p, theta, mounted, placement)
         inputs = [q, extras, data, p, theta, mounted, placement, payload_com, constants,
                   effect_constants]

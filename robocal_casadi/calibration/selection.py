@@ -10,7 +10,7 @@ by unit, so each step costs a small eigenvalue problem, not a new Jacobian.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,19 +30,6 @@ class Selection:
         kept = sum(len(v) for v in self.kept.values())
         return (f"Selection(kept {kept} units, dropped {dropped}, condition number "
                 f"{self.condition_number:.4g})")
-
-
-def dataset_rows(dataset, mask: np.ndarray):
-    """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
-    mask = np.asarray(mask, dtype=bool)
-    changes = {"extras": {k: np.asarray(v)[mask] for k, v in dataset.extras.items()}}
-    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
-        value = getattr(dataset, name, None)
-        if value is not None:
-            changes[name] = np.asarray(value)[mask]
-    if getattr(dataset, "point", None):
-        changes["point"] = tuple(p for p, keep in zip(dataset.point, mask) if keep)
-    return replace(dataset, **changes)
 
 
 def _condition(information: np.ndarray) -> float:

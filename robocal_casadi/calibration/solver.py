@@ -2,8 +2,9 @@
 
 Methods:
 
-* ``lm``: Levenberg-Marquardt on the exact Jacobian, column-scaled, with a QR solve of
-  the damped system (the default: it exploits the least-squares structure);
+* ``lm``: Levenberg-Marquardt on the exact Jacobian (the package's kernel,
+  ``least_squares.levenberg_marquardt``: Marquardt-scaled damping, a Cholesky solve of
+  the damped normal equations; the default, as it exploits the least-squares structure);
 * ``ipopt``: the same objective ``0.5 |r|^2`` handed to IPOPT through CasADi;
 * ``linearised``: the patent's iterated ``A dx = b`` (undamped Gauss-Newton steps);
 * ``two_stage``: the patent's scheme: angles with lengths held, then lengths with angles
@@ -26,6 +27,7 @@ import numpy as np
 
 from ..checks import array, choice, count, positive
 from ..errors import ArgumentError, SolverError
+from ..least_squares import DAMPING, Tolerances, levenberg_marquardt
 from .problem import Problem
 
 Method = Literal["lm", "ipopt", "linearised", "two_stage"]
@@ -33,6 +35,7 @@ Loss = Literal["linear", "huber"]
 METHODS: tuple[str, ...] = ("lm", "ipopt", "linearised", "two_stage")
 LOSSES: tuple[str, ...] = ("linear", "huber")
 TWO_STAGE_TOLERANCE = 1e-6  # relative cost decrease of a round below which two_stage stops
+CONVERGED_DECREASE = 1e-15  # relative cost decrease of a step at rounding level: converged
 
 
 @dataclass(frozen=True)
@@ -69,23 +72,6 @@ def _huber_weights(r: np.ndarray) -> np.ndarray:
     return np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-300))
 
 
-def _damped_step(J: np.ndarray, r: np.ndarray, lam: float) -> np.ndarray:
-    """Minimiser of ``|J s + r|^2 + lam |s|^2`` for unit-scaled columns.
-
-    Normal equations with a Cholesky factor: the columns are scaled to unit norm, so
-    ``J^T J`` is well scaled; a rank-deficient system falls back to an SVD solve.
-    """
-    A = J.T @ J
-    A[np.diag_indices_from(A)] += lam
-    g = -(J.T @ r)
-    try:
-        L = np.linalg.cholesky(A)
-        return np.linalg.solve(L.T, np.linalg.solve(L, g))
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(np.vstack([J, np.sqrt(lam) * np.eye(J.shape[1])]),
-                               np.concatenate([-r, np.zeros(J.shape[1])]), rcond=None)[0]
-
-
 def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     m, n = J.shape
     dof = max(m - n, 1)
@@ -98,53 +84,21 @@ def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, loss: str,
                          max_iterations: int, damping: bool, tolerance: float):
+    """The shared kernel over ``x[free]``: damped (``lm``) or plain Gauss-Newton steps."""
+    def evaluate(z: np.ndarray, jacobian: bool):
+        full = x.copy()
+        full[free] = z
+        return problem.residual(full), problem.jacobian(full, free) if jacobian else None
+
+    fit = levenberg_marquardt(
+        evaluate, x[free].copy(), max_iterations=max_iterations,
+        tolerances=Tolerances(ftol=CONVERGED_DECREASE, xtol=tolerance),
+        damping=DAMPING if damping else None,
+        reweight=_huber_weights if loss == "huber" else None)
     x = x.copy()
-    lam = 1e-4 if damping else 0.0
-    r = problem.residual(x)
-    weights = _huber_weights(r) if loss == "huber" else np.ones_like(r)
-    cost = 0.5 * float(np.sum(weights * r**2))
-    status = "max_iterations"
-    iterations = 0
-    for iterations in range(1, max_iterations + 1):
-        J = problem.jacobian(x, free)
-        w = np.sqrt(weights)
-        Jw, rw = J * w[:, None], r * w
-        scale = np.linalg.norm(Jw, axis=0)
-        scale[scale == 0] = 1.0
-        Js = Jw / scale
-        while True:
-            step_scaled = _damped_step(Js, rw, lam)
-            step = step_scaled / scale
-            trial = x.copy()
-            trial[free] += step
-            r_trial = problem.residual(trial)
-            cost_trial = 0.5 * float(np.sum(weights * r_trial**2))
-            if not np.isfinite(cost_trial):
-                cost_trial = np.inf
-            if cost_trial <= cost or not damping:
-                break
-            lam = max(lam * 10.0, 1e-8)
-            if lam > 1e12:
-                # Even a vanishing gradient step raises the cost: the gradient is zero to
-                # machine precision, i.e. this is the minimum.
-                status = "converged"
-                break
-        if status == "converged":
-            break
-        improvement = cost - cost_trial
-        x, r = trial, r_trial
-        if loss == "huber":
-            weights = _huber_weights(r)
-            cost_trial = 0.5 * float(np.sum(weights * r**2))
-        cost = cost_trial
-        if damping:
-            lam = max(lam / 10.0, 1e-12)
-        if np.linalg.norm(step_scaled) < tolerance * (1.0 + np.linalg.norm(x[free] * scale)) \
-                or abs(improvement) <= 1e-15 * max(cost, 1e-300) or cost == 0:
-            status = "converged"
-            break
+    x[free] = fit.x
     r, covariance = _finish(problem, x, free, loss)
-    return x, r, covariance, cost, iterations, status
+    return x, r, covariance, fit.cost, fit.iterations, fit.word
 
 
 def _finish(problem: Problem, x: np.ndarray, free: np.ndarray, loss: str):

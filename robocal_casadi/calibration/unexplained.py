@@ -12,8 +12,9 @@ backlash, a warm-up: each is such a variation, named or not.
 For one variable ``v`` and one parameter ``p_c`` (``theta``, ``d``, ``a``, ``alpha`` of
 each joint) the residual would move by ``sum_k S_c[:, k] g(v_k)``, with ``S_c`` the
 row sensitivities (``Problem.row_sensitivities``) and ``g`` a flexible function of
-``v``: piecewise-linear on knots at the quantiles of ``v`` (a product of two such for a
-pair; one value per sign for a direction). The columns are projected off everything the
+``v``: piecewise-linear on knots at the quantiles of ``v``, plus the first two harmonics
+for a joint angle (a product of two piecewise-linear functions for a pair; one value per
+sign for a direction). The columns are projected off everything the
 model already fits; the drop of the residual sum of squares gives a likelihood-ratio
 statistic, compared with the chi-square quantile at a family-wise level ``ALPHA`` shared
 over all tests (Bonferroni). The strongest significant tests (distinct variables, at most
@@ -36,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..effects.motion import directions_of_motion
 from .folds import FoldGrams, fold_schemes
 
 ALPHA = 1e-3  # family-wise false-alarm level over all tests
@@ -130,11 +132,8 @@ def _hats(values: np.ndarray, knots: int) -> np.ndarray | None:
 
 
 def _directions(joints: np.ndarray) -> np.ndarray:
-    """Sign of each joint's change from the previous row (0 for the first and still rows)."""
-    out = np.zeros_like(joints)
-    if len(joints) > 1:
-        out[1:] = np.sign(np.diff(joints, axis=0))
-    return out
+    """Each joint's direction of motion in row order (see ``effects.motion``)."""
+    return directions_of_motion(joints)
 
 
 def _variables(problem) -> list[_Variable]:
@@ -161,6 +160,11 @@ def _variables(problem) -> list[_Variable]:
             continue
         moving.append(j)
         basis = _hats(values, KNOTS)
+        if basis is not None and joint.revolute:
+            # Hats follow any shape between knots; the first two harmonics follow what
+            # turns with the joint (gears, eccentric loads) across the whole range.
+            basis = np.column_stack([basis, np.sin(values), np.cos(values),
+                                     np.sin(2 * values), np.cos(2 * values)])
         if basis is not None:
             out.append(_Variable(f"q{j + 1}", basis))
         sign = directions[:, j]

@@ -138,6 +138,13 @@ def summary(result: CalibrationResult) -> str:
         lines.append(result.profile.sentence(units, result.fit, result.validation))
     if result.delivered is not None:
         lines += delivered_lines(result.delivered, s, units.length)
+    stand_ins = _rejected(result, "implausible")
+    if stand_ins:
+        lines.append("not added, sizes no real robot shows (they stand in for something the "
+                     f"library does not name): {', '.join(stand_ins)}")
+    confounded = _rejected(result, "confounded")
+    if confounded:
+        lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
     if result.unexplained is not None:
         lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
     else:
@@ -155,6 +162,18 @@ def profiled(datasets, validation, profile: str, options: dict) -> CalibrationRe
                  if n in free.robot_nominal.parameters() and n not in allowed)
     cost = ProfileCost(profile, allowed, held, free.fit, free.validation)
     return replace(restricted, profile=cost)
+
+
+def _rejected(result: CalibrationResult, word: str) -> list[str]:
+    """Labels of the candidates whose decision holds ``word`` and were never added."""
+    added = {(e.name, tuple(e.joints)) for e in result.effects}
+    out: list[str] = []
+    for test in result.diagnosis:
+        label = test.get("label") or f"{test['effect']}{list(test['joints'])}"
+        if word in test["decision"] and (test["effect"], tuple(test["joints"])) not in added \
+                and label not in out:
+            out.append(label)
+    return out
 
 
 def report_info(args: argparse.Namespace, datasets: list):

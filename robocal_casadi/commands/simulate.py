@@ -16,21 +16,15 @@ artifact (cross_bar: 4 touches each; artifact_touches: --sockets x --touches eac
 --noise STD: tracker_points, per measured coordinate; cross_bar and artifact_touches,
 per coordinate of the probe's seat in its socket; sphere_laser, of the laser distance.
 
---effect NAME[:SPEC], repeatable (values in SI, joints 1-based; without values the
-typical magnitudes shown in brackets are used):
-  joint_compliance:2,3 or joint_compliance:2=1e-6,3=2e-6   c [rad/Nm]  [1e-6]
-      q_true = q_read - c g(q_read), g the gravity torque (links + payload column)
-  joint_cyclic:2 or joint_cyclic:2=a1/b1/a2/b2              [rad]  [2e-4/1e-4/1e-4/5e-5]
-      q_true = q_read + a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q
-  joint_scale:3 or joint_scale:3=5e-4                       s [1]  [5e-4]
-      q_true = (1 + s) q_read
-  thermal_drift or thermal_drift:1.2e-5                     k [1/K]  [1.2e-5]
-      every d_i, a_i of the true robot becomes L (1 + k (T - T_ref)); a drifting
-      temperature column is written (see --temperature, --reference-temperature)
+--effect NAME[:SPEC], repeatable (values in SI, joints 1-based, several values
+separated by '/', several joints by ','; without values the defaults shown are used):
+{effects}
 
 Example:
   robocal simulate --example industrial_6r --kind tracker_points --rows 500 \\
       --noise 0.01 --errors 0.5,0.05 --effect joint_compliance:2,3 --seed 1 --out sim
+  robocal simulate --example industrial_6r --kind tracker_points --rows 400 \\
+      --effect joint_coupling:5@6=2e-4/1e-4 --effect backlash:2=5e-4 --out sim2
 """
 
 from __future__ import annotations
@@ -43,12 +37,13 @@ from ..errors import InputError
 from ..fields import check_magnitude
 from ..examples import ROBOTS
 from ..robot import Robot, load_robot
-from ..simulate import EFFECT_NAMES, READINGS, simulate
+from ..effects import EFFECTS
+from ..simulate import READINGS, simulate
 from ..units import Units, parse_units
 from .arguments import add_force, output_folder, seed
 
-DEFAULTS = {"joint_compliance": 1e-6, "joint_cyclic": (2e-4, 1e-4, 1e-4, 5e-5),
-            "joint_scale": 5e-4, "thermal_drift": 1.2e-5}
+__doc__ = (__doc__ or "").format(effects="\n".join(f"  {cls.simulation_syntax()}"
+                                         for cls in EFFECTS.values()))
 KIND_CHOICES = ("tracker_points", "cross_bar", "artifact_touches", "sphere_laser")
 
 
@@ -151,30 +146,26 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
         name, _, spec = option.partition(":")
         name = name.strip()
         where = f"--effect {option}"
-        if name not in EFFECT_NAMES:
-            raise InputError(f"unknown effect {name!r}; expected one of {list(EFFECT_NAMES)}",
+        if name not in EFFECTS:
+            raise InputError(f"unknown effect {name!r}; expected one of {list(EFFECTS)}",
                              where=where)
-        if name == "thermal_drift":
-            effects[name] = float(_floats(spec, 1, where)[0]) if spec else DEFAULTS[name]
+        cls = EFFECTS[name]
+        width = len(cls.simulation_default)
+        if cls.per == "column":
+            values = _floats(spec.replace("/", ","), width, where) if spec else \
+                list(cls.simulation_default)
+            effects[name] = values[0] if width == 1 else tuple(values)
             continue
         if not spec:
-            raise InputError("name the joints, e.g. joint_compliance:2,3", where=where)
+            key = "2@3" if cls.per == "pair" else "2,3"
+            raise InputError(f"name the joints, e.g. {name}:{key}", where=where)
         entries = effects.setdefault(name, {})
         for item in spec.split(","):
-            joint_text, _, value_text = item.partition("=")
-            try:
-                joint = int(joint_text)
-            except ValueError:
-                raise InputError(f"expected a joint number, got {joint_text!r}",
-                                 where=where) from None
-            if not 1 <= joint <= robot.dof:
-                raise InputError(f"joint {joint} out of range 1..{robot.dof}", where=where)
-            if not value_text:
-                entries[joint] = DEFAULTS[name]
-            elif name == "joint_cyclic":
-                entries[joint] = tuple(_floats(value_text.replace("/", ","), 4, where))
-            else:
-                entries[joint] = _floats(value_text, 1, where)[0]
+            key_text, _, value_text = item.partition("=")
+            key = cls.simulation_key(key_text, robot, where)
+            values = _floats(value_text.replace("/", ","), width, where) if value_text else \
+                list(cls.simulation_default)
+            entries[key] = values[0] if width == 1 else tuple(values)
     return effects
 
 

@@ -1,57 +1,65 @@
-"""Effects the DH model lacks, each a small ``Effect`` subclass.
+"""Effects the DH model lacks, each a small ``Effect`` subclass in its own module.
 
-``EFFECTS`` maps the contract's effect names to their classes; ``make_effect`` builds one
-for a robot and the fit data (lumped compliance without masses, a thermal reference
-from the data's mean).
+``EFFECTS`` is the registry: it maps the contract's effect names to their classes, in
+the order diagnosis tries them, and is what diagnosis, the simulator, the ``simulate``
+command and the report read. Adding an effect means writing its module and adding its
+class to ``REGISTERED`` below. ``make_effect`` builds one for a robot and the fit data
+(lumped compliance without masses, a thermal reference from the data's mean, the
+driving joints of a coupling).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any, Mapping
 
 from ..errors import InputError
 from ..robot import Robot
-from .base import Effect, RowContext
+from .backlash import Backlash
+from .base import (Contribution, Effect, Implausible, Plausible, RowContext, TrueWorld,
+                   joint_list)
 from .compliance import JointCompliance
+from .coupling import JointCoupling
 from .cyclic import JointCyclic
 from .gravity import GravityModel, gravity_torque
+from .motion import directions_of_motion, direction_column, with_directions
 from .scale import JointScale
 from .thermal import ThermalDrift
 
-EFFECTS: dict[str, type[Effect]] = {
-    "joint_compliance": JointCompliance,
-    "joint_cyclic": JointCyclic,
-    "joint_scale": JointScale,
-    "thermal_drift": ThermalDrift,
-}
+REGISTERED: tuple[type[Effect], ...] = (JointCompliance, JointCyclic, JointScale, ThermalDrift,
+                                        JointCoupling, Backlash)
+EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in REGISTERED}
+
+
+def effect_class(name: str, where: str = "effects") -> type[Effect]:
+    """The registered class of effect ``name``; an ``InputError`` listing the valid names."""
+    if name not in EFFECTS:
+        raise InputError(f"unknown effect {name!r}; valid names: {', '.join(EFFECTS)}",
+                         where=where)
+    return EFFECTS[name]
+
+
+def effect_title(name: str) -> str:
+    """The effect's name in words (``joint_cyclic`` -> ``Periodic joint error``)."""
+    cls = EFFECTS.get(name)
+    return cls.title if cls is not None else name.replace("_", " ").capitalize()
 
 
 def make_effect(name: str, joints=(), robot: Robot | None = None,
-                extras: dict | None = None) -> Effect:
+                extras: Mapping[str, Any] | None = None, **options) -> Effect:
     """The effect ``name`` on ``joints`` (1-based), set up for ``robot`` and the fit data.
 
     ``extras`` are the fit data's extra columns (one array per name, all datasets
     joined): ``payload`` switches on the payload term of lumped compliance; for
     ``thermal_drift`` the column is ``temperature`` if present, else ``time``, and its
-    mean becomes the reference.
+    mean becomes the reference. ``options`` go to the class (``drivers`` of a
+    ``joint_coupling``, one per joint).
     """
-    extras = extras or {}
-    if name not in EFFECTS:
-        raise InputError(f"unknown effect {name!r}; valid names: {', '.join(EFFECTS)}",
-                         where="effects")
-    joints = tuple(int(j) for j in joints)
-    if name == "joint_compliance":
-        return JointCompliance(joints, robot=robot, payload="payload" in extras)
-    if name == "thermal_drift":
-        column = "temperature" if "temperature" in extras else "time"
-        if column not in extras:
-            raise InputError("thermal_drift needs a 'temperature' or 'time' column in the data",
-                             where="effects")
-        effect = ThermalDrift(joints, column=column)
-        effect.reference({column: np.asarray(extras[column], dtype=float)})
-        return effect
-    return EFFECTS[name](joints)
+    return effect_class(name).create(tuple(int(j) for j in joints), robot, extras or {},
+                                     **options)
 
 
-__all__ = ["EFFECTS", "Effect", "GravityModel", "JointCompliance", "JointCyclic", "JointScale",
-           "RowContext", "ThermalDrift", "gravity_torque", "make_effect"]
+__all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Implausible",
+           "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "Plausible",
+           "REGISTERED", "RowContext", "ThermalDrift", "TrueWorld", "direction_column",
+           "directions_of_motion", "effect_class", "effect_title", "gravity_torque",
+           "joint_list", "make_effect", "with_directions"]

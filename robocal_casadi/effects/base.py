@@ -1,28 +1,47 @@
 """The contract every effect model fulfils.
 
 An effect is something the DH model lacks (joint compliance, periodic gear errors, a
-gear-ratio error, thermal growth). It owns a few named parameters and, for one row of
-data, returns symbolic corrections to the joint readings and to the geometric
-parameters:
+gear-ratio error, thermal growth, coupling between joints, backlash). It owns a few
+named parameters ``theta`` and, for one row of data, returns corrections to the joint
+readings and to the geometric parameters:
 
-    q_effective = q + dq(q, p, extras; theta)        [rad or m]
-    p_effective = p + dp(q, p, extras; theta)        [SI, registry order]
+    q_effective = q + dq(q, p, extras; theta)        [rad or m], joint space
+    p_effective = p + dp(q, p, extras; theta)        [SI], geometric registry order
 
-Forward kinematics is then evaluated at ``(q_effective, p_effective)``. Everything is
-CasADi SX, so identification gets exact derivatives. Adding an effect means writing one
-small subclass.
+Forward kinematics is then evaluated at ``(q_effective, p_effective)``; ``q`` are the
+readings (what the controller reports), ``p`` the robot's DH parameters (lengths [m],
+angles [rad], in the frames of the DH convention), ``extras`` the row's extra columns
+(``temperature`` [C], ``time`` [s], ``payload`` [kg]) and the per-row inputs derived from
+the table's order (``direction_q{j}``, see ``motion``). ``delta`` is CasADi SX, so
+identification gets exact derivatives.
+
+Adding an effect means writing one subclass in one module of this package and listing
+it in ``effects/__init__.py``'s registry; everything else reads the class:
+
+* ``name`` (result.json), ``title`` (report heading), ``unit`` (of the parameters),
+  ``sentence`` (template of ``describe``), ``plot_variable`` (what to plot it against);
+* ``plausible(parameter)`` (the range seen on real robots, for refusing absurd
+  estimates), ``typical`` (a typical size, for judging whether data see it);
+* ``candidates`` / ``merged`` (the units diagnosis tests one by one, and one effect
+  holding several of them), ``create`` (one effect from a result's joints);
+* ``simulation_default`` and ``simulated_dq`` / ``simulated_dp``: the truth for the
+  simulator, in numpy, written independently of ``delta``.
 """
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import ClassVar
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping, Sequence
 
 import casadi as ca
+import numpy as np
 
+from ..errors import InputError
 from ..parameters import ParameterRegistry
 from ..robot import Robot
+from ..units import Units
 
 
 @dataclass(frozen=True)
@@ -30,10 +49,10 @@ class RowContext:
     """What an effect may look at for one data row (all CasADi SX).
 
     ``q`` (dof,) joint readings; ``p`` geometric parameters (registry order, SI);
-    ``extras`` maps column names (``temperature`` [C], ``time`` [s], ``payload`` [kg], ...)
-    to scalar symbols; ``payload_com`` (3,) [m] in the flange frame; ``constants`` the
-    effect's own ``Effect.constants`` as symbols (None where the caller gives none: the
-    effect then uses its numbers directly).
+    ``extras`` maps column names (``temperature`` [C], ``time`` [s], ``payload`` [kg],
+    ``direction_q{j}`` [1], ...) to scalar symbols; ``payload_com`` (3,) [m] in the flange
+    frame; ``constants`` the effect's own ``Effect.constants`` as symbols (None where the
+    caller gives none: the effect then uses its numbers directly).
     """
 
     robot: Robot
@@ -45,11 +64,116 @@ class RowContext:
     constants: ca.SX | None = None
 
 
-class Effect(ABC):
-    """One effect with named parameters ``theta``; see the module docstring."""
+@dataclass(frozen=True)
+class Plausible:
+    """The range of one parameter on real robots, in the parameter's unit (SI).
 
-    name: ClassVar[str]  # contract name, e.g. "joint_compliance"
-    unit: ClassVar[str]  # unit of the parameters in result.json, e.g. "rad/Nm"
+    ``maximum``: the largest plausible magnitude ``|value|``; ``minimum``: the smallest
+    plausible nonzero magnitude (0: any small value is plausible); ``sign``: +1 the value
+    must not be negative, -1 not positive, 0 either; ``basis``: where the numbers come
+    from, in words.
+    """
+
+    maximum: float
+    minimum: float = 0.0
+    sign: int = 0
+    basis: str = ""
+
+    def __post_init__(self):
+        if not 0.0 <= self.minimum <= self.maximum:
+            raise ValueError(f"Plausible: need 0 <= minimum <= maximum, got {self.minimum}, "
+                             f"{self.maximum}")
+        if self.sign not in (-1, 0, 1):
+            raise ValueError(f"Plausible: sign must be -1, 0 or +1, got {self.sign}")
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """One estimate outside its ``Plausible`` range: which, by how much, in words.
+
+    ``factor`` is how far outside: ``|value| / maximum`` above the range,
+    ``minimum / |value|`` below it, ``inf`` for a wrong sign.
+    """
+
+    parameter: str
+    value: float
+    unit: str
+    plausible: Plausible
+    factor: float
+    message: str
+
+
+def amplitude_check(effect: "Effect", pairs, values: Mapping[str, float],
+                    limits: Plausible) -> tuple[Implausible, ...]:
+    """``Implausible`` for each (sine, cosine) parameter pair whose amplitude
+    ``hypot(sine, cosine)`` exceeds ``limits.maximum``, named ``sine/cosine``."""
+    out = []
+    for sine, cosine in pairs:
+        if sine not in values and cosine not in values:
+            continue
+        amplitude = math.hypot(float(values.get(sine, 0.0)), float(values.get(cosine, 0.0)))
+        if amplitude > limits.maximum:
+            factor = amplitude / limits.maximum
+            out.append(Implausible(f"{sine}/{cosine}", amplitude, effect.unit, limits, factor,
+                                   f"the amplitude of {sine} and {cosine}, {amplitude:.3g} "
+                                   f"{effect.unit}, is {factor:.3g} times the largest plausible "
+                                   f"{limits.maximum:.3g} {effect.unit} ({limits.basis})"))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Contribution:
+    """An effect evaluated on N rows: ``dq`` (N x dof) [rad or m] and ``dp`` (N x number of
+    geometric parameters) [SI], the corrections of ``delta`` at the given ``theta``."""
+
+    dq: np.ndarray
+    dp: np.ndarray
+
+
+@dataclass(frozen=True)
+class TrueWorld:
+    """What the simulator's truth of an effect may use besides the rows.
+
+    ``robot`` the true robot (its geometry, masses, gravity); ``payload_com`` (3,) [m] in
+    the flange frame; ``reference_temperature`` [C], the ``T_ref`` of thermal growth.
+    """
+
+    robot: Robot
+    payload_com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    reference_temperature: float = 20.0
+
+
+class Effect(ABC):
+    """One effect with named parameters ``theta``; see the module docstring.
+
+    Class attributes every subclass sets:
+
+    ``name``: the contract name in result.json (``joint_compliance``); ``title``: the
+    name in words (``Joint compliance``); ``unit``: of the parameters in result.json
+    (``rad/Nm``); ``typical``: a typical parameter magnitude [unit], for judging whether
+    the data see the effect; ``sentence``: a ``str.format`` template of one sentence
+    saying what the fitted values mean, filled by ``describe``; ``plot_variable``: what the
+    error is plotted against (``PLOT_VARIABLES``); ``per``: what one candidate (and one
+    simulated entry) is: ``joint``, ``pair`` (a joint and the joint driving it) or
+    ``column`` (one data column, no joints); ``revolute_only``: whether the joints must be
+    revolute; ``simulation_default``: the true values of one entry [unit] the simulator
+    uses when none are given, in ``parameter_names`` order; ``formula``: the relation in
+    one line, as the terminal shows it (``q_true = (1 + s) q_read``).
+    """
+
+    PLOT_VARIABLES: ClassVar[tuple[str, ...]] = ("joint", "torque", "driver", "direction",
+                                                  "column")
+
+    name: ClassVar[str]
+    title: ClassVar[str]
+    unit: ClassVar[str]
+    typical: ClassVar[float]
+    sentence: ClassVar[str]
+    plot_variable: ClassVar[str]
+    per: ClassVar[str] = "joint"
+    revolute_only: ClassVar[bool] = False
+    simulation_default: ClassVar[tuple[float, ...]]
+    formula: ClassVar[str]
 
     def __init__(self, joints: tuple[int, ...]):
         self.joints = tuple(int(j) for j in joints)  # 1-based
@@ -61,6 +185,8 @@ class Effect(ABC):
     def label(self) -> str:
         return f"{self.name}{list(self.joints)}"
 
+    # ----------------------------------------------------------------- parameters
+
     @abstractmethod
     def parameter_names(self) -> tuple[str, ...]:
         """Names of ``theta``, unique across effects (e.g. ``("c2", "c3")``)."""
@@ -69,8 +195,69 @@ class Effect(ABC):
         names = self.parameter_names()
         return ParameterRegistry(names, ("none",) * len(names))
 
+    @abstractmethod
+    def plausible(self, parameter: str) -> Plausible:
+        """The range of ``parameter`` (one of ``parameter_names``) on real robots."""
+
+    def check_plausible(self, values: Mapping[str, float]) -> tuple[Implausible, ...]:
+        """Every estimate in ``values`` (name -> value, SI) outside its plausible range.
+
+        Empty when all are plausible; each entry says in words which parameter is
+        outside, its value, the range and by what factor.
+        """
+        out = []
+        for parameter, value in values.items():
+            value = float(value)
+            limits = self.plausible(parameter)
+            unit = self.parameter_unit(parameter)
+            magnitude = abs(value)
+            if not math.isfinite(value):
+                out.append(Implausible(parameter, value, unit, limits, math.inf,
+                                       f"{parameter} = {value} is not a finite number"))
+            elif limits.sign and value * limits.sign < 0:
+                found, expected = ("negative", "positive") if limits.sign > 0 else \
+                    ("positive", "negative")
+                out.append(Implausible(parameter, value, unit, limits, math.inf,
+                                       f"{parameter} = {value:.3g} {unit} is {found}; on real "
+                                       f"robots it is {expected} ({limits.basis})"))
+            elif magnitude > limits.maximum:
+                factor = magnitude / limits.maximum
+                out.append(Implausible(parameter, value, unit, limits, factor,
+                                       f"{parameter} = {value:.3g} {unit} is {factor:.3g} times "
+                                       f"the largest plausible magnitude {limits.maximum:.3g} "
+                                       f"{unit} ({limits.basis})"))
+            elif 0 < magnitude < limits.minimum:
+                factor = limits.minimum / magnitude
+                out.append(Implausible(parameter, value, unit, limits, factor,
+                                       f"{parameter} = {value:.3g} {unit} is {factor:.3g} times "
+                                       f"smaller than the smallest seen on real robots, "
+                                       f"{limits.minimum:.3g} {unit} ({limits.basis})"))
+        return tuple(out) + self._check_amplitudes(values)
+
+    def _check_amplitudes(self, values: Mapping[str, float]) -> tuple[Implausible, ...]:
+        """Ranges on combinations of parameters (e.g. the amplitude of a sine and cosine
+        pair); none by default."""
+        return ()
+
+    def implausibility(self, values: Mapping[str, float]) -> str:
+        """'' when no estimate in ``values`` is absurd, else why, in words.
+
+        Absurd means beyond the largest magnitude or of the wrong sign; a value smaller
+        than real robots show is weak, not absurd, and is left to the evidence tests
+        (``check_plausible`` reports it too).
+        """
+        return "; ".join(f.message for f in self.check_plausible(values)
+                         if f.value == 0 or abs(f.value) > f.plausible.minimum)
+
+    def parameter_unit(self, parameter: str) -> str:
+        """The unit of one parameter (``unit`` unless a subclass mixes units)."""
+        return self.unit
+
+    # ----------------------------------------------------------------- data
+
     def required_columns(self) -> tuple[str, ...]:
-        """Extra data columns this effect needs (e.g. ``("temperature",)``)."""
+        """Per-row inputs this effect reads from ``RowContext.extras`` besides ``payload``:
+        data columns (``temperature``) or inputs derived from the table (``direction_q2``)."""
         return ()
 
     def reference(self, extras: dict) -> dict:
@@ -84,6 +271,178 @@ class Effect(ABC):
         """
         return ()
 
+    # ----------------------------------------------------------------- the model
+
     @abstractmethod
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, ca.SX | None]:
         """``(dq, dp)`` for one row; ``dp`` may be ``None`` for no geometric change."""
+
+    def contribution(self, robot: Robot, theta, Q, extras: Mapping[str, Any] | None = None,
+                     payload_com=None, p=None) -> Contribution:
+        """``delta`` evaluated at N rows: readings ``Q`` (N x dof) [rad or m], ``extras``
+        column -> N values (``payload`` 0 and directions 0 where absent), ``payload_com``
+        (3,) [m] flange frame, geometry ``p`` (default ``robot``'s), ``theta`` (SI).
+
+        The CasADi function is built once per effect and robot and kept.
+        """
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        n = len(Q)
+        extras = dict(extras or {})
+        columns = tuple(sorted(set(self.required_columns()) | {"payload"}))
+        cache = self.__dict__.setdefault("_contribution_functions", {})
+        key = (robot, columns)
+        if key not in cache:
+            registry = robot.parameters()
+            q = ca.SX.sym("q", robot.dof)
+            e = ca.SX.sym("extras", len(columns))
+            p_sym = ca.SX.sym("p", len(registry))
+            t = ca.SX.sym("theta", len(self.parameter_names()))
+            com = ca.SX.sym("payload_com", 3)
+            row = RowContext(robot, registry, q, p_sym, {c: e[i] for i, c in enumerate(columns)},
+                             com)
+            dq, dp = self.delta(row, t)
+            dp = ca.SX.zeros(len(registry)) if dp is None else dp
+            cache[key] = ca.Function(f"{self.name}_contribution", [q, e, p_sym, t, com],
+                                     [dq, dp])
+        function = cache[key]
+        values = []
+        for c in columns:
+            if c in extras:
+                values.append(np.broadcast_to(np.asarray(extras[c], dtype=float), (n,)))
+            elif c == "payload" or c.startswith("direction_"):
+                values.append(np.zeros(n))
+            else:
+                raise InputError(f"{self.name} needs a {c!r} column", where=c)
+        E = np.array(values).reshape(len(columns), n)
+        p = robot.parameter_vector() if p is None else np.asarray(p, dtype=float)
+        com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
+        mapped = function.map(n) if n > 1 else function
+        dq, dp = mapped(Q.T, E, np.tile(p[:, None], (1, n)),
+                        np.tile(np.asarray(theta, dtype=float).reshape(-1, 1), (1, n)),
+                        np.tile(com.reshape(3, 1), (1, n)))
+        return Contribution(np.asarray(dq).T.reshape(n, robot.dof),
+                            np.asarray(dp).T.reshape(n, -1))
+
+    # ----------------------------------------------------------------- words and plots
+
+    def describe(self, values: Mapping[str, float], units: Units) -> str:
+        """One sentence of what the fitted ``values`` (name -> SI) say, in ``units``."""
+        parts = ", ".join(f"{k} = {v:.3g}" for k, v in values.items())
+        return self.sentence.format(joints=joint_list(self.joints), values=parts,
+                                    unit=self.unit)
+
+    def plot_values(self, robot: Robot, joint: int, Q, extras: Mapping[str, Any],
+                    payload_com=None) -> np.ndarray:
+        """The variable the error at ``joint`` (1-based) is plotted against, per row [SI].
+
+        ``joint``: the joint angle; ``driver``: the driving joint's angle; ``direction``:
+        the joint's direction of motion (-1, 0, +1); ``torque`` and ``column`` are
+        computed by the subclass.
+        """
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if self.plot_variable == "joint":
+            return Q[:, joint - 1]
+        raise NotImplementedError(f"{self.name}: plot variable {self.plot_variable!r}")
+
+    # ----------------------------------------------------------------- diagnosis
+
+    @classmethod
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["Effect", ...]:
+        """The units diagnosis tests one at a time: by default one effect per joint
+        (revolute joints only where ``revolute_only``)."""
+        return tuple(cls.create((j,), robot, extras) for j in range(1, robot.dof + 1)
+                     if robot.joints[j - 1].revolute or not cls.revolute_only)
+
+    @classmethod
+    def merged(cls, units: Sequence["Effect"], robot: Robot,
+               extras: Mapping[str, Any]) -> "Effect":
+        """One effect holding the parameters of several ``candidates`` units."""
+        joints = tuple(sorted({j for unit in units for j in unit.joints}))
+        return cls.create(joints, robot, extras)
+
+    @classmethod
+    def create(cls, joints, robot: Robot | None = None,
+               extras: Mapping[str, Any] | None = None, **options) -> "Effect":
+        """The effect on ``joints`` (1-based) set up for ``robot`` and the fit data."""
+        return cls(tuple(joints), **options)
+
+    # ----------------------------------------------------------------- simulation
+
+    def simulated_dq(self, world: TrueWorld, Q, extras: Mapping[str, np.ndarray],
+                     values: Mapping[str, float]) -> np.ndarray:
+        """The true ``dq`` (N x dof) [rad or m] at readings ``Q`` (N x dof) in numpy, for
+        the simulator; ``extras`` column -> N values; ``values`` name -> true value (SI).
+
+        Written from the definition, not from ``delta``, so that a calibration that
+        recovers the simulated truth checks ``delta``.
+        """
+        return np.zeros(np.atleast_2d(Q).shape)
+
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+                     values: Mapping[str, float]) -> np.ndarray | None:
+        """The true ``dp`` [SI] at geometry ``p`` for one row's ``extras``, or None."""
+        return None
+
+    @classmethod
+    def simulation_key(cls, text: str, robot: Robot, where: str = "effects"):
+        """One simulated entry's key from text: a joint number (``per`` joint), checked
+        against ``robot``; ``JointCoupling`` reads ``J@K``."""
+        try:
+            joint = int(str(text).strip())
+        except ValueError:
+            raise InputError(f"expected a joint number, got {text!r}", where=where) from None
+        cls._check_simulated_joint(joint, robot, where)
+        return joint
+
+    @classmethod
+    def _check_simulated_joint(cls, joint: int, robot: Robot, where: str) -> None:
+        if not 1 <= joint <= robot.dof:
+            raise InputError(f"joint {joint} out of range 1..{robot.dof}", where=where)
+        if cls.revolute_only and not robot.joints[joint - 1].revolute:
+            raise InputError(f"joint {joint} is prismatic; {cls.name} needs a revolute joint",
+                             where=where)
+
+    @classmethod
+    def for_simulation(cls, keys: Sequence) -> "Effect":
+        """The effect holding the simulated entries ``keys`` (see ``simulation_key``)."""
+        return cls(tuple(int(k) for k in keys))
+
+    @classmethod
+    def simulation_syntax(cls) -> str:
+        """How ``robocal simulate --effect`` names this effect, for the help text."""
+        # placeholder joints 8 (J) and 9 (K) name the parameters the way a user writes them
+        unit = cls.for_simulation((8,) if cls.per == "joint" else ((8, 9),) if cls.per == "pair"
+                                  else ())
+        names = "/".join(unit.parameter_names()).replace("8", "J").replace("9", "K")
+        default = "/".join(f"{v:g}" for v in cls.simulation_default)
+        key = {"joint": "J", "pair": "J@K", "column": ""}[cls.per]
+        spec = f"{cls.name}:{key}[={names}]" if key else f"{cls.name}[:{names}]"
+        return f"{spec}  [{unit.unit}]  (default {default})\n      {cls.formula}"
+
+    def check_simulation(self, robot: Robot, values: Mapping[str, float]) -> None:
+        """Refuse simulated values the effect cannot have (a wrong sign) or a robot it cannot
+        act on; ``InputError`` naming the effect."""
+        for parameter, value in values.items():
+            sign = self.plausible(parameter).sign
+            if sign and value * sign < 0:
+                raise InputError(f"{parameter} must not be {'negative' if sign > 0 else 'positive'}"
+                                 f", got {value:g}", where=f"effects.{self.name}")
+
+    def simulation_values(self, entries: Sequence[float] | None = None) -> dict[str, float]:
+        """Name -> true value for a one-unit effect, ``simulation_default`` when None."""
+        entries = self.simulation_default if entries is None else tuple(entries)
+        names = self.parameter_names()
+        if len(entries) != len(names):
+            raise InputError(f"{self.name}: expected {len(names)} value(s) "
+                             f"({', '.join(names)}), got {len(entries)}", where="effects")
+        return {n: float(v) for n, v in zip(names, entries)}
+
+
+def joint_list(joints: Sequence[int]) -> str:
+    """``joint 2`` or ``joints 2, 3 and 5``."""
+    joints = list(joints)
+    if not joints:
+        return "the arm"
+    if len(joints) == 1:
+        return f"joint {joints[0]}"
+    return "joints " + ", ".join(str(j) for j in joints[:-1]) + f" and {joints[-1]}"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import casadi as ca
+
 from ..errors import InputError
 from ..robot import Robot
 
@@ -23,6 +25,4 @@ def check_joints(effect, robot: Robot, *, revolute_only: bool = False) -> None:
 
 def column(entries: dict, size: int):
     """A CasADi column of ``size`` with ``entries`` {0-based index: expression}, zero elsewhere."""
-    import casadi as ca
-
     return ca.vertcat(*[entries.get(i, 0) for i in range(size)])

@@ -25,23 +25,42 @@ geometry, fixed seed), a constant column is put first, and pivoted Gram-Schmidt 
 each column whose part outside the span of the ones before it exceeds 1e-6 of its
 norm. ``c{j}`` itself appears only with a ``payload`` column (``payload=True``), where the
 known payload mass makes it separable.
+
+Plausible values on real robots: ``c_j`` positive, about 1e-7 .. 1e-4 rad/Nm (large
+arms are stiff, light collaborative arms soft). A lumped term ``c_j h_k`` or ``c_j m_k``
+is the compliance times a first moment [kg m] or a mass [kg] of one link, and either
+may have any sign (it depends on where the link's centre of mass lies in its frame).
+Its magnitude is at most the largest compliance times the largest first moment or mass
+a link of an industrial arm carries: 1e-4 rad/Nm x 500 kg m = 5e-2 for a moment term,
+1e-4 rad/Nm x 1000 kg = 1e-1 for a mass term (a 1000 kg link whose compliance is 1e-4
+would be far softer than any real arm; the bound is deliberately wide, it refuses only
+what no arm does).
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
 
+from typing import Any, Mapping
+
 import casadi as ca
 import numpy as np
 
+from ..errors import InputError
 from ..robot import Robot
-from .base import Effect, RowContext
+from ..units import Units
+from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import check_joints, column
 from .gravity import (FIRST_MOMENT_COMPONENTS, first_moment_basis, gravity_torque,
                       payload_torque_per_kg)
 
 SAMPLES = 96
 INDEPENDENCE = 1e-6
+COMPLIANCE = Plausible(1e-4, 1e-7, +1, "joint stiffness of industrial and collaborative "
+                       "arms: 1e-7 .. 1e-4 rad/Nm")
+MOMENT_TERM = Plausible(5e-2, basis="compliance 1e-4 rad/Nm times a link first moment of "
+                        "500 kg m at most")
+MASS_TERM = Plausible(1e-1, basis="compliance 1e-4 rad/Nm times a link mass of 1000 kg at most")
 
 
 @lru_cache(maxsize=16)
@@ -120,8 +139,13 @@ class JointCompliance(Effect):
     """
 
     name = "joint_compliance"
+    title = "Joint compliance"
     unit = "rad/Nm"
-    typical = 1e-6  # a typical parameter size, for judging whether the data see it
+    typical = 1e-6
+    sentence = "{joints} {verb} under gravity ({values})"
+    plot_variable = "torque"
+    simulation_default = (1e-6,)
+    formula = "q_true = q_read - c g(q_read), g the gravity torque (links + payload column)"
 
     def __init__(self, joints: tuple[int, ...], robot: Robot | None = None,
                  payload: bool = False):
@@ -137,6 +161,65 @@ class JointCompliance(Effect):
     def __repr__(self) -> str:
         form = ", lumped" if self.lumped else ""
         return f"JointCompliance(joints={list(self.joints)}{form})"
+
+    @classmethod
+    def create(cls, joints, robot: Robot | None = None,
+               extras: Mapping[str, Any] | None = None, **options) -> "JointCompliance":
+        """Lumped without link masses; the payload term where the data has ``payload``."""
+        return cls(tuple(joints), robot=robot, payload="payload" in (extras or {}))
+
+    def plausible(self, parameter: str) -> Plausible:
+        if "_m" in parameter:
+            return MASS_TERM
+        if "_h" in parameter:
+            return MOMENT_TERM
+        return COMPLIANCE
+
+    def parameter_unit(self, parameter: str) -> str:
+        if "_m" in parameter:
+            return "rad kg/Nm"
+        if "_h" in parameter:
+            return "rad kg m/Nm"
+        return self.unit
+
+    def describe(self, values, units: Units) -> str:
+        verb = "deflects" if len(self.joints) == 1 else "deflect"
+        if self.lumped:
+            text = f"lumped link masses: {len(values)} terms"
+        else:
+            text = ", ".join(f"{k} = {v:.3g}" for k, v in values.items()) + f" {self.unit}"
+        return self.sentence.format(joints=joint_list(self.joints), verb=verb, values=text)
+
+    def plot_values(self, robot: Robot, joint: int, Q, extras, payload_com=None) -> np.ndarray:
+        """The gravity torque [Nm] (force [N]) the joint holds, from pinocchio with the
+        ``payload`` column; the joint angle where the robot file has no masses."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if not robot.has_inertia:
+            return Q[:, joint - 1]
+        from ..pinocchio_model import gravity_torques
+
+        return gravity_torques(robot, Q, payload_mass=extras.get("payload", 0.0),
+                               payload_com=payload_com)[:, joint - 1]
+
+    def check_simulation(self, robot: Robot, values) -> None:
+        super().check_simulation(robot, values)
+        if not robot.has_inertia:
+            raise InputError("joint_compliance needs 'mass' and 'com' on every joint of the "
+                             "robot file to simulate gravity torques",
+                             where="effects.joint_compliance")
+
+    def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
+        """``-c_j tau_j(q)`` with pinocchio's gravity torque of the true robot's links and the
+        row's payload (needs masses in the robot file)."""
+        from ..pinocchio_model import gravity_torques
+
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        dq = np.zeros(Q.shape)
+        payload = np.asarray(extras.get("payload", np.zeros(len(Q))), dtype=float)
+        torques = gravity_torques(world.robot, Q, payload, world.payload_com)
+        for j in self.joints:
+            dq[:, j - 1] = -values[f"c{j}"] * torques[:, j - 1]
+        return dq
 
     def parameter_names(self) -> tuple[str, ...]:
         if not self.lumped:

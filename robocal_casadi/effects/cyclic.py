@@ -2,30 +2,53 @@
 
     dq_j = a1_j sin(q_j) + b1_j cos(q_j) + a2_j sin(2 q_j) + b2_j cos(2 q_j)     [rad]
 
-Parameters ``a1_{j}, b1_{j}, a2_{j}, b2_{j}`` [rad] per revolute joint j (1-based). Over a
-small range of q_j the cosine terms look like a constant, which the joint's ``theta``
-offset already holds; diagnosis checks each column against the geometry.
+Parameters ``a1_{j}, b1_{j}, a2_{j}, b2_{j}`` [rad] per revolute joint j (1-based), joint
+space. Over a small range of q_j the cosine terms look like a constant, which the joint's
+``theta`` offset already holds; diagnosis checks each column against the geometry.
+
+Plausible on real robots: each coefficient below about 0.05 deg (8.7e-4 rad); the
+periodic errors of gears and encoders of industrial arms are a few arc seconds to a few
+hundredths of a degree.
 """
 
 from __future__ import annotations
 
-import casadi as ca
+import math
 
-from .base import Effect, RowContext
+import casadi as ca
+import numpy as np
+
+from ..units import Units
+from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import check_joints, column
 
 HARMONICS = ("a1", "b1", "a2", "b2")
+AMPLITUDE = Plausible(math.radians(0.05), basis="periodic gear and encoder errors stay "
+                      "below about 0.05 deg")
 
 
 class JointCyclic(Effect):
     """First and second harmonics of the joint angle, per joint in ``joints``."""
 
     name = "joint_cyclic"
+    title = "Periodic joint error"
     unit = "rad"
-    typical = 1e-4  # a typical parameter size, for judging whether the data see it
+    typical = 1e-4
+    sentence = "periodic reading error, {values}"
+    plot_variable = "joint"
+    revolute_only = True
+    simulation_default = (2e-4, 1e-4, 1e-4, 5e-5)
+    formula = "q_true = q_read + a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q"
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{h}_{j}" for j in self.joints for h in HARMONICS)
+
+    def plausible(self, parameter: str) -> Plausible:
+        return AMPLITUDE
+
+    def _check_amplitudes(self, values) -> tuple:
+        return amplitude_check(self, [(f"a{h}_{j}", f"b{h}_{j}") for j in self.joints
+                                      for h in (1, 2)], values, AMPLITUDE)
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot, revolute_only=True)
@@ -36,3 +59,23 @@ class JointCyclic(Effect):
             entries[j - 1] = (a1 * ca.sin(q) + b1 * ca.cos(q)
                               + a2 * ca.sin(2 * q) + b2 * ca.cos(2 * q))
         return column(entries, row.robot.dof), None
+
+    def describe(self, values, units: Units) -> str:
+        parts = []
+        a = units.angle_scale
+        for j in self.joints:
+            first = math.hypot(values.get(f"a1_{j}", 0.0), values.get(f"b1_{j}", 0.0))
+            second = math.hypot(values.get(f"a2_{j}", 0.0), values.get(f"b2_{j}", 0.0))
+            parts.append(f"joint {j}: {first / a:.3g} {units.angle} once and {second / a:.3g} "
+                         f"{units.angle} twice per turn")
+        return self.sentence.format(values="; ".join(parts))
+
+    def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        dq = np.zeros(Q.shape)
+        for j in self.joints:
+            x = Q[:, j - 1]
+            dq[:, j - 1] = (values[f"a1_{j}"] * np.sin(x) + values[f"b1_{j}"] * np.cos(x)
+                            + values[f"a2_{j}"] * np.sin(2 * x)
+                            + values[f"b2_{j}"] * np.cos(2 * x))
+        return dq

@@ -6,6 +6,12 @@
 (parameter ``k_t`` [1/s]); ``T_ref`` is fixed from the fit data (their mean) when the
 effect is created, so ``k`` does not trade against the lengths themselves. Base and
 tool are left alone: they belong to the mounting, not to the arm's links. ``dq = 0``.
+
+Plausible on real robots: the expansion coefficients of the metals arms are made of
+(steel about 11.5e-6/K, aluminium about 23e-6/K), so ``k_T`` is positive and below about
+3e-5/K. Against ``time``, the drift may be of either sign (a robot warming up or cooling
+down); the joints next to the motors warm by up to about 2 K per minute just after a
+start, so ``|k_t|`` stays below 3e-5/K x 2 K / 60 s = 1e-6/s.
 """
 
 from __future__ import annotations
@@ -13,12 +19,21 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from typing import Any, Mapping
+
 from ..errors import InputError, RobocalError
 from ..parameters import length_names
-from .base import Effect, RowContext
+from ..robot import Robot
+from ..units import Units
+from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import column
 
 COLUMNS = {"temperature": ("k_T", "1/K"), "time": ("k_t", "1/s")}
+PLAUSIBLE = {
+    "k_T": Plausible(3e-5, sign=+1, basis="metals expand when warmed: steel 11.5e-6/K, "
+                     "aluminium 23e-6/K"),
+    "k_t": Plausible(1e-6, basis="3e-5/K at a warming or cooling of up to 2 K per minute"),
+}
 
 
 class ThermalDrift(Effect):
@@ -29,7 +44,14 @@ class ThermalDrift(Effect):
     """
 
     name = "thermal_drift"
-    typical = 1e-5  # a typical parameter size, for judging whether the data see it
+    title = "Thermal drift"
+    typical = 1e-5
+    sentence = "link lengths grow by {value:.3g} per {per} ({key})"
+    plot_variable = "column"
+    per = "column"
+    simulation_default = (1.2e-5,)
+    formula = ("every d_i, a_i of the true robot becomes L (1 + k (T - T_ref)); a drifting\n"
+               "      temperature column is written (see --temperature, --reference-temperature)")
 
     def __init__(self, joints: tuple[int, ...] = (), column: str = "temperature",
                  reference_value: float | None = None):
@@ -53,6 +75,60 @@ class ThermalDrift(Effect):
 
     def parameter_names(self) -> tuple[str, ...]:
         return (COLUMNS[self.column][0],)
+
+    def plausible(self, parameter: str) -> Plausible:
+        return PLAUSIBLE[parameter]
+
+    @classmethod
+    def create(cls, joints=(), robot: Robot | None = None,
+               extras: Mapping[str, Any] | None = None, **options) -> "ThermalDrift":
+        """Against ``temperature`` if ``extras`` has it, else ``time``; its mean the reference."""
+        extras = extras or {}
+        column = options.get("column") or ("temperature" if "temperature" in extras else "time")
+        if column not in extras:
+            raise InputError("thermal_drift needs a 'temperature' or 'time' column in the data",
+                             where="effects")
+        effect = cls(tuple(joints), column=column)
+        effect.reference({column: np.asarray(extras[column], dtype=float)})
+        return effect
+
+    @classmethod
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["ThermalDrift", ...]:
+        """One per ``temperature`` or ``time`` column the data carry."""
+        return tuple(cls.create((), robot, {column: extras[column]}, column=column)
+                     for column in COLUMNS if column in extras)
+
+    @classmethod
+    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> "ThermalDrift":
+        (unit,) = units  # one column per effect
+        return unit
+
+    @classmethod
+    def for_simulation(cls, keys=()) -> "ThermalDrift":
+        """Against the ``temperature`` column; its reference is the simulator's ``T_ref``."""
+        return cls((), column="temperature")
+
+    def describe(self, values, units: Units) -> str:
+        (key, value), = values.items()
+        return self.sentence.format(value=value, per="K" if key == "k_T" else "s", key=key)
+
+    def plot_values(self, robot: Robot, joint: int, Q, extras, payload_com=None) -> np.ndarray:
+        """The ``temperature`` [C] or ``time`` [s] column."""
+        return np.asarray(extras[self.column], dtype=float)
+
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+                     values: Mapping[str, float]) -> np.ndarray | None:
+        """Every ``d_i``, ``a_i`` of the true robot times ``k (T - T_ref)``, ``T_ref`` the
+        simulator's reference temperature."""
+        if extras.get(self.column) is None:
+            return None
+        registry = world.robot.parameters()
+        factor = values[self.parameter_names()[0]] * (float(extras[self.column])
+                                                      - world.reference_temperature)
+        dp = np.zeros(len(registry))
+        for name in length_names(world.robot):  # d_i, a_i in DH; x_i, y_i, z_i in URDF
+            dp[registry.index(name)] = factor * p[registry.index(name)]
+        return dp
 
     def required_columns(self) -> tuple[str, ...]:
         return (self.column,)

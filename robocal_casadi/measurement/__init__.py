@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..errors import InputError
 from .artifact import ArtifactModel, CrossBarModel
 from .base import MeasurementModel
 from .sphere_laser import SphereLaserModel
@@ -17,8 +18,6 @@ MODELS: dict[str, type[MeasurementModel]] = {
 
 def model_for(dataset, label: str) -> MeasurementModel:
     """The measurement model of ``dataset``'s kind, with placement names under ``label``."""
-    from ..errors import InputError
-
     if dataset.kind not in MODELS:
         raise InputError(f"no measurement model for kind {dataset.kind!r}", file=dataset.path,
                          where="kind")

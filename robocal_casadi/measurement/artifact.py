@@ -18,12 +18,14 @@ one perpendicularity: exactly the bar residuals ``|AC| - L``, ``|BD| - L``, ``AC
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
 
+from ..datasets import dataset_rows
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from .base import MeasurementModel, PointsFunction
 
 
@@ -90,8 +92,6 @@ class ArtifactModel(MeasurementModel):
         """The dataset with every repeated touch moved onto its socket (joint-space Newton)."""
         if not any(s.unknown_index is not None for s in self.sockets):
             return None
-        from dataclasses import replace
-
         joints = np.array(self.dataset.joints, dtype=float)
         for socket in self.sockets:
             if socket.unknown_index is None:
@@ -184,8 +184,6 @@ class ArtifactModel(MeasurementModel):
 
     def subset(self, groups: np.ndarray):
         """The dataset with only the placements (pose ids) in ``groups``."""
-        from ..calibration.selection import dataset_rows
-
         return dataset_rows(self.dataset, np.isin(self.dataset.pose, groups))
 
     def errors(self, residual: np.ndarray) -> np.ndarray:
@@ -217,8 +215,6 @@ class ArtifactModel(MeasurementModel):
 
     def error_terms(self) -> tuple:
         """``position`` per touch, then per placement its distances and perpendiculars."""
-        from ..results import ErrorTerm
-
         terms = [ErrorTerm("position", socket.pose, (socket.name,))
                  for socket in self.sockets if socket.unknown_index is not None
                  for _ in socket.rows]

@@ -24,7 +24,9 @@ from typing import Callable, ClassVar
 import casadi as ca
 import numpy as np
 
+from ..datasets import dataset_rows
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 
 PointsFunction = Callable[[ca.MX], ca.MX]
 
@@ -89,8 +91,6 @@ class MeasurementModel(ABC):
 
     def error_terms(self) -> tuple:
         """What each entry of ``errors`` is (``results.ErrorTerm``)."""
-        from ..results import ErrorTerm
-
         return (ErrorTerm("error"),) * len(self.error_rows())
 
     @abstractmethod
@@ -117,8 +117,6 @@ class MeasurementModel(ABC):
 
     def subset(self, groups: np.ndarray):
         """A copy of the dataset with only the given units (see ``residual_groups``)."""
-        from ..calibration.selection import dataset_rows
-
         return dataset_rows(self.dataset, np.isin(np.arange(self.dataset.rows), groups))
 
     # A model whose residual splits into the same few entries per data row (each row's

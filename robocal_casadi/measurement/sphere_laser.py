@@ -24,11 +24,14 @@ rank. ``errors`` leaves that row out.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 
 from ..errors import InputError
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
 from .base import MeasurementModel, PointsFunction
 
@@ -102,8 +105,6 @@ class SphereLaserModel(MeasurementModel):
         ``|w + l d|^2 = R^2`` (``w = T_i p0 - c``, ``d = R_i n``) nearest the measured
         distance; a beam that misses takes its closest approach.
         """
-        from dataclasses import replace
-
         origin, direction = laser_of(mounted)
         scan = self._scan
         if scan is None:
@@ -156,8 +157,6 @@ class SphereLaserModel(MeasurementModel):
         return out
 
     def error_terms(self) -> tuple:
-        from ..results import ErrorTerm
-
         return (ErrorTerm("surface"),) * self.count
 
 

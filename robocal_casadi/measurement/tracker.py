@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from ..parameters import ParameterRegistry
+from ..results import ErrorTerm
 from ..transforms import pose_from_xyz_rpy
 from .base import MeasurementModel, PointsFunction
 
@@ -106,6 +107,4 @@ class TrackerModel(MeasurementModel):
         return np.asarray(residual, float).reshape(-1, 3).copy()
 
     def error_terms(self) -> tuple:
-        from ..results import ErrorTerm
-
         return (ErrorTerm("position"),) * self.dataset.rows

@@ -7,42 +7,33 @@ shows a pattern against the effect's own variable and the error after it does no
   gravity of the calibrated robot's links, plus the row's ``payload`` [kg] at
   ``payload_com`` in the flange frame; the flange origin when the data gives none).
   A robot file without link masses has no torque to show: the joint angle instead.
-- ``joint_cyclic`` and ``joint_scale``: the joint angle.
+- ``joint_cyclic``, ``joint_scale``: the joint angle; ``joint_coupling``: the angle of
+  the driving joint; ``backlash``: the joint's direction of motion (-1, 0, +1, from the
+  row order of the full table).
 - ``thermal_drift``: the ``temperature`` [C] or ``time`` [s] column.
 
-The fitted effect is evaluated from the effect models of the result
-(``result.effect_models`` with ``result.effect_values``, SI) row by row with the same
-``Effect.delta`` the identification used, on the calibrated geometry: the joint
-correction ``dq_j`` [rad or m] for joint effects, the relative length change
-``k (T - T_ref)`` [1] for thermal drift. Everything returned here is in display units
-(the robot file's length and angle units; torques in N m, forces in N).
+Which it is, and its title, come from the effect's class (``Effect.plot_variable``,
+``Effect.plot_values``, ``Effect.title``). The fitted effect is the effect object's own
+evaluation (``Effect.contribution``, the same ``delta`` the identification used) with
+the values of the result (``result.effect_models``, ``result.effect_values``, SI), on
+the calibrated geometry: the joint correction ``dq_j`` [rad or m] for joint effects, the
+relative length change ``k (T - T_ref)`` [1] for thermal drift. Everything returned here
+is in display units (the robot file's length and angle units; torques in N m, forces in
+N).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-import casadi as ca
 import numpy as np
 
-from ..effects.base import RowContext
+from ..effects import EFFECTS, effect_title
+from ..effects.motion import with_directions
 from ..results import CalibrationResult, DatasetResiduals, EffectFinding
 from ..robot import Robot
 from ..units import Units
 from .numbers import errors_of, joint_reading_unit
-
-EFFECT_TITLES = {
-    "joint_compliance": "Joint compliance",
-    "joint_cyclic": "Periodic joint error",
-    "joint_scale": "Joint scale error",
-    "thermal_drift": "Thermal drift",
-}
-
-
-def effect_title(name: str) -> str:
-    """The effect's name in words (``joint_cyclic`` -> ``Periodic joint error``)."""
-    return EFFECT_TITLES.get(name, name.replace("_", " ").capitalize())
-
 
 @dataclass(frozen=True)
 class EffectPanel:
@@ -117,23 +108,7 @@ def joint_corrections(robot: Robot, model, theta: np.ndarray, Q: np.ndarray,
                       payload_com: np.ndarray | None = None) -> np.ndarray:
     """The correction ``dq`` [rad or m] (N x dof) that ``model`` with ``theta`` makes at
     each row of ``Q`` (N x dof readings, SI); ``extras`` maps column names to N values."""
-    registry = robot.parameters()
-    Q = np.atleast_2d(np.asarray(Q, dtype=float))
-    columns = sorted(extras)
-    q = ca.SX.sym("q", robot.dof)
-    e = ca.SX.sym("e", len(columns))
-    p = ca.SX.sym("p", len(registry))
-    t = ca.SX.sym("theta", len(theta))
-    com = ca.SX.sym("payload_com", 3)
-    row = RowContext(robot, registry, q, p, {c: e[i] for i, c in enumerate(columns)}, com)
-    dq, _ = model.delta(row, t)
-    function = ca.Function("effect_correction", [q, e, p, t, com], [dq]).map(len(Q))
-    E = np.array([np.asarray(extras[c], dtype=float) for c in columns]).reshape(len(columns),
-                                                                                len(Q))
-    P = np.tile(robot.parameter_vector()[:, None], (1, len(Q)))
-    T = np.tile(np.asarray(theta, dtype=float)[:, None], (1, len(Q)))
-    C = np.tile((np.zeros(3) if payload_com is None else payload_com)[:, None], (1, len(Q)))
-    return np.asarray(function(Q.T, E, P, T, C)).T
+    return model.contribution(robot, theta, Q, extras, payload_com).dq
 
 
 def gravity_torque_at(robot: Robot, Q: np.ndarray, extras: dict[str, np.ndarray],
@@ -182,8 +157,11 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
     units = result.units
     robot = result.robot_calibrated
     models = effect_models_of(result, finding)
-    with_joints = tuple(r for r in residuals if r.joints is not None)
-    joint_effect = bool(finding.joints) and bool(with_joints) and finding.name != "thermal_drift"
+    # per-row inputs of the row order (directions of motion) come from the full table
+    with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))
+                        for r in residuals if r.joints is not None)
+    joint_effect = (bool(finding.joints) and bool(with_joints)
+                    and EFFECTS.get(finding.name, EFFECTS["joint_scale"]).per != "column")
     title = effect_title(finding.name)
     if joint_effect:
         title += f", {_joint_list(finding.joints)}"
@@ -204,6 +182,10 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
     units, robot = result.units, result.robot_calibrated
     compliance = finding.name == "joint_compliance"
     torque = compliance and robot.has_inertia
+    model = models[0][0] if models else None
+    variable = EFFECTS[finding.name].plot_variable if finding.name in EFFECTS else "joint"
+    if variable == "torque" or model is None:
+        variable = "joint"  # without the effect object, the joint angle is all there is
     panels = []
     fitted_any = False
     for joint in finding.joints:
@@ -217,6 +199,11 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             com = _payload_com(r)
             if torque:
                 xs.append(gravity_torque_at(robot, Q, extras, com)[:, j])
+            elif variable == "direction":
+                xs.append(model.plot_values(robot, joint, Q, extras, com))
+            elif variable == "driver":
+                xs.append(model.plot_values(robot, joint, Q, extras, com)
+                          / joint_reading_unit(robot, _driver(model, joint) - 1, units)[0])
             else:
                 xs.append(Q[:, j] / angle_scale)
             geo.append(g)
@@ -228,12 +215,18 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             unit = "N m" if robot.joints[j].revolute else "N"
             x_label = f"gravity {'torque' if robot.joints[j].revolute else 'force'} " \
                       f"at joint {joint} [{unit}]"
+        elif variable == "direction":
+            x_label = f"direction of motion of q{joint} (-1, 0, +1)"
+        elif variable == "driver":
+            driver = _driver(model, joint)
+            x_label = f"q{driver} [{joint_reading_unit(robot, driver - 1, units)[1]}]"
         else:
             x_label = f"q{joint} [{angle_unit}]"
         what = "deflection" if compliance else "reading error"
+        curve = torque or finding.name in ("joint_cyclic", "joint_scale")
         panels.append(EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin),
                                   x_label, fitted, f"fitted {what} dq{joint} [{angle_unit}]",
-                                  fitted_is_curve=torque or not compliance))
+                                  fitted_is_curve=curve))
     before_after = ("Error before the effects (geometric calibration only, orange) and after "
                     "them (with every effect found, blue) on the fit data; lines are the RMS "
                     "in bins")
@@ -252,13 +245,24 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
         against = "against the joint angle"
         fitted_text = ("the dashed line (right axis) is the fitted reading error "
                        "a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q")
-    else:
+    elif finding.name == "joint_scale":
         against = "against the joint angle"
         fitted_text = "the dashed line (right axis) is the fitted reading error s q"
+    else:
+        against = {"driver": "against the angle of the driving joint",
+                   "direction": "against the joint's direction of motion (from the row order)",
+                   }.get(variable, "against the joint angle")
+        fitted_text = (f"the black points (right axis) are the fitted reading error, "
+                       f"{model.formula}")
     caption = f"{title}. {before_after}, {against}"
     caption += f"; {fitted_text}." if fitted_any else "."
     return EffectView(finding.name, title, tuple(panels), caption,
                       "torque" if torque else "joint")
+
+
+def _driver(model, joint: int) -> int:
+    """The joint driving ``joint`` in a coupling (1-based)."""
+    return dict(model.pairs)[joint]
 
 
 def _fitted_dq(robot, models, Q, extras, com, j, angle_scale) -> np.ndarray | None:

@@ -246,8 +246,17 @@ def parameters_section(result: CalibrationResult) -> Section:
     held = [p for p in result.parameters if not p.identifiable]
     blocks: list = [Table("parameters", "Identified geometric parameters", tuple(header),
                           tuple(row(p) for p in identified), numeric=tuple(numeric)),
-                    Paragraph("Standard errors come from the covariance of the least-squares "
-                              "fit.", "note")]
+                    Paragraph("Standard errors come from the posterior covariance of the fit "
+                              "(each parameter weighed against its tolerance), counting "
+                              "repeated readings once.", "note")]
+    prior = getattr(result, "prior", None)
+    if prior is not None and prior.dominated:
+        listed = ", ".join(f"{name} ({100 * prior.data_share[name]:.0f}% from the data)"
+                           for name in prior.dominated)
+        blocks.append(Paragraph(f"Prior-dominated: {listed}. Their estimates say more about "
+                                f"the tolerances than about the robot: the data barely "
+                                f"tell them apart from other parameters or the placement.",
+                                "note"))
     if held:
         reasons = tuple(row(p)[:3] + (p.reason or "not identifiable",) for p in held)
         blocks.append(Details("parameters-held", f"{len(held)} parameters held at nominal "

@@ -38,11 +38,11 @@ from ..datasets import joint_readings as checked_joint_readings
 from ..datasets import referenced_robot
 from ..errors import InputError
 from ..fields import (check_keys, check_magnitude, cut, load_yaml, mapping, quantities,
-                      quantity, referenced_file, require, units_of, vector)
+                      quantity, referenced_file, require, vector)
 from ..robot import Robot
 from ..table import read_table
 from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy
-from ..units import Units
+from ..units import Units, units_of
 from .conventions import MARKER_CONVENTIONS, method_observation, observation_rotation
 from .tracker import unit_up
 

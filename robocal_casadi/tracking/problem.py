@@ -35,6 +35,7 @@ from __future__ import annotations
 from functools import cached_property
 
 import casadi as ca
+import numpy as np
 
 from ..codegen import compiled
 from ..kinematics import Kinematics
@@ -54,8 +55,6 @@ def goal_vector(goal):
     """The 12-vector ``[p, x, y, z]`` of a 4x4 goal pose (numpy or CasADi)."""
     if isinstance(goal, (ca.SX, ca.MX)):
         return ca.vertcat(goal[:3, 3], goal[:3, 0], goal[:3, 1], goal[:3, 2])
-    import numpy as np
-
     return np.concatenate([goal[:3, 3], goal[:3, 0], goal[:3, 1], goal[:3, 2]])
 
 

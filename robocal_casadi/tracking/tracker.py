@@ -20,6 +20,7 @@ from typing import Literal, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..ik import inverse_kinematics
 from ..robot import Robot
 from .problem import TrackingProblem
 from ..checks import choice, rotation_matrix
@@ -379,8 +380,6 @@ class Tracker:
         """Inverse kinematics within the joint limits of the goal pose ``A''`` and of
         ``A'' Rz(pi)`` (the level x axis the other way), started from ``previous``, then
         from random joints (fixed seed: repeatable)."""
-        from ..ik import inverse_kinematics
-
         pose = np.eye(4)
         pose[:3, 3] = goal[0:3]
         pose[:3, 0], pose[:3, 1], pose[:3, 2] = goal[3:6], goal[6:9], goal[9:12]

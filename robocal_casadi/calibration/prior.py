@@ -1,0 +1,299 @@
+"""Maximum a posteriori identification: what the data say, weighed against tolerances.
+
+Each robot and mounted parameter has a tolerance ``t_i``: how far it may plausibly be off
+its nominal value ``x0_i`` (one standard deviation of a Gaussian prior, SI). With noise
+``sigma`` [m] on every residual entry, the estimate minimises
+
+    0.5 |r(x)|^2 + 0.5 sum_i (sigma / t_i)^2 (x_i - x0_i)^2,
+
+the least-squares problem with one extra residual row ``(sigma / t_i)(x_i - x0_i)`` per
+parameter. A parameter the data determine well (standard error far below ``t_i``) is
+estimated as by least squares; one they barely touch stays near nominal instead of
+being fitted to noise (a reflector offset along the flange axis that the tracker frame
+nearly absorbs). ``sigma`` is estimated from the fit itself:
+``sigma^2 = RSS / (m - n_effective)`` with ``n_effective`` the degrees of freedom the fit
+spends (placements plus the data's share of each parameter), iterated to a fixed point.
+
+Posterior covariance: ``sigma^2 (J^T J + sigma^2 P)^-1``, ``P = diag(1 / t_i^2)``. The
+data's share of parameter ``i`` is ``1 - Sigma_ii / t_i^2`` (1: the data alone, 0: the
+prior alone); below one half the prior dominates and the estimate says more about the
+tolerance than about the robot.
+
+Default tolerances per kind of parameter (``DEFAULT_TOLERANCE``); a robot file's
+``tolerance:`` entries override them (``robot.Robot.tolerance``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+DEGREE = math.pi / 180.0
+DEFAULT_TOLERANCE = {
+    "dh_length": 1e-3,           # [m] d, a of a joint
+    "dh_angle": 0.5 * DEGREE,    # [rad] theta, alpha, beta of a joint
+    "frame_length": 10e-3,       # [m] base and tool position
+    "frame_angle": 1.0 * DEGREE,  # [rad] base and tool rpy
+    "instrument_length": 5e-3,   # [m] probe, target, laser origin in the flange frame
+    "instrument_direction": 3.0 * DEGREE,  # [rad ~ unit vector component] laser beam
+}
+DOMINATED_SHARE = 0.5  # data share below which the prior dominates a parameter
+SIGMA_ITERATIONS = 6  # fixed-point rounds for the noise estimate
+SIGMA_SETTLED = 0.02  # relative change of sigma that ends the rounds
+
+
+def kind_of(name: str, quantity: str) -> str | None:
+    """The kind of parameter ``name`` (a key of ``DEFAULT_TOLERANCE``); None: no prior."""
+    if name.startswith(("probe_", "target_", "laser_")):
+        return "instrument_length" if quantity == "length" else "instrument_direction"
+    if name.startswith(("base_", "tool_", "flange_")):
+        return "frame_length" if quantity == "length" else "frame_angle"
+    stem = name.rstrip("0123456789")
+    if stem in ("d", "a", "x", "y", "z"):  # x, y, z: a URDF joint origin, like d and a
+        return "dh_length"
+    if stem in ("theta", "alpha", "beta", "roll", "pitch", "yaw"):
+        return "dh_angle"
+    return None
+
+
+def tolerance_of(name: str, quantity: str, robot) -> float | None:
+    """Tolerance [SI] of parameter ``name``: the robot file's, else the default of its kind."""
+    given = getattr(robot, "tolerance", None) or {}
+    if name in given:
+        return float(given[name])
+    kind = kind_of(name, quantity)
+    if kind is None:
+        return None
+    return float(given.get(kind, DEFAULT_TOLERANCE[kind]))
+
+
+@dataclass(frozen=True)
+class Prior:
+    """Gaussian prior on ``x[index]`` (parameters ``names``): centre [SI], tolerance [SI],
+    noise ``sigma`` [m]."""
+
+    names: tuple[str, ...]
+    index: np.ndarray
+    centre: np.ndarray
+    tolerance: np.ndarray
+    sigma: float
+
+    @property
+    def weights(self) -> np.ndarray:
+        """``sigma / t_i`` [1 / (SI of the parameter) * m]: the prior rows' weights."""
+        return self.sigma / self.tolerance
+
+    def with_sigma(self, sigma: float) -> "Prior":
+        return Prior(self.names, self.index, self.centre, self.tolerance, float(sigma))
+
+    def __repr__(self) -> str:
+        return f"Prior({len(self.index)} parameters, sigma={self.sigma:.3g} m)"
+
+
+class PriorProblem:
+    """A ``Problem`` whose residual carries the prior's rows after the data's.
+
+    Everything else (layout, masks, sizes, per-dataset errors) is the wrapped problem's,
+    so the solvers run on it unchanged.
+    """
+
+    def __init__(self, problem, prior: Prior, row_weights: np.ndarray | None = None):
+        self.problem = problem
+        self.prior = prior
+        # sqrt of each data entry's weight: a reading recorded k times counts 1/k per copy
+        self.root_weights = None if row_weights is None else np.sqrt(row_weights)
+
+    def __getattr__(self, name):
+        return getattr(self.problem, name)
+
+    def prior_rows(self, x: np.ndarray) -> np.ndarray:
+        p = self.prior
+        return p.weights * (np.asarray(x, float)[p.index] - p.centre)
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        r = self.problem.residual(x)
+        if self.root_weights is not None:
+            r = r * self.root_weights
+        return np.concatenate([r, self.prior_rows(x)])
+
+    def jacobian(self, x: np.ndarray, columns=None) -> np.ndarray:
+        J = self.problem.jacobian(x, columns)
+        if self.root_weights is not None:
+            J = J * self.root_weights[:, None]
+        n = len(self.problem.unknowns)
+        if columns is None:
+            columns = np.arange(n)
+        elif np.asarray(columns).dtype == bool:
+            columns = np.flatnonzero(columns)
+        position = np.full(n, -1)
+        position[np.asarray(columns, int)] = np.arange(len(columns))
+        rows = np.zeros((len(self.prior.index), J.shape[1]))
+        where = position[self.prior.index]
+        present = where >= 0
+        rows[np.flatnonzero(present), where[present]] = self.prior.weights[present]
+        return np.vstack([J, rows])
+
+    def symbolic_residual(self, x):
+        import casadi as ca
+
+        p = self.prior
+        extra = [float(w) * (x[int(i)] - float(c))
+                 for i, c, w in zip(p.index, p.centre, p.weights)]
+        r = self.problem.symbolic_residual(x)
+        if self.root_weights is not None:
+            r = r * ca.DM(self.root_weights)
+        return ca.vertcat(r, *extra)
+
+
+@dataclass(frozen=True)
+class Posterior:
+    """Posterior statistics at an estimate, over the free unknowns.
+
+    ``covariance`` over ``free`` (NaN rows/columns for unknowns the distinct data do not
+    reach); ``share`` the data's share of each prior parameter (``prior.index`` order);
+    ``sigma`` [m] the noise estimate (NaN when the distinct data leave no degree of
+    freedom); ``dof`` the residual degrees of freedom it rests on.
+    """
+
+    covariance: np.ndarray
+    share: np.ndarray
+    sigma: float
+    dof: float
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+
+
+def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior | None,
+              sigma: float | None = None, rows: np.ndarray | None = None) -> Posterior:
+    """Posterior at an estimate from the data Jacobian ``J`` (columns ``free_index``) and
+    residual ``r`` [m].
+
+    ``rows`` (boolean over ``r``) keeps only the entries that are independent information
+    (duplicated readings left out). ``sigma`` [m] fixes the noise for the prior's weight;
+    the returned ``sigma`` is re-estimated from the kept residual.
+    """
+    if rows is not None:
+        J, r = J[rows], r[rows]
+    free_index = np.asarray(free_index, int)
+    n = len(free_index)
+    precision_prior = np.zeros(n)
+    prior_position = np.zeros(0, int)
+    if prior is not None and len(prior.index):
+        position = {int(i): k for k, i in enumerate(free_index)}
+        prior_position = np.array([position.get(int(i), -1) for i in prior.index])
+        held = prior_position >= 0
+        precision_prior[prior_position[held]] = 1.0 / prior.tolerance[held] ** 2
+    reached = (np.abs(J).sum(axis=0) > 0) | (precision_prior > 0)
+    Jr = J[:, reached]
+    data = Jr.T @ Jr
+    m = len(r)
+    rss = float(r @ r)
+    sigma_prior = sigma if sigma is not None else (prior.sigma if prior is not None else None)
+
+    def solve_for(s: float | None):
+        if s is None or not np.isfinite(s):
+            information = data
+        else:
+            information = data + np.diag(s**2 * precision_prior[reached])
+        inverse = np.linalg.pinv(information, rcond=1e-14, hermitian=True)
+        spent = float(np.trace(inverse @ data))
+        return inverse, spent
+
+    inverse, spent = solve_for(sigma_prior)
+    dof = m - spent
+    sigma_new = math.sqrt(rss / dof) if dof > 0.5 else float("nan")
+    covariance = np.full((n, n), np.nan)
+    scale = sigma_new**2
+    sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
+    covariance[sub] = scale * inverse
+    # Data share: the diagonal of the resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e.
+    # 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2 with the noise s the prior was weighed with.
+    share = np.full(len(prior_position), np.nan)
+    if prior is not None and len(prior_position) and sigma_prior is not None:
+        diagonal = np.full(n, np.nan)
+        diagonal[reached] = np.diag(inverse)
+        for k, position in enumerate(prior_position):
+            if position >= 0 and np.isfinite(diagonal[position]):
+                share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
+    return Posterior(covariance, share, sigma_new, dof)
+
+
+def duplicate_rows(problem) -> tuple[np.ndarray, int, int]:
+    """Residual entries that carry independent information, and the duplicates found.
+
+    A unit of data (a placement of a bar or artifact, a tracker or laser reading) that
+    repeats an earlier unit's readings exactly (joints and measured values) adds no
+    information: its residual entries are left out (False). Returns the mask over the
+    stacked residual, the number of repeated units and the number of units.
+    """
+    copies = repeated_copies(problem)
+    first = copies > 0
+    units = repeated = 0
+    for model, groups in _groups(problem):
+        keys = {}
+        for g, c in zip(groups, copies[_span(problem, model)]):
+            if g >= 0:
+                keys.setdefault(int(g), c)
+        units += len(keys)
+        repeated += sum(1 for c in keys.values() if c < 0)
+    return first, repeated, units
+
+
+def repeated_copies(problem) -> np.ndarray:
+    """Per residual entry, how often its unit's readings occur (negative: a later copy)."""
+    out = []
+    count: dict[bytes, int] = {}
+    keys = []
+    for model, groups in _groups(problem):
+        key_of = {int(g): model.dataset.kind.encode() + _unit_bytes(model.dataset, int(g))
+                  for g in dict.fromkeys(groups.tolist()) if g >= 0}
+        for key in key_of.values():
+            count[key] = count.get(key, 0) + 1
+        keys.append((groups, key_of))
+    seen: set[bytes] = set()
+    for groups, key_of in keys:
+        sign = {}
+        for g, key in key_of.items():
+            sign[g] = -1 if key in seen else 1
+            seen.add(key)
+        out.append(np.array([sign[int(g)] * count[key_of[int(g)]] if g >= 0 else 1
+                             for g in groups], dtype=int))
+    return np.concatenate(out) if out else np.zeros(0, int)
+
+
+def copy_weights(problem) -> np.ndarray:
+    """Per residual entry ``1 / copies``: repeated readings count once in all."""
+    return 1.0 / np.abs(repeated_copies(problem))
+
+
+def _groups(problem):
+    return [(model, np.asarray(model.residual_groups(), int)) for model in problem.models]
+
+
+def _span(problem, model) -> slice:
+    start = 0
+    for other in problem.models:
+        size = other.residual_size()
+        if other is model:
+            return slice(start, start + size)
+        start += size
+    raise KeyError(model)
+
+
+def _unit_bytes(dataset, group: int) -> bytes:
+    """The readings of one unit of data as bytes (its id left out)."""
+    pose = getattr(dataset, "pose", None)
+    rows = np.flatnonzero(np.asarray(pose) == group) if pose is not None else np.array([group])
+    parts = []
+    for name in ("joints", "measured", "distance", "flange_poses"):
+        value = getattr(dataset, name, None)
+        if value is not None:
+            parts.append(np.ascontiguousarray(np.asarray(value, float)[rows]).tobytes())
+    points = getattr(dataset, "point", None)
+    if points:
+        parts.append("|".join(str(points[i]) for i in rows).encode())
+    return b"#".join(parts)

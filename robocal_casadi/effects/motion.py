@@ -1,0 +1,73 @@
+"""Direction of motion of each joint, from the order of a dataset's rows.
+
+A table lists its rows in the order they were measured. Row i's direction of motion of
+joint j is the sign of the change of its reading since the previous row:
+
+    direction_q{j}[i] = sign(q_j[i] - q_j[i-1])          in {-1, 0, +1}
+
+A row with no change keeps the last known direction; the first row of a dataset, and
+rows before the first change, have direction 0 (unknown). The directions belong to the
+whole table in recorded order: placements of an artifact follow one another in that
+order (the robot moves from the last touch of one placement to the first of the next),
+and the directions are computed once per dataset from its full table, never from a part
+of it. A dataset cut down to some of its rows (data selection) carries the directions of
+its full table in ``extras``; cross-validation and the placement refits of validation use
+the same per-row values as the fit.
+
+Per-row inputs derived here are named ``direction_q{j}`` (1-based) and travel with the
+data columns of ``extras``.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+PREFIX = "direction_q"
+
+
+def direction_column(joint: int) -> str:
+    """The name of joint ``joint``'s (1-based) direction input: ``direction_q{joint}``."""
+    return f"{PREFIX}{int(joint)}"
+
+
+def is_direction_column(column: str) -> bool:
+    return column.startswith(PREFIX) and column[len(PREFIX):].isdigit()
+
+
+def directions_of_motion(Q) -> np.ndarray:
+    """Direction of motion (N x dof) in {-1, 0, +1} of readings ``Q`` (N x dof) in row
+    order; see the module docstring."""
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    out = np.zeros(Q.shape)
+    if len(Q) < 2:
+        return out
+    change = np.sign(np.diff(Q, axis=0))  # (N-1) x dof: row i+1 against row i
+    last = np.zeros(Q.shape[1])
+    for i, step in enumerate(change, start=1):
+        last = np.where(step != 0, step, last)
+        out[i] = last
+    return out
+
+
+def with_directions(joints, extras: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``extras`` plus ``direction_q1..n`` of the full table ``joints`` (N x dof), where
+    ``extras`` does not hold them already (a table cut down keeps its own)."""
+    out = dict(extras)
+    if joints is None:
+        return out
+    directions = directions_of_motion(joints)
+    for j in range(1, directions.shape[1] + 1):
+        out.setdefault(direction_column(j), directions[:, j - 1])
+    return out
+
+
+def direction_values(dataset, column: str) -> np.ndarray:
+    """The per-row values of the derived input ``column`` for ``dataset`` (N,)."""
+    if column in dataset.extras:
+        return np.asarray(dataset.extras[column], dtype=float)
+    joint = int(column[len(PREFIX):])
+    if dataset.joints is None:
+        return np.zeros(0)
+    return directions_of_motion(dataset.joints)[:, joint - 1]

@@ -1,0 +1,279 @@
+"""One Levenberg-Marquardt kernel for every nonlinear least-squares fit in the package.
+
+Minimises ``0.5 |r(x)|^2`` (``r`` in the caller's units, e.g. [m]). Each step solves the
+damped normal equations, by default with Marquardt's scaling,
+
+    (J^T J + mu diag(J^T J)) dx = -J^T r,
+
+computed on the columns scaled to unit norm (``D = diag(|J_j|)``) so the system is well
+scaled: ``(Js^T Js + mu I) D dx = -Js^T r``; Levenberg's ``J^T J + mu I`` (``D = I``) is the
+choice for unknowns of one unit. ``mu`` starts at ``Damping.initial``, grows by
+``increase`` after a step that raises the cost and shrinks by ``decrease`` after one that
+does not; a step is sought until ``mu`` passes ``ceiling``.
+
+The state may live on a manifold: ``retract(x, dx)`` maps a step in the local
+coordinates the Jacobian is taken in to a new state (default ``x + dx``), and
+``coordinates(x)`` gives the state in those coordinates (default ``x``). Simple bounds
+(vector states only) clip each step; an unknown at a bound whose descent points outwards
+is held for that step.
+
+Termination is reported as a status code with one message each (``STATUS``), in the
+manner of ``scipy.optimize.least_squares``; codes above 0 are convergence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Literal
+
+import numpy as np
+
+StatusWord = Literal["converged", "max_iterations", "stalled", "held"]
+
+#: status code -> (word, message). Codes above 0 mean a minimum was reached.
+STATUS: dict[int, tuple[StatusWord, str]] = {
+    -2: ("held", "every unknown is held at a bound"),
+    -1: ("stalled", "the cost fell by less than the stall fraction over the stall window"),
+    0: ("max_iterations", "the iteration limit was reached"),
+    1: ("converged", "the gradient is orthogonal to the residual within gtol"),
+    2: ("converged", "an accepted step lowered the cost by less than ftol of itself"),
+    3: ("converged", "the scaled step fell below xtol of the scaled state"),
+    4: ("converged", "the residual fell to its floor (an exact fit)"),
+    5: ("converged", "no damped step lowers the cost: the gradient vanishes to rounding"),
+}
+
+# An evaluation returns the residual and, when asked or when it comes for free, the
+# Jacobian in the local coordinates of the state (None when not computed).
+Evaluate = Callable[[Any, bool], tuple[np.ndarray, "np.ndarray | None"]]
+
+
+@dataclass(frozen=True)
+class Damping:
+    """Damping schedule (dimensionless).
+
+    ``scaling="marquardt"`` damps with ``diag(J^T J)``, for unknowns of mixed units (lengths
+    and angles); ``"identity"`` with ``I`` (Levenberg), for unknowns of one unit, e.g.
+    joint angles [rad], whose columns' sizes carry meaning.
+    """
+
+    scaling: Literal["marquardt", "identity"] = "marquardt"
+    initial: float = 1e-4
+    increase: float = 10.0  # factor after a step that raised the cost
+    decrease: float = 10.0  # divisor after an accepted step
+    floor: float = 1e-12
+    ceiling: float = 1e12  # beyond this no step is sought: status 5
+
+
+DAMPING = Damping()
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Stopping tests; a zero or None test is off (status codes in brackets).
+
+    ``gtol`` [1]: every column's cosine with the residual (MINPACK's test) (1);
+    ``ftol`` [1]: an accepted step's relative cost decrease (2);
+    ``xtol`` [1]: ``|D dx| <= xtol (1 + |D x|)``, the scaled step against the scaled state
+    (``D`` the column norms of ``J``, ``x`` the state's local coordinates) (3);
+    ``residual_floor`` [residual units]: ``|r|`` at or below it (4);
+    ``stall``: ``(window, fraction)``, the cost fell by less than ``fraction`` over the last
+    ``window`` accepted steps (-1).
+    """
+
+    gtol: float = 0.0
+    ftol: float = 0.0
+    xtol: float = 0.0
+    residual_floor: float = 0.0
+    stall: tuple[int, float] | None = None
+
+
+@dataclass(frozen=True)
+class LeastSquaresResult:
+    """Where the kernel stopped: state ``x``, residual and Jacobian there (the Jacobian is
+    None when no step was taken from the last accepted state), ``cost = 0.5 |r|^2``,
+    accepted steps, and the status code (see ``STATUS``)."""
+
+    x: Any
+    residual: np.ndarray = field(repr=False)
+    jacobian: np.ndarray | None = field(repr=False)
+    cost: float
+    iterations: int
+    status: int
+
+    @property
+    def word(self) -> StatusWord:
+        """One word for the outcome: converged, max_iterations, stalled or held."""
+        return STATUS[self.status][0]
+
+    @property
+    def message(self) -> str:
+        return STATUS[self.status][1]
+
+    @property
+    def converged(self) -> bool:
+        return self.status > 0
+
+
+def damped_step(Js: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray:
+    """Minimiser ``s`` of ``|Js s + r|^2 + mu |s|^2`` for unit-scaled columns ``Js``.
+
+    Normal equations (well scaled, since the columns have unit norm); the damped matrix is
+    positive definite, an undamped one (``mu = 0``) is factored by Cholesky, and one that
+    Cholesky refuses falls back to an SVD solve of the stacked problem.
+    """
+    n = Js.shape[1]
+    A = Js.T @ Js
+    A.flat[::n + 1] += mu
+    g = -(Js.T @ r)
+    try:
+        if mu > 0.0:
+            return np.linalg.solve(A, g)
+        L = np.linalg.cholesky(A)
+        return np.linalg.solve(L.T, np.linalg.solve(L, g))
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(np.vstack([Js, np.sqrt(mu) * np.eye(n)]),
+                               np.concatenate([-r, np.zeros(n)]), rcond=None)[0]
+
+
+def column_scale(J: np.ndarray) -> np.ndarray:
+    """Column norms of ``J``, a zero column counted as 1 (it takes no part)."""
+    scale = np.linalg.norm(J, axis=0)
+    scale[scale == 0] = 1.0
+    return scale
+
+
+def _vector_retract(x: np.ndarray, step: np.ndarray) -> np.ndarray:
+    return x + step
+
+
+@dataclass
+class _State:
+    x: Any
+    r: np.ndarray
+    J: np.ndarray | None
+    cost: float
+
+
+def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
+                        tolerances: Tolerances = Tolerances(), damping: Damping | None = DAMPING,
+                        retract: Callable[[Any, np.ndarray], Any] = _vector_retract,
+                        bounds: tuple[np.ndarray, np.ndarray] | None = None,
+                        reweight: Callable[[np.ndarray], np.ndarray] | None = None,
+                        coordinates: Callable[[Any], np.ndarray] = np.asarray,
+                        ) -> LeastSquaresResult:
+    """Minimise ``0.5 |w r(x)|^2`` from ``x0``; see the module docstring.
+
+    ``evaluate(x, jacobian)`` returns ``(r, J)``, ``J`` may be None unless ``jacobian``.
+    ``damping=None`` takes undamped Gauss-Newton steps, each accepted whatever it does to
+    the cost. ``bounds = (lower, upper)`` for a vector state. ``reweight(r)`` gives
+    per-entry weights ``w**2`` (iteratively reweighted least squares), renewed after every
+    accepted step.
+    """
+    if bounds is not None:
+        x0 = np.clip(np.asarray(x0, dtype=float), *bounds)
+    r, J = evaluate(x0, False)
+    weights = reweight(r) if reweight is not None else None
+    state = _State(x0, r, J, _cost(r, weights))
+    mu = damping.initial if damping is not None else 0.0
+    history = [state.cost]
+    for iteration in range(max_iterations):
+        if state.J is None:
+            state.J = evaluate(state.x, True)[1]
+        J, r = _weighted(state.J, state.r, weights)
+        stop = _stop_before_step(J, r, state.cost, tolerances, history)
+        if stop is not None:
+            return _result(state, iteration, stop)
+        free = _free_unknowns(state.x, J, r, bounds)
+        if not free.any():
+            return _result(state, iteration, -2)
+        scale = column_scale(J[:, free]) if damping is None or damping.scaling == "marquardt" \
+            else np.ones(int(free.sum()))
+        Js = J[:, free] / scale
+        while True:
+            step = np.zeros(J.shape[1])
+            step[free] = damped_step(Js, r, mu) / scale
+            x_trial, step, clipped = _moved(state.x, step, retract, bounds)
+            r_trial, J_trial = evaluate(x_trial, False)
+            cost_trial = _cost(r_trial, weights)
+            # A step the bounds cut short must lower the cost, or a shorter one is tried.
+            if damping is None or cost_trial < state.cost or (
+                    cost_trial == state.cost and not clipped):
+                break
+            mu = max(mu * damping.increase, damping.floor)
+            if mu > damping.ceiling:
+                return _result(state, iteration, 5)
+        decrease = state.cost - cost_trial
+        state = _State(x_trial, r_trial, J_trial, cost_trial)
+        if reweight is not None:
+            weights = reweight(r_trial)
+            state.cost = _cost(r_trial, weights)
+        history.append(state.cost)
+        if damping is not None:
+            mu = max(mu / damping.decrease, damping.floor)
+        stop = _stop_after_step(step[free] * scale, coordinates(state.x)[free] * scale,
+                                state.cost, decrease, tolerances)
+        if stop is not None:
+            return _result(state, iteration + 1, stop)
+    return _result(state, max_iterations, 0)
+
+
+def _cost(r: np.ndarray, weights: np.ndarray | None) -> float:
+    """``0.5 |w r|^2``; a non-finite value counts as infinite."""
+    cost = 0.5 * float(r @ r if weights is None else np.sum(weights * r**2))
+    return cost if np.isfinite(cost) else np.inf
+
+
+def _free_unknowns(x, J: np.ndarray, r: np.ndarray,
+                   bounds: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """All unknowns but those at a bound whose descent direction points outwards."""
+    if bounds is None:
+        return np.ones(J.shape[1], dtype=bool)
+    gradient = J.T @ r
+    return ~(((x <= bounds[0]) & (gradient > 0)) | ((x >= bounds[1]) & (gradient < 0)))
+
+
+def _moved(x, step: np.ndarray, retract, bounds) -> tuple[Any, np.ndarray, bool]:
+    """The state after ``step`` (clipped onto the bounds), the step taken, and whether the
+    bounds cut it short."""
+    moved = retract(x, step)
+    if bounds is None:
+        return moved, step, False
+    moved = np.clip(moved, *bounds)
+    taken = moved - x
+    return moved, taken, not np.array_equal(taken, step)
+
+
+def _weighted(J: np.ndarray, r: np.ndarray, weights: np.ndarray | None):
+    if weights is None:
+        return J, r
+    w = np.sqrt(weights)
+    return J * w[:, None], r * w
+
+
+def _stop_before_step(J: np.ndarray, r: np.ndarray, cost: float, tolerances: Tolerances,
+                      history: list[float]) -> int | None:
+    norm = np.sqrt(2.0 * cost)
+    if norm <= tolerances.residual_floor:
+        return 4
+    if tolerances.gtol and J.shape[1]:
+        cosine = np.abs(J.T @ r) / column_scale(J)
+        if np.max(cosine) <= tolerances.gtol * norm:
+            return 1
+    if tolerances.stall is not None:
+        window, fraction = tolerances.stall
+        if len(history) > window and cost > (1.0 - fraction) * history[-window - 1]:
+            return -1
+    return None
+
+
+def _stop_after_step(scaled_step: np.ndarray, scaled_x: np.ndarray, cost: float,
+                     decrease: float, tolerances: Tolerances) -> int | None:
+    if abs(decrease) <= tolerances.ftol * cost:
+        return 2
+    if np.linalg.norm(scaled_step) <= tolerances.xtol * (1.0 + np.linalg.norm(scaled_x)):
+        return 3
+    return None
+
+
+def _result(state: _State, iterations: int, status: int) -> LeastSquaresResult:
+    return LeastSquaresResult(state.x, state.r, state.J, state.cost, iterations, status)

@@ -1,0 +1,162 @@
+"""The packages' import graph has no cycle.
+
+The graph is read from the source with ``ast``, without importing anything: an edge runs
+from a module to every module of the project it imports, at the top or inside a function
+(an import deferred into a function is still a dependency), except under
+``if TYPE_CHECKING:``. Importing ``a.b.c`` runs the ``__init__`` of ``a.b`` too, so the
+edge also reaches those packages (not the importer's own enclosing packages, which are
+already being initialised when it runs).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("robocal_casadi", "planning")
+
+
+def module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def project_modules(root: Path, packages: tuple[str, ...]) -> dict[str, Path]:
+    return {module_name(p, root): p for package in packages for p in (root / package).rglob("*.py")}
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def imported_names(tree: ast.AST) -> list[ast.Import | ast.ImportFrom]:
+    """Every import statement in ``tree`` outside ``if TYPE_CHECKING:`` blocks."""
+    found: list[ast.Import | ast.ImportFrom] = []
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            found.append(node)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(tree)
+    return found
+
+
+def _with_packages(target: str, importer: str, modules: dict[str, Path]) -> set[str]:
+    """``target`` and the packages on its path that are not enclosing ``importer``."""
+    parts = target.split(".")
+    own = {".".join(importer.split(".")[:k]) for k in range(1, importer.count(".") + 1)}
+    return {".".join(parts[:k]) for k in range(1, len(parts) + 1)} & modules.keys() - own
+
+
+def import_graph(root: Path = ROOT, packages: tuple[str, ...] = PACKAGES) -> dict[str, set[str]]:
+    modules = project_modules(root, packages)
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        edges: set[str] = set()
+        for node in imported_names(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            else:
+                if node.level:
+                    base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    source = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    source = node.module or ""
+                # ``from a import b`` imports the module ``a.b`` when there is one.
+                targets = [source] + [f"{source}.{alias.name}" for alias in node.names]
+            for target in targets:
+                edges |= _with_packages(target, name, modules)
+        graph[name] = edges - {name}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_the_cycle_finder_finds_a_planted_cycle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a", "d"}, "d": set(), "e": {"d"}}
+    assert cycles(graph) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_a_planted_cycle_through_a_function_level_import_is_found(tmp_path):
+    package = tmp_path / "pkg"
+    (package / "sub").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "sub" / "__init__.py").write_text("from .y import g\n")
+    (package / "x.py").write_text("from .sub.y import g\n")
+    (package / "sub" / "y.py").write_text("def g():\n    from ..x import f\n")
+    (package / "z.py").write_text("from typing import TYPE_CHECKING\n"
+                                  "if TYPE_CHECKING:\n    from .x import f\n")
+    graph = import_graph(tmp_path, ("pkg",))
+    assert graph["pkg.x"] == {"pkg.sub", "pkg.sub.y"}  # the package on the way counts
+    assert graph["pkg.sub.y"] == {"pkg.x"}  # not its own enclosing packages
+    assert graph["pkg.z"] == set()  # names for type checking only
+    assert cycles(graph) == [["pkg.sub", "pkg.sub.y", "pkg.x"]]
+
+
+def test_the_project_graph_resolves_its_imports():
+    graph = import_graph()
+    assert "robocal_casadi.errors" in graph["robocal_casadi.robot"]
+    assert "robocal_casadi.calibration.diagnosis" in graph[
+        "robocal_casadi.calibration.identification"]  # ``from . import diagnosis``
+    assert {"planning", "planning.design"} <= graph["robocal_casadi.commands.plan"]
+    assert "robocal_casadi.robot" not in graph["robocal_casadi.parameters"]
+
+
+def test_no_import_cycle():
+    found = cycles(import_graph())
+    assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
