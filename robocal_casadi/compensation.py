@@ -119,7 +119,13 @@ def _with_effects(kinematics: Kinematics, effects, extras: dict, targets: np.nda
     for _ in range(EFFECT_ROUNDS):
         if rows.size == 0:
             break
-        T = effects.tool_poses(Q[rows], _rows_of(extras, rows, count))
+        if any(c.startswith("direction_q") for c in effects.columns()):
+            # backlash: the directions of motion along the whole path of solutions
+            from .effects.motion import with_directions
+
+            T = effects.tool_poses(Q[rows], _rows_of(with_directions(Q, extras), rows, count))
+        else:
+            T = effects.tool_poses(Q[rows], _rows_of(extras, rows, count))
         if poses is None:
             error = targets[rows, :3] - T[:, :3, 3]
         else:

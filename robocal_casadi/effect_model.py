@@ -24,6 +24,8 @@ import casadi as ca
 import numpy as np
 
 from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
+from .effects.coupling import JointCoupling
+from .effects.motion import is_direction_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
 from .kinematics import Kinematics
@@ -50,6 +52,8 @@ def effects_to_dict(result) -> dict | None:
             entry["reference"] = float(effect.constants()[0])
         if isinstance(effect, JointCompliance):
             entry["payload"] = bool(effect.payload or payload_in_data)
+        if isinstance(effect, JointCoupling):
+            entry["drivers"] = [int(d) for d in effect.drivers]
         entries.append(entry)
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
     return {"units": {"length": "m", "angle": "rad"}, "effects": entries,
@@ -112,9 +116,12 @@ class EffectModel:
 
     def tool_poses(self, Q: np.ndarray, extras: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """World tool poses (N x 4 x 4) [m] at readings ``Q`` (N x dof) with the effects;
-        ``extras`` one array (or number) per name in ``columns()``."""
+        ``extras`` one array (or number) per name in ``columns()``; the directions of
+        motion (backlash) follow from the order of the rows where not given."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
-        extras = extras or {}
+        extras = dict(extras or {})
+        if any(is_direction_column(c) for c in self.columns()):
+            extras = with_directions(Q, extras)
         missing = [c for c in self.columns() if c not in extras]
         if missing:
             raise InputError(f"the effects need {', '.join(missing)} for every row")
@@ -144,6 +151,8 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
         if name == "joint_compliance":
             payload |= bool(entry.get("payload", False))
             effect: Effect = JointCompliance(joints, robot=robot, payload=entry.get("payload", False))
+        elif name == "joint_coupling":
+            effect = JointCoupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
         elif name == "thermal_drift":
             effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
                                   reference_value=float(entry["reference"]))
@@ -222,6 +231,8 @@ def row_values(model: EffectModel, table, *, payload: float | None = None,
     options = {"payload": payload, "temperature": temperature}
     out: dict[str, np.ndarray] = {}
     for name in model.columns():
+        if is_direction_column(name) and not table.has(name):
+            continue  # from the order of the rows (``EffectModel.tool_poses``)
         if table.has(name):
             if options.get(name) is not None:
                 raise InputError(f"{name} is given both as a column and as --{name}",

@@ -116,7 +116,8 @@ class ParameterRegistry:
         for i, joint in enumerate(robot.joints, start=1):
             if robot.convention == "urdf":
                 v = [float(values[self.index(f"{stem}{i}")]) for stem, _ in URDF_PARAMETERS]
-                joints.append(replace(joint, origin=Frame(tuple(v[:3]), tuple(v[3:]))))  # type: ignore[arg-type]
+                joints.append(replace(joint, origin=replace(joint.origin, xyz=tuple(v[:3]),
+                                                            rpy=tuple(v[3:]))))
                 continue
             changes = {stem: float(values[self.index(f"{stem}{i}")]) for stem, _ in JOINT_PARAMETERS}
             joints.append(replace(joint, **changes))
