@@ -194,21 +194,6 @@ def geometry_only(result, datasets, validation=()) -> dict:
     return out
 
 
-def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
-    """``delivered`` in the robot file's length unit, with what each output applies."""
-    def scaled(block):
-        return {role: value / length_scale for role, value in block.items()} | {"unit": unit}
-
-    out = {"robot_calibrated.yaml": {"applies": "the calibrated geometry only (robocal fk, "
-                                                "robocal compensate, a controller's DH table)",
-                                     **scaled(delivered["robot_calibrated.yaml"])}}
-    if delivered.get("with_effects"):
-        out[EFFECTS_FILE] = {"applies": "the calibrated geometry with the identified effects "
-                                        "(robocal fk and robocal compensate --with-effects)",
-                             **scaled(delivered["with_effects"])}
-    return out
-
-
 def delivered_lines(delivered: dict, length_scale: float, unit: str) -> list[str]:
     """Terminal lines: the accuracy each output delivers."""
     def text(block):

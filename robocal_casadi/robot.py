@@ -222,10 +222,11 @@ def load_robot(path: str | Path, *, base_link: str | None = None,
     that starts with ``<``); errors name the file and the key. ``base_link`` and
     ``tip_link`` choose a URDF's chain (default: its root to its single leaf)."""
     path = Path(path)
-    from .urdf import is_urdf, read_urdf_robot
+    from .urdf.description import is_urdf, read_description
 
     if is_urdf(path):
-        return read_urdf_robot(path, base_link=base_link, tip_link=tip_link)
+        return robot_from_dict(read_description(path, base_link=base_link, tip_link=tip_link),
+                               file=path)
     if base_link is not None or tip_link is not None:
         raise InputError("base_link and tip_link choose the chain of a URDF robot; this "
                          "robot file is not URDF", file=path)

@@ -298,7 +298,7 @@ def test_ur_calibration_file(tmp_path):
 @pytest.mark.parametrize("text, tip", [(ur10_urdf(), "tool0"), (panda_urdf(), "panda_hand")],
                          ids=["ur10", "panda"])
 def test_dh_equivalent_has_the_same_kinematics(tmp_path, text, tip):
-    from robocal_casadi.urdf import dh_equivalent
+    from robocal_casadi.urdf.equivalent import dh_equivalent
 
     robot = load_robot(write(tmp_path, "r.urdf", text), tip_link=tip)
     equivalent = dh_equivalent(robot)
