@@ -1,6 +1,7 @@
 """The measurement set-up a dataset file describes, as the planner needs it (SI).
 
-Besides the contract's keys, a dataset file may carry an optional ``planning`` block, in
+Besides the keys of docs/formats.md#dataset-file, a dataset file may carry an optional
+``planning`` block (docs/formats.md#planning-block), in
 the file's units::
 
     planning:

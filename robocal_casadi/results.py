@@ -1,4 +1,4 @@
-"""Typed, immutable results of a calibration, and the contract's ``result.json``.
+"""Typed, immutable results of a calibration, and ``result.json`` (docs/formats.md#result-file).
 
 Values are SI inside; ``to_json`` converts to the robot file's units (lengths in its
 length unit, angles in its angle unit, residual RMS in its length unit).
@@ -13,6 +13,8 @@ import numpy as np
 
 from .robot import Robot
 from .units import Units
+
+DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 
 
 @dataclass(frozen=True)
@@ -76,7 +78,7 @@ class EffectFinding:
     summary: str = ""
 
     def to_json(self, units: Units | None = None) -> dict:
-        """Contract entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
+        """The ``result.json`` entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
         scale = units.length_scale if units is not None else 1.0
         evidence = {k: float(v) / (scale if k.startswith("cv_rms") else 1.0)
                     for k, v in self.evidence.items()}
@@ -107,8 +109,6 @@ class PriorSummary:
     @property
     def dominated(self) -> tuple[str, ...]:
         """Parameters whose estimate owes more to the prior than to the data."""
-        from .calibration.prior import DOMINATED_SHARE
-
         return tuple(n for n, s in self.data_share.items()
                      if np.isfinite(s) and s < DOMINATED_SHARE)
 
@@ -230,7 +230,7 @@ class DatasetResiduals:
 
 @dataclass(frozen=True)
 class CalibrationResult:
-    """Everything a calibration produced. See ``to_json`` for the contract's file."""
+    """Everything a calibration produced. See ``to_json`` for ``result.json``."""
 
     datasets: tuple[str, ...]
     robot_nominal: Robot
@@ -283,7 +283,7 @@ class CalibrationResult:
         raise KeyError(f"no parameter {name!r}; names: {[p.name for p in self.parameters]}")
 
     def to_json(self) -> dict:
-        """The contract's ``result.json`` content, in the robot file's units."""
+        """The ``result.json`` content (docs/formats.md#result-file), in the robot file's units."""
         units = self.units
         out: dict[str, Any] = {
             "datasets": list(self.datasets),

@@ -200,8 +200,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     diagnosis add more. ``method``, ``loss`` and ``max_iterations`` go to ``solver.solve``;
     a geometric fit that has not converged within ``max_iterations`` is a ``SolverError``. With
     ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
-    than that fraction are dropped first, as in the bar patent (``selection``); what was
-    dropped is in ``result.selection``.
+    than that fraction are dropped first, as in the published cross-bar method
+    (``selection``, docs/methods.md#cross-bar-calibration); what was dropped is in
+    ``result.selection``.
 
     ``rule`` decides which parameters the data estimate. ``"prior"`` (default): every
     parameter that is not exactly undeterminable (no effect, absorbed by the placement,
