@@ -27,6 +27,7 @@ from ..output import atomic_directory
 from ..profiles import PROFILES, ProfileCost, profile_parameters
 from ..results import CalibrationResult
 from ..robot import save_robot
+from ..output import json_safe as _clean
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 
@@ -73,17 +74,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     report.add_argument("--report-templates", type=Path, metavar="DIR",
                         help="folder of Jinja2 templates replacing the report's own "
                              "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
-
-
-def _clean(value):
-    """JSON-safe copy: NaN and infinities become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
 
 
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
