@@ -192,7 +192,8 @@ RULES = ("prior", "fraction")
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False, rule: str = "prior") -> CalibrationResult:
+              progress: bool = False, rule: str = "prior",
+              parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
@@ -216,7 +217,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
     closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
-    a number >= 0, ``rule`` one of ``RULES``.
+    a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
+    restricts the robot parameters that may be fitted, e.g. to a controller's set
+    (``profiles``); the others are held at nominal. Default: all of them.
     """
     method = choice(method, METHODS, "method")
     rule = choice(rule, RULES, "rule")
@@ -240,9 +243,16 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     models = models_for(datasets)
     problem = Problem(robot, models, effects)
     x0 = problem.initial()
+    candidates = None
+    if parameters is not None:
+        allowed = set(parameters)
+        robot_names = set(problem.kinematics.registry.names)
+        open_ = problem.mask("robot", "effects", "mounted")
+        candidates = [n for i, n in enumerate(problem.unknowns.names)
+                      if open_[i] and (n not in robot_names or n in allowed)]
 
     nominal = solve(problem, x0, problem.mask("placement"), method=method, loss=loss)
-    identifiability = analyse_identifiability(problem, nominal.x)
+    identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
@@ -252,7 +262,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
             problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)
-            identifiability = analyse_identifiability(problem, nominal.x)
+            identifiability = analyse_identifiability(problem, nominal.x, candidates)
     if not identifiability.identifiable:
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
@@ -266,7 +276,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
-    revised = analyse_identifiability(problem, geometric.x)
+    revised = analyse_identifiability(problem, geometric.x, candidates)
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)
@@ -297,7 +307,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         determined = identifiability
         identifiability, geometric, prior = _map_geometric(
             problem, nominal.x, geometric.x, noise, distinct, method=method, loss=loss,
-            max_iterations=max_iterations)
+            max_iterations=max_iterations, candidates=candidates)
         # The condition number describes the data: that of the parameters with a fair share
         # of their effect their own (the weak ones lean on the prior, not on the data).
         identifiability = replace(identifiability,
@@ -487,16 +497,19 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 
 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
-                   distinct, *, method: str, loss: str, max_iterations: int):
-    """Identifiability with exact dependencies only, and the MAP fit of the rest."""
+                   distinct, *, method: str, loss: str, max_iterations: int, candidates=None):
+    """Identifiability with exact dependencies only, and the MAP fit of the rest
+    (``candidates``: the unknowns that may be fitted, default all)."""
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(problem.rms(x_start), 1e-12)
-    identifiability = analyse_identifiability(problem, x_nominal, tolerance=EXACT_TOLERANCE)
+    identifiability = analyse_identifiability(problem, x_nominal, candidates,
+                                              tolerance=EXACT_TOLERANCE)
     free = _free_mask(problem, identifiability)
     solution, prior = _map_solve(problem, x_start, free, _prior_of(problem, free, sigma),
                                  distinct, method=method, loss=loss,
                                  max_iterations=max_iterations)
-    revised = analyse_identifiability(problem, solution.x, tolerance=EXACT_TOLERANCE)
+    revised = analyse_identifiability(problem, solution.x, candidates,
+                                      tolerance=EXACT_TOLERANCE)
     if set(revised.identifiable) > set(identifiability.identifiable):
         free = _free_mask(problem, revised)
         candidate, candidate_prior = _map_solve(
