@@ -6,13 +6,18 @@ length unit, angles in its angle unit, residual RMS in its length unit).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from .robot import Robot
 from .units import Units
+
+if TYPE_CHECKING:
+    from .calibration.problem import Problem
+    from .calibration.selection import Selection
+    from .calibration.solver import Solution
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,7 @@ class EffectFinding:
     parameters: dict[str, float]
     unit: str
     evidence: dict[str, float]
-    std: dict[str, float] = field(default_factory=dict)
+    std: dict[str, float | None] = field(default_factory=dict)
     summary: str = ""
 
     def to_json(self, units: Units | None = None) -> dict:
@@ -95,7 +100,7 @@ class PriorSummary:
     weak parameters held); ``noise`` [m] the residual's standard deviation estimated from
     distinct readings (NaN when they leave no degree of freedom); per prior parameter its
     ``tolerance`` [SI of ``quantities``] and the data's share of its estimate (1: data
-    alone, 0: prior alone).
+    alone, 0: prior alone); ``dominated`` those whose share is below one half.
     """
 
     rule: str
@@ -103,14 +108,7 @@ class PriorSummary:
     tolerance: dict[str, float] = field(default_factory=dict)
     data_share: dict[str, float] = field(default_factory=dict)
     quantities: dict[str, str] = field(default_factory=dict)
-
-    @property
-    def dominated(self) -> tuple[str, ...]:
-        """Parameters whose estimate owes more to the prior than to the data."""
-        from .calibration.prior import DOMINATED_SHARE
-
-        return tuple(n for n, s in self.data_share.items()
-                     if np.isfinite(s) and s < DOMINATED_SHARE)
+    dominated: tuple[str, ...] = ()  # whose estimate owes more to the prior than to the data
 
     def entry(self, name: str, units: Units) -> dict:
         """``tolerance`` (file units), ``data_share`` and ``prior_dominated`` of ``name``."""
@@ -258,6 +256,72 @@ class CalibrationResult:
     prior: PriorSummary | None = None
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
+
+    @classmethod
+    def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
+                 final_problem: Problem, nominal: Solution, geometric: Solution,
+                 final: Solution, std: np.ndarray, identifiability: Identifiability,
+                 parameters: Sequence[ParameterEstimate],
+                 parameters_geometric: Sequence[ParameterEstimate],
+                 effects: Sequence[EffectFinding], diagnosis: Sequence[dict], fit: RmsSummary,
+                 validation: RmsSummary | None, residuals: Sequence[DatasetResiduals],
+                 validation_residuals: Sequence[DatasetResiduals],
+                 spheres: Sequence[SphereEstimate], selection: Selection | None,
+                 unexplained: Any, recommended: str, recommendation: str,
+                 prior: PriorSummary | None, notes: Sequence[str], method: str,
+                 loss: str) -> CalibrationResult:
+        """The result of a calibration from its stages.
+
+        ``problem`` is the geometric identification problem (``nominal`` and ``geometric``
+        its solutions), ``final_problem`` the one with the effects diagnosis added
+        (``final`` its solution; the same problem when it added none); ``std`` [SI] the
+        standard error of every unknown of ``final_problem`` (NaN where not estimated).
+        The calibrated robot takes the ``recommended`` model's geometry.
+        """
+        names = final_problem.unknowns.names
+
+        def std_of(i: int) -> float | None:
+            return float(std[i]) if np.isfinite(std[i]) else None
+
+        mounted_slice = final_problem.slices["mounted"]
+        mounted = {names[i]: (float(final.x[i]), std_of(i))
+                   for i in range(mounted_slice.start, mounted_slice.stop)}
+        placement_slice = final_problem.slices["placement"]
+        placement = {names[i]: float(final.x[i])
+                     for i in range(placement_slice.start, placement_slice.stop)}
+        effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
+                                        for n in f.parameters}) for f in effects)
+        chosen = final.x if recommended == "final" else geometric.x
+        return cls(
+            datasets=datasets,
+            robot_nominal=robot,
+            robot_calibrated=robot.with_parameters(chosen[problem.slices["robot"]]),
+            parameters=tuple(parameters),
+            identifiability=identifiability,
+            condition_number=identifiability.condition_number,
+            effects=effects,
+            fit=fit,
+            validation=validation,
+            residuals=tuple(residuals),
+            validation_residuals=tuple(validation_residuals),
+            mounted=mounted,
+            mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
+            placement=placement,
+            solver={"method": method, "loss": loss, "iterations": final.iterations,
+                    "status": final.status, "seconds": geometric.seconds + nominal.seconds,
+                    "residuals": problem.size, "free_unknowns": int(geometric.free.sum())},
+            effect_models=tuple(final_problem.effects),
+            effect_values=final.x[final_problem.slices["effects"]].copy(),
+            diagnosis=tuple(diagnosis),
+            selection={} if selection is None else dict(selection.dropped),
+            parameters_geometric=tuple(parameters_geometric),
+            unexplained=unexplained,
+            recommended=recommended,
+            recommendation=recommendation,
+            prior=prior,
+            spheres=tuple(spheres),
+            notes=tuple(notes),
+        )
 
     @property
     def warning(self) -> str:
