@@ -23,8 +23,9 @@ manner of ``scipy.optimize.least_squares``; codes above 0 are convergence.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 

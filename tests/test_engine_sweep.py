@@ -23,9 +23,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
 from robocal_casadi.effects import make_effect
 from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp, ur_type
-from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
 from robocal_casadi.measurement.base import MeasurementModel
 from robocal_casadi.measurement.tracker import TrackerModel
 from robocal_casadi.robot import Frame

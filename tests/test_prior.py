@@ -10,12 +10,11 @@ import numpy as np
 import pytest
 
 from robocal_casadi import examples
-from robocal_casadi.commands.demo import data_folder
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.errors import InputError
 from robocal_casadi.calibration import calibrate, solve
 from robocal_casadi.calibration.prior import Prior, PriorProblem, posterior, tolerance_of
-from robocal_casadi.datasets import dataset_rows
+from robocal_casadi.commands.demo import data_folder
+from robocal_casadi.datasets import dataset_rows, load_dataset
+from robocal_casadi.errors import InputError
 from robocal_casadi.parameters import ParameterRegistry
 from robocal_casadi.results import EffectFinding
 from robocal_casadi.robot import load_robot, robot_to_dict

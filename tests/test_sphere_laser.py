@@ -21,8 +21,14 @@ from robocal_casadi.errors import InputError
 from robocal_casadi.measurement import MODELS
 from robocal_casadi.measurement.sphere_laser import SphereLaserModel
 from robocal_casadi.robot import save_robot
-from robocal_casadi.sphere_fit import (Scan, algebraic_start, fit_dataset, fit_sensor,
-                                       surface_residuals, tangent_basis)
+from robocal_casadi.sphere_fit import (
+    Scan,
+    algebraic_start,
+    fit_dataset,
+    fit_sensor,
+    surface_residuals,
+    tangent_basis,
+)
 
 # The patent's example: [x0, y0, z0, nx, ny, xc, yc, zc] in mm (nx, ny unitless).
 PATENT = np.array([61.236, -15.643, 139.778, 0.016, 0.020, -119.193, -305.573, 106.620])
@@ -149,8 +155,8 @@ def patent_scan():
 def test_residuals_match_a_plain_loop(patent_scan):
     poses, distance, _ = patent_scan
     p0, n, c = patent_truth()
-    expected = [np.linalg.norm(T[:3, :3] @ (p0 + l * n) + T[:3, 3] - c) - RADIUS
-                for T, l in zip(poses[:50], distance[:50])]
+    expected = [np.linalg.norm(T[:3, :3] @ (p0 + length * n) + T[:3, 3] - c) - RADIUS
+                for T, length in zip(poses[:50], distance[:50])]
     got = surface_residuals(poses[:50], distance[:50], RADIUS, p0, n, c)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
 

@@ -57,9 +57,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -537,7 +536,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
                     reason = _implausible(effect_of[s.candidate], values)
                     if reason:
-                        verdict = f"implausible after refit ({reason}): stands in for something else"
+                        verdict = (f"implausible after refit ({reason}): stands in for "
+                                   f"something else")
                 if not verdict:
                     decisions[id(s)] = "added"
                     accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)

@@ -15,9 +15,10 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal, Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -26,14 +27,32 @@ from ..datasets import DatasetBase
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
-from ..results import (CalibrationResult, DatasetResiduals, EffectFinding, Identifiability,
-                       ParameterEstimate, PriorSummary, RmsSummary, SphereEstimate)
+from ..results import (
+    CalibrationResult,
+    DatasetResiduals,
+    EffectFinding,
+    Identifiability,
+    ParameterEstimate,
+    PriorSummary,
+    RmsSummary,
+    SphereEstimate,
+)
 from ..robot import Robot
 from . import diagnosis, unexplained
 from .degeneracy import check_dataset, check_finite
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
-from .prior import (DOMINATED_SHARE, SIGMA_ITERATIONS, SIGMA_SETTLED, Posterior, Prior,
-                    PriorProblem, copy_weights, duplicate_rows, posterior, tolerance_of)
+from .prior import (
+    DOMINATED_SHARE,
+    SIGMA_ITERATIONS,
+    SIGMA_SETTLED,
+    Posterior,
+    Prior,
+    PriorProblem,
+    copy_weights,
+    duplicate_rows,
+    posterior,
+    tolerance_of,
+)
 from .problem import Problem
 from .selection import Selection, select_by_condition
 from .solver import LOSSES, METHODS, Loss, Method, Solution, solve

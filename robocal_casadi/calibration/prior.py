@@ -85,7 +85,7 @@ class Prior:
         """``sigma / t_i`` [1 / (SI of the parameter) * m]: the prior rows' weights."""
         return self.sigma / self.tolerance
 
-    def with_sigma(self, sigma: float) -> "Prior":
+    def with_sigma(self, sigma: float) -> Prior:
         return Prior(self.names, self.index, self.centre, self.tolerance, float(sigma))
 
     def __repr__(self) -> str:

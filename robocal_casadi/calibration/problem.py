@@ -13,9 +13,9 @@ validation); the residual and Jacobian are built once per problem as CasADi func
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Sequence
 
 import casadi as ca
 import numpy as np

@@ -61,8 +61,9 @@ class Solution:
 
     def __repr__(self) -> str:
         rms = float(np.sqrt(np.mean(self.residual**2))) if self.residual.size else 0.0
-        return (f"Solution(method={self.method}, status={self.status!r}, free={int(self.free.sum())},"
-                f" iterations={self.iterations}, rms_residual={rms:.4g}, seconds={self.seconds:.3g})")
+        return (f"Solution(method={self.method}, status={self.status!r}, "
+                f"free={int(self.free.sum())}, iterations={self.iterations}, "
+                f"rms_residual={rms:.4g}, seconds={self.seconds:.3g})")
 
 
 def _huber_weights(r: np.ndarray) -> np.ndarray:

@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -103,7 +104,7 @@ class Implausible:
     message: str
 
 
-def amplitude_check(effect: "Effect", pairs, values: Mapping[str, float],
+def amplitude_check(effect: Effect, pairs, values: Mapping[str, float],
                     limits: Plausible) -> tuple[Implausible, ...]:
     """``Implausible`` for each (sine, cosine) parameter pair whose amplitude
     ``hypot(sine, cosine)`` exceeds ``limits.maximum``, named ``sine/cosine``."""
@@ -347,22 +348,22 @@ class Effect(ABC):
     # ----------------------------------------------------------------- diagnosis
 
     @classmethod
-    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["Effect", ...]:
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[Effect, ...]:
         """The units diagnosis tests one at a time: by default one effect per joint
         (revolute joints only where ``revolute_only``)."""
         return tuple(cls.create((j,), robot, extras) for j in range(1, robot.dof + 1)
                      if robot.joints[j - 1].revolute or not cls.revolute_only)
 
     @classmethod
-    def merged(cls, units: Sequence["Effect"], robot: Robot,
-               extras: Mapping[str, Any]) -> "Effect":
+    def merged(cls, units: Sequence[Effect], robot: Robot,
+               extras: Mapping[str, Any]) -> Effect:
         """One effect holding the parameters of several ``candidates`` units."""
         joints = tuple(sorted({j for unit in units for j in unit.joints}))
         return cls.create(joints, robot, extras)
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "Effect":
+               extras: Mapping[str, Any] | None = None, **options) -> Effect:
         """The effect on ``joints`` (1-based) set up for ``robot`` and the fit data."""
         return cls(tuple(joints), **options)
 
@@ -403,7 +404,7 @@ class Effect(ABC):
                              where=where)
 
     @classmethod
-    def for_simulation(cls, keys: Sequence) -> "Effect":
+    def for_simulation(cls, keys: Sequence) -> Effect:
         """The effect holding the simulated entries ``keys`` (see ``simulation_key``)."""
         return cls(tuple(int(k) for k in keys))
 

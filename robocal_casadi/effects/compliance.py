@@ -39,9 +39,9 @@ what no arm does).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import lru_cache
-
-from typing import Any, Mapping
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -51,8 +51,12 @@ from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import check_joints, column
-from .gravity import (FIRST_MOMENT_COMPONENTS, first_moment_basis, gravity_torque,
-                      payload_torque_per_kg)
+from .gravity import (
+    FIRST_MOMENT_COMPONENTS,
+    first_moment_basis,
+    gravity_torque,
+    payload_torque_per_kg,
+)
 
 SAMPLES = 96
 INDEPENDENCE = 1e-6
@@ -164,7 +168,7 @@ class JointCompliance(Effect):
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "JointCompliance":
+               extras: Mapping[str, Any] | None = None, **options) -> JointCompliance:
         """Lumped without link masses; the payload term where the data has ``payload``."""
         return cls(tuple(joints), robot=robot, payload="payload" in (extras or {}))
 

@@ -16,10 +16,11 @@ start, so ``|k_t|`` stays below 3e-5/K x 2 K / 60 s = 1e-6/s.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import casadi as ca
 import numpy as np
-
-from typing import Any, Mapping
 
 from ..errors import InputError, RobocalError
 from ..robot import Robot
@@ -80,7 +81,7 @@ class ThermalDrift(Effect):
 
     @classmethod
     def create(cls, joints=(), robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "ThermalDrift":
+               extras: Mapping[str, Any] | None = None, **options) -> ThermalDrift:
         """Against ``temperature`` if ``extras`` has it, else ``time``; its mean the reference."""
         extras = extras or {}
         column = options.get("column") or ("temperature" if "temperature" in extras else "time")
@@ -92,18 +93,18 @@ class ThermalDrift(Effect):
         return effect
 
     @classmethod
-    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["ThermalDrift", ...]:
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[ThermalDrift, ...]:
         """One per ``temperature`` or ``time`` column the data carry."""
         return tuple(cls.create((), robot, {column: extras[column]}, column=column)
                      for column in COLUMNS if column in extras)
 
     @classmethod
-    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> "ThermalDrift":
+    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> ThermalDrift:
         (unit,) = units  # one column per effect
         return unit
 
     @classmethod
-    def for_simulation(cls, keys=()) -> "ThermalDrift":
+    def for_simulation(cls, keys=()) -> ThermalDrift:
         """Against the ``temperature`` column; its reference is the simulator's ``T_ref``."""
         return cls((), column="temperature")
 

@@ -35,6 +35,7 @@ from ..robot import Robot
 from ..units import Units
 from .numbers import errors_of, joint_reading_unit
 
+
 @dataclass(frozen=True)
 class EffectPanel:
     """One panel: errors before and after against ``x``, with the fitted effect.
@@ -155,7 +156,6 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
     if not residuals:
         return None
     units = result.units
-    robot = result.robot_calibrated
     models = effect_models_of(result, finding)
     # per-row inputs of the row order (directions of motion) come from the full table
     with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))

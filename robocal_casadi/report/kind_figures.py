@@ -14,7 +14,7 @@ in ``units`` (the report's display units). Every function returns a fresh figure
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure

@@ -16,19 +16,17 @@ import numpy as np
 
 from ..results import CalibrationResult
 from ..units import Units
-from . import figures
-from .content import Details, Document, Paragraph, Plot, Section, Table
-from .conclusion import conclusion_paragraphs
-from .effect_views import effect_models_of, effect_title, effect_view
-from .unexplained import unexplained_blocks
-from . import kind_figures
+from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
+from .conclusion import conclusion_paragraphs
+from .content import Details, Document, Paragraph, Plot, Section, Table
+from .effect_views import effect_models_of, effect_title, effect_view
 from .info import ReportInfo
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
-    error_noun,
     display_units,
+    error_noun,
     errors_of,
     format_fixed,
     format_number,
@@ -37,6 +35,7 @@ from .numbers import (
     quantity_of_placement,
     row_count,
 )
+from .unexplained import unexplained_blocks
 
 SOLVER_TITLES = {"seconds": "time [s]", "residuals": "residual entries",
                  "free_unknowns": "free unknowns"}

@@ -37,8 +37,18 @@ import numpy as np
 from ..datasets import joint_readings as checked_joint_readings
 from ..datasets import referenced_robot
 from ..errors import InputError
-from ..fields import (check_keys, check_magnitude, cut, load_yaml, mapping, quantities,
-                      quantity, referenced_file, require, vector)
+from ..fields import (
+    check_keys,
+    check_magnitude,
+    cut,
+    load_yaml,
+    mapping,
+    quantities,
+    quantity,
+    referenced_file,
+    require,
+    vector,
+)
 from ..robot import Robot
 from ..table import read_table
 from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy

@@ -14,18 +14,23 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Literal
 
 import numpy as np
 
+from ..checks import choice, rotation_matrix
 from ..errors import InputError
 from ..ik import inverse_kinematics
 from ..robot import Robot
+from .conventions import (
+    MARKER_CONVENTIONS,
+    MarkerConvention,
+    method_observation,
+    observation_rotation,
+)
 from .problem import TrackingProblem
-from ..checks import choice, rotation_matrix
-from .conventions import (MARKER_CONVENTIONS, MarkerConvention, method_observation,
-                          observation_rotation)
 from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
 
 #: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
@@ -129,9 +134,9 @@ class Tracker:
     parallel to it); ``marker_convention`` how an observation's orientation reads:
     ``method`` ``(x, y, z [m], roll, pitch, yaw [rad])`` of the target frame, or
     ``opencv`` ``(tvec [m], rvec [rad])`` of an OpenCV/ArUco marker
-    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot solve start again
-    from inverse kinematics of the goal pose (a first capture far from the answer, a
-    target that jumped).
+    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot
+    solve start again from inverse kinematics of the goal pose (a first capture far from
+    the answer, a target that jumped).
 
     Of the joints that meet the goal, the answer is the one nearest the previous answer
     (weighted): each revolute joint on its nearest whole turn within its limits, and the
