@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from .calibration.problem import Problem
     from .calibration.selection import Selection
     from .calibration.solver import Solution
+    from .effects.base import Effect
 
 
 @dataclass(frozen=True)
@@ -246,7 +247,7 @@ class CalibrationResult:
     mounted_quantities: dict[str, str] = field(default_factory=dict)  # name -> length | none
     placement: dict[str, float] = field(default_factory=dict)
     solver: dict[str, Any] = field(default_factory=dict)
-    effect_models: tuple = ()  # the Effect objects, with ``effect_values`` (SI)
+    effect_models: tuple[Effect, ...] = ()  # the effects fitted, values in ``effect_values``
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units

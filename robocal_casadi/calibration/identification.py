@@ -18,7 +18,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -62,7 +62,8 @@ __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_f
 
 def models_for(datasets: Sequence, prefix: str = "") -> list:
     """One measurement model per dataset, labelled by file stem (made unique)."""
-    models, seen = [], {}
+    models = []
+    seen: dict[str, int] = {}
     for dataset in datasets:
         label = prefix + Path(dataset.path).stem
         seen[label] = seen.get(label, 0) + 1
@@ -104,10 +105,10 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
     names = problem.unknowns.names
     if candidates is None:
         mask = problem.mask("robot", "effects", "mounted")
-        candidate_index = list(np.flatnonzero(mask))
+        candidate_index = [int(i) for i in np.flatnonzero(mask)]
     else:
         candidate_index = [problem.unknowns.index(n) for n in candidates]
-    placement = list(np.flatnonzero(problem.mask("placement")))
+    placement = [int(i) for i in np.flatnonzero(problem.mask("placement"))]
     invisible = "; ".join(sorted({getattr(m, "invisible_reason", "no effect on these data")
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
@@ -185,7 +186,7 @@ def _rms(errors: Sequence[np.ndarray]) -> float:
     return float(np.sqrt(np.mean(flat**2))) if flat.size else float("nan")
 
 
-def refit_placement(problem: Problem, x: np.ndarray, *, method: str = "lm") -> np.ndarray:
+def refit_placement(problem: Problem, x: np.ndarray, *, method: Method = "lm") -> np.ndarray:
     """``x`` with only the placement unknowns re-solved (robot, effects, mounted held)."""
     return solve(problem, x, problem.mask("placement"), method=method).x
 
@@ -207,7 +208,7 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 
 Rule = Literal["prior", "fraction"]
-RULES: tuple[str, ...] = ("prior", "fraction")
+RULES: tuple[Rule, ...] = get_args(Rule)
 
 
 @dataclass(frozen=True)
@@ -497,14 +498,14 @@ def _warn_duplicates(repeated: int, units: int) -> str:
 def _prior_of(problem: Problem, free: np.ndarray, sigma: float) -> Prior:
     """The prior on the free robot and mounted parameters, centred on their start values."""
     start = problem.initial()
-    index, tolerance = [], []
+    weighed, tolerance = [], []
     for i in np.flatnonzero(free & problem.mask("robot", "mounted")):
         name = problem.unknowns.names[i]
         t = tolerance_of(name, problem.unknowns.quantity(name), problem.robot)
         if t is not None:
-            index.append(i)
+            weighed.append(i)
             tolerance.append(t)
-    index = np.array(index, dtype=int)
+    index = np.array(weighed, dtype=int)
     return Prior(tuple(problem.unknowns.names[i] for i in index), index, start[index],
                  np.array(tolerance, float), sigma)
 
@@ -552,7 +553,7 @@ def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
 
 
 def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,
-               *, method: str, loss: str, max_iterations: int):
+               *, method: Method, loss: Loss, max_iterations: int):
     """MAP estimate over ``x[free]``; the noise level re-estimated until it settles."""
     for _ in range(SIGMA_ITERATIONS):
         solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
@@ -570,7 +571,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 
 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
-                   distinct, *, method: str, loss: str, max_iterations: int):
+                   distinct, *, method: Method, loss: Loss, max_iterations: int):
     """Identifiability with exact dependencies only, and the MAP fit of the rest."""
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(problem.rms(x_start), 1e-12)
@@ -704,8 +705,9 @@ def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str)
             continue
         index = problem.placement_indices(model)
         centre_std = None if std is None else [_finite(std[i]) for i in index]
+        x_centre, y_centre, z_centre = (float(x[i]) for i in index)
         out.append(SphereEstimate(label=model.label, role=role,
-                                  centre=tuple(float(x[i]) for i in index),
+                                  centre=(x_centre, y_centre, z_centre),
                                   centre_std=None if centre_std is None else tuple(centre_std),
                                   radius=float(model.dataset.radius)))
     return tuple(out)

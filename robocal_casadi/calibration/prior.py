@@ -234,7 +234,7 @@ def duplicate_rows(problem) -> tuple[np.ndarray, int, int]:
     first = copies > 0
     units = repeated = 0
     for model, groups in _groups(problem):
-        keys = {}
+        keys: dict[int, int] = {}
         for g, c in zip(groups, copies[_span(problem, model)]):
             if g >= 0:
                 keys.setdefault(int(g), c)

@@ -373,24 +373,26 @@ class Problem:
         J[:, position[functions.columns[keep]]] = J_rows[:, keep]
         return r.ravel(), J
 
-    def _model_residual(self, compiled: CompiledModel, x: np.ndarray, with_jacobian: bool,
-                        columns: np.ndarray | None = None
-                        ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Residual of one model and, if asked, its Jacobian's ``columns`` (default all)."""
-        model = compiled.model
+    def _model_values(self, compiled: CompiledModel, x: np.ndarray) -> np.ndarray:
+        """Residual of one model at ``x``."""
+        if isinstance(compiled, DirectResidual):
+            return np.asarray(compiled.residual(x)).ravel()
+        separable = self._separable(compiled.model)
+        if separable is not None:
+            (r,) = separable.residual(*self._separable_arguments(compiled.model, x))
+            return r.ravel()
+        return self._point_residual(compiled, x)
+
+    def _model_jacobian(self, compiled: CompiledModel, x: np.ndarray,
+                        columns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Residual of one model and its Jacobian's ``columns`` (default all)."""
         columns = np.arange(len(self.unknowns)) if columns is None else np.asarray(columns)
         if isinstance(compiled, DirectResidual):
-            r = np.asarray(compiled.residual(x)).ravel()
-            J = np.asarray(compiled.jacobian(x).full())[:, columns] if with_jacobian else None
-            return r, J
-        separable = self._separable(model)
-        if separable is not None and not with_jacobian:
-            (r,) = separable.residual(*self._separable_arguments(model, x))
-            return r.ravel(), None
+            return (np.asarray(compiled.residual(x)).ravel(),
+                    np.asarray(compiled.jacobian(x).full())[:, columns])
+        separable = self._separable(compiled.model)
         if separable is not None:
-            return self._separable_jacobian(model, separable, x, columns)
-        if not with_jacobian:
-            return self._point_residual(compiled, x), None
+            return self._separable_jacobian(compiled.model, separable, x, columns)
         return self._chain_rule(compiled, x, columns)
 
     def _point_residual(self, compiled: PointResidual, x: np.ndarray) -> np.ndarray:
@@ -458,7 +460,8 @@ class Problem:
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Stacked residual [m] at ``x``."""
-        parts = [self._model_residual(e, np.asarray(x, float), False)[0] for e in self._compiled]
+        x = np.asarray(x, float)
+        parts = [self._model_values(compiled, x) for compiled in self._compiled]
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def jacobian(self, x: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
@@ -468,11 +471,12 @@ class Problem:
         """
         if columns is not None and np.asarray(columns).dtype == bool:
             columns = np.flatnonzero(columns)
-        parts = [self._model_residual(e, np.asarray(x, float), True, columns)[1]
-                 for e in self._compiled]
-        return np.vstack(parts)
+        x = np.asarray(x, float)
+        return np.vstack([self._model_jacobian(compiled, x, columns)[1]
+                          for compiled in self._compiled])
 
-    def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int]):
+    def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int] | np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """How each residual entry moves when a geometric parameter changes in one row only.
 
         For a parameter ``p_c`` (indices into the robot slice of ``x``) that took another
@@ -484,7 +488,7 @@ class Problem:
         carry their own flange poses have no such sensitivity.
         """
         x = np.asarray(x, float)
-        parameters = np.asarray(parameters, dtype=int)
+        chosen = np.asarray(parameters, dtype=int)
         robot_columns = np.arange(self.slices["robot"].start, self.slices["robot"].stop)
         entries, rows, values = [], [], []
         entry_offset = row_offset = 0
@@ -494,21 +498,21 @@ class Problem:
             if isinstance(compiled, PointResidual) and model.uses_robot:
                 separable = self._separable(model)
                 if separable is not None:
-                    J = self._separable_jacobian(model, separable, x, robot_columns[parameters])[1]
+                    J = self._separable_jacobian(model, separable, x, robot_columns[chosen])[1]
                     per_row = size // max(n_rows, 1)
                     index = np.arange(per_row * n_rows)
                     entries.append(entry_offset + index)
                     rows.append(row_offset + index // per_row)
                     values.append(J[index])
                 else:
-                    i, k, v = self._point_sensitivities(compiled, x, parameters)
+                    i, k, v = self._point_sensitivities(compiled, x, chosen)
                     entries.append(entry_offset + i)
                     rows.append(row_offset + k)
                     values.append(v)
             entry_offset += size
             row_offset += n_rows
         if not entries:
-            return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(parameters)))
+            return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(chosen)))
         return np.concatenate(entries), np.concatenate(rows), np.vstack(values)
 
     def _point_sensitivities(self, compiled: PointResidual, x: np.ndarray,

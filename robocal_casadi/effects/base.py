@@ -298,12 +298,12 @@ class Effect(ABC):
             e = ca.SX.sym("extras", len(columns))
             p_sym = ca.SX.sym("p", len(registry))
             t = ca.SX.sym("theta", len(self.parameter_names()))
-            com = ca.SX.sym("payload_com", 3)
+            com_sym = ca.SX.sym("payload_com", 3)
             row = RowContext(robot, registry, q, p_sym, {c: e[i] for i, c in enumerate(columns)},
-                             com)
+                             com_sym)
             dq, dp = self.delta(row, t)
             dp = ca.SX.zeros(len(registry)) if dp is None else dp
-            cache[key] = ca.Function(f"{self.name}_contribution", [q, e, p_sym, t, com],
+            cache[key] = ca.Function(f"{self.name}_contribution", [q, e, p_sym, t, com_sym],
                                      [dq, dp])
         function = cache[key]
         values = []
@@ -318,11 +318,12 @@ class Effect(ABC):
         p = robot.parameter_vector() if p is None else np.asarray(p, dtype=float)
         com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
         mapped = function.map(n) if n > 1 else function
-        dq, dp = mapped(Q.T, E, np.tile(p[:, None], (1, n)),
-                        np.tile(np.asarray(theta, dtype=float).reshape(-1, 1), (1, n)),
-                        np.tile(com.reshape(3, 1), (1, n)))
-        return Contribution(np.asarray(dq).T.reshape(n, robot.dof),
-                            np.asarray(dp).T.reshape(n, -1))
+        dq_values, dp_values = mapped(
+            Q.T, E, np.tile(p[:, None], (1, n)),
+            np.tile(np.asarray(theta, dtype=float).reshape(-1, 1), (1, n)),
+            np.tile(com.reshape(3, 1), (1, n)))
+        return Contribution(np.asarray(dq_values).T.reshape(n, robot.dof),
+                            np.asarray(dp_values).T.reshape(n, -1))
 
     # ----------------------------------------------------------------- words and plots
 

@@ -157,9 +157,8 @@ class JointCompliance(Effect):
         self.lumped = robot is not None and not robot.has_inertia
         self.payload = bool(payload)
         self.terms: dict[int, tuple[int, ...]] = {}
-        if self.lumped:
+        if robot is not None and self.lumped:
             check_joints(self, robot)
-            assert robot is not None  # for the type checker: lumped implies a robot
             self.terms = {j: independent_terms(robot, j) for j in self.joints}
 
     def __repr__(self) -> str:
@@ -238,7 +237,7 @@ class JointCompliance(Effect):
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot)
         payload = row.extras.get("payload", 0.0)
-        entries = {}
+        entries: dict[int, ca.SX | float] = {}
         if not self.lumped:
             tau = _torque_function(row.robot)(row.q, row.p, payload, row.payload_com)
             for k, j in enumerate(self.joints):
@@ -249,7 +248,7 @@ class JointCompliance(Effect):
         per_kg = per_kg_function(row.q, row.p, row.payload_com)
         k = 0
         for j in self.joints:
-            deflection = 0
+            deflection: ca.SX | float = 0
             if self.payload:
                 deflection = deflection - theta[k] * payload * per_kg[j - 1]
                 k += 1

@@ -26,11 +26,13 @@ from ..units import Units
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
 
 if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
     from .effect_views import EffectView
 
 COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
 ALPHA = {"nominal": 0.35, "geometric": 0.45, "final": 0.6}
-STYLE = {
+STYLE: dict[RcKeyType, float | str | bool] = {
     "font.size": 9.0,
     "axes.titlesize": 10.0,
     "axes.labelsize": 9.0,

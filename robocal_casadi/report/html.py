@@ -18,7 +18,7 @@ from pathlib import Path
 import jinja2
 from markupsafe import Markup
 
-from ..errors import InputError
+from ..errors import ArgumentError, InputError
 from ..output import atomic_file
 from ..results import CalibrationResult
 from .content import Details, Document, Paragraph, Plot, Table
@@ -125,6 +125,9 @@ def render_html(document: Document, environment: jinja2.Environment | None = Non
     """The page for ``document``: a complete HTML5 string with everything inline."""
     environment = environment or template_environment()
     stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    if environment.loader is None:
+        raise ArgumentError("the template environment has no loader to read report.css from",
+                            argument="environment")
     css = environment.loader.get_source(environment, "report.css")[0]
     sections = [{"anchor": s.anchor, "title": s.title, "appendix": s.appendix,
                  "blocks": [_view(b) for b in s.blocks]} for s in document.sections]

@@ -10,6 +10,7 @@ the file's unit (``numbers.display_units``), angles in the file's angle unit.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import partial
 
 import numpy as np
@@ -555,7 +556,7 @@ def _error_row(label: str, role: str, errors: list[np.ndarray], units: Units) ->
             format_number(final.max / scale))
 
 
-def _values_table(name: str, caption: str, entries: list[tuple[str, float, float | None]],
+def _values_table(name: str, caption: str, entries: Sequence[tuple[str, float, float | None]],
                   units: Units) -> Table:
     rows = []
     for key, value, std in entries:

@@ -16,7 +16,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -31,7 +31,7 @@ from .conventions import (
     observation_rotation,
 )
 from .problem import TrackingProblem
-from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
+from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome, bind_buffer
 
 #: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
 POSITION_TOLERANCE = 1e-6
@@ -43,8 +43,8 @@ BOUND_TOLERANCE = 1e-12
 STATUSES = ("ok", "limited", "unreachable", "failed")
 TrackingMethod = Literal["gauss_newton", "sqpmethod", "ipopt"]
 QpSolver = Literal["qrqp", "qpoases"]
-METHODS: tuple[str, ...] = ("gauss_newton", "sqpmethod", "ipopt")
-QPSOLS: tuple[str, ...] = ("qrqp", "qpoases")
+METHODS: tuple[TrackingMethod, ...] = get_args(TrackingMethod)
+QPSOLS: tuple[QpSolver, ...] = get_args(QpSolver)
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ def _vector(value, length: int, name: str) -> np.ndarray:
     return array
 
 
-def unit_up(up: Sequence[float], *, file=None, where: str = "up") -> np.ndarray:
+def unit_up(up: Sequence[float] | np.ndarray, *, file=None, where: str = "up") -> np.ndarray:
     """The worktable normal as a unit vector; zero or non-finite is an ``InputError``."""
     vector = np.asarray(up, dtype=float).ravel()
     if vector.shape != (3,) or not np.all(np.isfinite(vector)):
@@ -206,6 +206,7 @@ class Tracker:
                              where="weights")
         self.method = method
         self.seed_from_ik = bool(seed_from_ik)
+        self.solver: GaussNewtonSolver | NlpsolSolver
         if method == "gauss_newton":
             self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights,
                                             compiled=compiled)
@@ -225,9 +226,7 @@ class Tracker:
         self._goal_out = np.zeros(12)
         self._goal_function = self.problem.compiled_goal if compiled else self.problem.goal
         self._goal_buffer, self._goal_evaluate = self._goal_function.buffer()
-        for k, array in enumerate(self._goal_in):
-            self._goal_buffer.set_arg(k, memoryview(array))
-        self._goal_buffer.set_res(0, memoryview(self._goal_out))
+        bind_buffer(self._goal_buffer, self._goal_in, (self._goal_out,))
 
     def __repr__(self) -> str:
         steps = None if self.max_step is None else list(self.max_step)
@@ -272,7 +271,8 @@ class Tracker:
         self._goal_evaluate()
         return self._goal_out
 
-    def step(self, q_capture: Sequence[float], observation: Sequence[float]) -> TrackStep:
+    def step(self, q_capture: Sequence[float] | np.ndarray,
+             observation: Sequence[float] | np.ndarray) -> TrackStep:
         """One cycle: joints facing the target from the standoff, level, closest to the
         previous answer.
 
@@ -280,18 +280,18 @@ class Tracker:
         ``(x, y, z [m], roll, pitch, yaw [rad])`` the target in the camera.
         """
         start = time.perf_counter()
-        q_capture = _vector(q_capture, self.robot.dof, "q_capture")
-        observation = _vector(observation, 6, "observation")
-        finite = bool(np.isfinite(q_capture).all() and np.isfinite(observation).all())
+        q_read = _vector(q_capture, self.robot.dof, "q_capture")
+        target = _vector(observation, 6, "observation")
+        finite = bool(np.isfinite(q_read).all() and np.isfinite(target).all())
         if self._previous is None:
-            if not np.isfinite(q_capture).all():
+            if not np.isfinite(q_read).all():
                 raise InputError("the first capture joints must be finite", where="q_capture")
-            self._previous = np.minimum(np.maximum(q_capture, self.lower), self.upper)
+            self._previous = np.minimum(np.maximum(q_read, self.lower), self.upper)
             self._previous.setflags(write=False)
         previous = self._previous
         if not finite:
             return self._refuse("failed", start)
-        goal = self._goal_vector(q_capture, observation)
+        goal = self._goal_vector(q_read, target)
         if math.dist(goal[0:3], self._base_origin) > self.reach:
             return self._refuse("unreachable", start)
         lower, upper = self.lower, self.upper
