@@ -47,9 +47,10 @@ its socket; sphere_laser, of the laser distance.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -64,8 +65,14 @@ from .output import atomic_directory, written_by_robocal
 from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
-from .transforms import (invert, matrix_from_quaternion, pose_from_xyz_rpy,
-                         quaternion_from_matrix, rot_z, rpy_from_matrix)
+from .transforms import (
+    invert,
+    matrix_from_quaternion,
+    pose_from_xyz_rpy,
+    quaternion_from_matrix,
+    rot_z,
+    rpy_from_matrix,
+)
 from .units import Units
 
 TABLES = {"cross_bar": "touches.csv", "artifact_touches": "touches.csv",
@@ -247,7 +254,7 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
             if isinstance(spec, Mapping):
                 value = next(iter(spec.values()), None) if len(spec) == 1 else spec
             try:
-                value = float(value)  # type: ignore[arg-type]
+                value = float(value)
             except (TypeError, ValueError):
                 raise InputError(f"expected a coefficient k [1/K], got {spec!r}",
                                  where=where) from None
@@ -731,7 +738,7 @@ def _touches(setup: _Setup) -> _Generated:
             sockets_truth[index] = dict(zip(names, positions))
             bar.update(len(sockets_truth))
     bar_length = float(setup.bar_length)
-    Q_read = setup.in_order(Q_read, Q_true, payloads)
+    Q_read_array = setup.in_order(Q_read, Q_true, payloads)
 
     def fields(units: Units) -> dict:
         out: dict[str, Any] = {"probe": {"xyz": _in(units, DEFAULT_PROBE)}}
@@ -741,7 +748,7 @@ def _touches(setup: _Setup) -> _Generated:
         return out
 
     return _Generated(
-        Q_read=Q_read, extras=_extras(payloads, temperatures, setup),
+        Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
         mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
         leading={"pose": poses, "point": points})
 
@@ -807,7 +814,11 @@ def _sphere_laser(setup: _Setup) -> _Generated:
             break
     centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
 
-    Q_read, Q_true, payloads, temperatures, distances = [], [], [], [], []
+    Q_read: list[np.ndarray] = []
+    Q_true: list[np.ndarray] = []
+    payloads: list[float] = []
+    temperatures: list[float | None] = []
+    distances: list[float] = []
     attempts = 0
     with Progress("simulate sphere_laser", total=setup.rows) if setup.progress else _Quiet() as bar:
         while len(Q_read) < setup.rows:

@@ -360,7 +360,8 @@ def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Ef
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
                                         growth=select_growth)
         if any(selection.dropped.values()):
-            datasets = [m.subset(selection.kept[m.label]) for m in problem.models]
+            datasets = [m.subset(np.asarray(selection.kept[m.label], dtype=int))
+                        for m in problem.models]
             problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)

@@ -380,7 +380,8 @@ class Effect(ABC):
         """
         return np.zeros(np.atleast_2d(Q).shape)
 
-    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray,
+                     extras: Mapping[str, float | None],
                      values: Mapping[str, float]) -> np.ndarray | None:
         """The true ``dp`` [SI] at geometry ``p`` for one row's ``extras``, or None."""
         return None

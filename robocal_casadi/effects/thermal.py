@@ -116,14 +116,16 @@ class ThermalDrift(Effect):
         """The ``temperature`` [C] or ``time`` [s] column."""
         return np.asarray(extras[self.column], dtype=float)
 
-    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray,
+                     extras: Mapping[str, float | None],
                      values: Mapping[str, float]) -> np.ndarray | None:
         """Every ``d_i``, ``a_i`` of the true robot times ``k (T - T_ref)``, ``T_ref`` the
         simulator's reference temperature."""
-        if extras.get(self.column) is None:
+        temperature = extras.get(self.column)
+        if temperature is None:
             return None
         registry = world.robot.parameters()
-        factor = values[self.parameter_names()[0]] * (float(extras[self.column])
+        factor = values[self.parameter_names()[0]] * (float(temperature)
                                                       - world.reference_temperature)
         dp = np.zeros(len(registry))
         for i in range(1, world.robot.dof + 1):

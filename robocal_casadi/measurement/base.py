@@ -19,7 +19,8 @@ taken over.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Callable, ClassVar
+from collections.abc import Callable
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -59,12 +60,13 @@ class MeasurementModel(ABC):
         """Nominal values of ``mounted`` from the dataset file [SI]."""
 
     @abstractmethod
-    def initial_placement(self, points: Callable[[np.ndarray], np.ndarray],
+    def initial_placement(self, points: Callable[[np.ndarray], np.ndarray] | None,
                           mounted: np.ndarray) -> np.ndarray:
         """A starting value of ``placement`` without user help.
 
         ``points(offsets)`` evaluates world positions (3 x N) numerically for the
-        current robot; ``mounted`` are the current mounted values.
+        current robot (None for data that carry their own flange poses); ``mounted`` are
+        the current mounted values.
         """
 
     @abstractmethod

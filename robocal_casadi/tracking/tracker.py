@@ -154,8 +154,8 @@ class Tracker:
                 command(step.q)
     """
 
-    def __init__(self, robot: Robot, camera_xyz: Sequence[float], standoff: float,
-                 up: Sequence[float] = (0.0, 0.0, 1.0),
+    def __init__(self, robot: Robot, camera_xyz: Sequence[float] | np.ndarray, standoff: float,
+                 up: Sequence[float] | np.ndarray = (0.0, 0.0, 1.0),
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
                  method: TrackingMethod = "gauss_newton", qpsol: QpSolver = "qrqp",
