@@ -115,12 +115,17 @@ def real_split(name: str, fit, validation) -> dict:
     }
 
 
-def real_cases(shared: Path) -> list[dict]:
+def real_cases(shared: Path | None) -> list[dict]:
     """UR10 tracker data: series A split at q1 = -2.3 rad (fit below, held out above: the
-    held-out poses lie outside the fit region), series A and D every fourth pose held out."""
-    folder = shared / "ur10-ipa"
-    if not folder.is_dir():
-        folder = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa"
+    held-out poses lie outside the fit region), series A and D every fourth pose held out.
+    Without the full data sets (``shared``) only series D as the package ships it, split
+    the same way."""
+    folder = None if shared is None else shared / "ur10-ipa"
+    if folder is None or not (folder / "series_A.yaml").is_file():
+        shipped = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa"
+        return [real_split("ur10 series_D, every fourth pose held out",
+                           load_dataset(shipped / "series_D_fit.yaml"),
+                           load_dataset(shipped / "series_D_validation.yaml"))]
     series_a = load_dataset(folder / "series_A.yaml")
     below = series_a.joints[:, 0] < -2.3
     cases = [real_split("ur10 series A, fit q1 < -2.3 rad, held out the rest",
@@ -137,10 +142,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="1,000 rows only")
     parser.add_argument("--real-only", action="store_true", help="the real data splits only")
-    parser.add_argument("--shared", type=Path,
-                        default=Path(__file__).resolve().parents[2] / "shared" / "data",
-                        help="folder of the real data sets (default: ../shared/data, else "
-                             "the package's copies)")
+    parser.add_argument("--shared", type=Path, default=None, metavar="DIR",
+                        help="folder of the full real data sets (ur10-ipa/series_A.yaml, "
+                             "series_D.yaml); default: the package's copy of series D")
     args = parser.parse_args()
     sizes = (1000,) if args.quick else (1000, 10000)
     cases = real_cases(args.shared)

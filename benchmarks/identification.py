@@ -14,7 +14,10 @@ is not exactly undeterminable, weighed against its tolerance). Printed side by s
 * the UR10 series D target offset along the flange axis (every fourth pose held out);
 * the Panda placements held out (three pairs), as in ``real_data.py``.
 
-    python benchmarks/identification.py [--shared ../shared/data] [--quick]
+    python benchmarks/identification.py [--shared DIR] [--quick]
+
+Real data come from ``robocal_casadi/data`` unless ``--shared DIR`` names a folder of the
+full data sets (``ur10-ipa/series_D.yaml``, ``panda-mukca/``).
 """
 
 from __future__ import annotations
@@ -124,14 +127,18 @@ def run_simulated(folder: Path, kind: str, readings: str, units: int, noise: flo
 
 
 def run_tracker(path: Path) -> dict:
-    fit, held = split_every_fourth(load_dataset(path))
     out = {"case": f"UR10 {path.stem}, target offset along the flange axis"}
+    if path.is_file():
+        fit, held = split_every_fourth(load_dataset(path))
+    else:  # the package's copy of the series, already split the same way
+        fit = load_dataset(path.with_name(path.stem + "_fit.yaml"))
+        held = load_dataset(path.with_name(path.stem + "_validation.yaml"))
     for rule in RULES:
         start = time.perf_counter()
         result = calibrate([fit], [held], diagnose=True, rule=rule)
         entry = outcome(result, time.perf_counter() - start)
         value, std = result.mounted["target_z"]
-        nominal = load_dataset(path).target[2]
+        nominal = fit.target[2]
         entry.update({"target_z_mm": value * MM, "target_z_std_mm": None if std is None
                       else std * MM, "target_z_nominal_mm": nominal * MM,
                       "target_z_identified": "target_z" in result.identifiability.identifiable})
@@ -153,8 +160,8 @@ def run_panda(folder: Path, held_out: tuple[str, str]) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--shared", type=Path, default=Path(__file__).resolve().parents[2] /
-                        "shared" / "data")
+    parser.add_argument("--shared", type=Path, default=None, metavar="DIR",
+                        help="folder of the full data sets (default: the package's copies)")
     parser.add_argument("--quick", action="store_true", help="simulated cases only")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     args = parser.parse_args()
@@ -172,6 +179,8 @@ def main() -> None:
             entry["runs"] = runs
             results.append(entry)
             print(json.dumps({k: v for k, v in entry.items() if k != "runs"}), flush=True)
+    if args.shared is None:
+        args.shared = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data"
     if not args.quick:
         results.append(run_tracker(args.shared / "ur10-ipa" / "series_D.yaml"))
         print(json.dumps(results[-1]), flush=True)

@@ -1,4 +1,4 @@
-"""Calibration on the real data sets in ../shared/data (or the package's copies).
+"""Calibration on real data: the package's copies, or the full public data sets.
 
 Each set is calibrated on part of its data and validated on the rest:
 
@@ -10,7 +10,13 @@ Each set is calibrated on part of its data and validated on the rest:
 Prints JSON: RMS [mm] nominal / geometric / final on fit and held-out data, the effects
 diagnosis added, identifiable parameter count, condition number and time.
 
-    python benchmarks/real_data.py [--shared ../shared/data] [--quick]
+    python benchmarks/real_data.py [--shared DIR] [--quick]
+
+Without ``--shared`` the data come from ``robocal_casadi/data``: UR10 series D as shipped
+(already split, every fourth pose held out) and the Panda placements; series A is not
+shipped. ``--shared DIR`` names a folder holding ``ur10-ipa/series_D.yaml``,
+``ur10-ipa/series_A.yaml`` and ``panda-mukca/`` converted from the public data sets
+(see ``robocal_casadi/data/README.md``), and runs both series.
 """
 
 from __future__ import annotations
@@ -61,7 +67,11 @@ def summary(result, seconds: float) -> dict:
 
 
 def run_tracker(path: Path, diagnose: bool) -> dict:
-    fit, held = split_every_fourth(load_dataset(path))
+    if path.is_file():
+        fit, held = split_every_fourth(load_dataset(path))
+    else:  # the package's copy of the series, already split the same way
+        fit = load_dataset(path.with_name(path.stem + "_fit.yaml"))
+        held = load_dataset(path.with_name(path.stem + "_validation.yaml"))
     start = time.perf_counter()
     result = calibrate([fit], [held], diagnose=diagnose)
     return {"set": path.stem, "rows_fit": fit.rows, "rows_validation": held.rows,
@@ -92,14 +102,19 @@ def _socket_spread(result) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--shared", type=Path, default=Path(__file__).resolve().parents[2] /
-                        "shared" / "data")
+    parser.add_argument("--shared", type=Path, default=None, metavar="DIR",
+                        help="folder of the full data sets (default: the package's copies)")
     parser.add_argument("--quick", action="store_true", help="series D and one Panda split only")
     parser.add_argument("--no-diagnose", action="store_true")
     args = parser.parse_args()
     diagnose = not args.no_diagnose
     results = []
-    series = ("series_D",) if args.quick else ("series_D", "series_A")
+    if args.shared is None:
+        from robocal_casadi.commands.demo import data_folder
+
+        args.shared = data_folder()
+    shipped = not (args.shared / "ur10-ipa" / "series_A.yaml").is_file()
+    series = ("series_D",) if args.quick or shipped else ("series_D", "series_A")
     for name in series:
         results.append(run_tracker(args.shared / "ur10-ipa" / f"{name}.yaml", diagnose))
         print(json.dumps(results[-1]), flush=True)

@@ -1,10 +1,10 @@
 """Point laser and sphere: time and accuracy, side by side in one process. Prints JSON.
 
-1. Sensor only, the patent's case (820 readings, tilting scan, 25 mm sphere, 0.01 mm
+1. Sensor only, the published example (820 readings, tilting scan, 25 mm sphere, 0.01 mm
    distance noise): our Levenberg-Marquardt (closed-form start, no guesses; and with the
    file's direction guess), our IPOPT (CasADi, exact derivatives), against
-   ``scipy.optimize.least_squares`` with a finite-difference Jacobian on the patent's
-   parametrisation ``[x0, y0, z0, nx, ny, xc, yc, zc]`` (``nz = sqrt(1 - nx^2 - ny^2)``),
+   ``scipy.optimize.least_squares`` with a finite-difference Jacobian on the published
+   method's parametrisation ``[x0, y0, z0, nx, ny, xc, yc, zc]`` (``nz = sqrt(1 - nx^2 - ny^2)``),
    started from the guesses a user would write.
 2. Robot plus sensor: 300 joint readings of the example 6R arm, identified jointly through
    ``calibrate``, against scipy ``least_squares`` (finite differences) on the same
@@ -52,7 +52,7 @@ from robocal_casadi.sphere_fit import (  # noqa: E402
 )
 
 PATENT_NAMES = ("x0", "y0", "z0", "nx", "ny", "xc", "yc", "zc")
-MM = np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1e3, 1e3, 1e3])  # SI -> patent units
+MM = np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1e3, 1e3, 1e3])  # SI -> the published example's units
 
 
 def _median_seconds(call, repeats: int):
@@ -113,7 +113,7 @@ def sensor_case(repeats: int) -> dict:
 
     R, t = poses[:, :3, :3], poses[:, :3, 3]
 
-    def residual(z):  # what a user would write: the patent's 8 unknowns
+    def residual(z):  # what a user would write: the published method's 8 unknowns
         nz = np.sqrt(max(1.0 - z[3] ** 2 - z[4] ** 2, 0.0))
         offsets = z[0:3] + distance[:, None] * np.array([z[3], z[4], nz])
         points = np.einsum("nij,nj->ni", R, offsets) + t

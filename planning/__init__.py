@@ -1,4 +1,5 @@
-"""Experiment design: choosing measurement poses before data is taken (METHODS.md 4).
+"""Experiment design: choosing measurement poses before data is taken
+(docs/methods.md#experiment-design).
 
 ``design_plan(dataset, count, index)`` draws feasible candidates (bar or artifact
 placements, laser poses, tracker configurations), picks ``count`` of them that make the

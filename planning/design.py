@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -23,9 +23,13 @@ from robocal_casadi.errors import ArgumentError, InputError
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.progress import Progress
 
+from .accuracy import tool_error, tool_weights
 from .candidates import Candidate, generate
-from .indices import DESCRIPTIONS, canonical, index_value, scaling, score
-from .information import Information
+from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
+from .information import Information, exact_condition
+from .order import Travel, order_candidates
+from .collision import Body
+from .ranges import working_ranges
 from .reach import Workspace
 from .refine import refine_plan
 from .rows import RowModel
@@ -45,7 +49,11 @@ class Plan:
     ``O2``) and its ``value`` for the plan; ``random_values`` the same index for random
     feasible plans of the same size; ``singular_values`` of the plan's column-scaled
     identification Jacobian (scaled as the index asks, see ``indices``);
-    ``identifiable`` the parameters it is computed over.
+    ``identifiable`` the parameters it is computed over. ``tool_error`` [m] the
+    predicted standard error of the tool position over the workspace at the set-up's
+    reading noise (``accuracy``), ``random_tool_errors`` the same for the random plans;
+    ``condition_all`` the condition number over every parameter not exactly
+    unidentifiable; ``travel`` the joint moves between consecutive poses in run order.
     """
 
     setup: PlanSetup
@@ -58,6 +66,17 @@ class Plan:
     pool_size: int
     swaps: int
     refined: bool = False
+    tool_error: float = float("nan")
+    random_tool_errors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    condition_all: float = float("nan")
+    travel: Travel | None = None
+
+    @property
+    def random_tool_median(self) -> float:
+        """Median predicted tool-position error [m] of the random plans."""
+        if not len(self.random_tool_errors):
+            return float("nan")
+        return float(np.median(self.random_tool_errors))
 
     @property
     def random_median(self) -> float:
@@ -91,7 +110,14 @@ class Plan:
                 f"{self.pool_size} feasible candidates\n"
                 f"{self.index} ({DESCRIPTIONS[self.index]}): plan {self.value:.6g}, random "
                 f"feasible plans of the same size: median {self.random_median:.6g} "
-                f"(ratio {ratio:.3g}, {len(self.random_values)} plans)")
+                f"(ratio {ratio:.3g}, {len(self.random_values)} plans)\n"
+                f"predicted tool-position error over the workspace at "
+                f"{1e3 * self.setup.noise:.3g} mm reading noise: plan "
+                f"{1e3 * self.tool_error:.4g} mm, random median "
+                f"{1e3 * self.random_tool_median:.4g} mm\n"
+                f"condition number over every parameter not exactly unidentifiable: "
+                f"{self.condition_all:.4g}"
+                + (f"\n{self.travel.summary()}" if self.travel is not None else ""))
 
 
 def pool_size_for(count: int, kind: str) -> int:
@@ -101,12 +127,13 @@ def pool_size_for(count: int, kind: str) -> int:
     return max(300, 10 * count)
 
 
-def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int = 0,
+def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, seed: int = 0,
                 pool: int | None = None, refine: bool = True, refine_rounds: int = REFINE_ROUNDS,
                 quiet: bool = False) -> Plan:
     """Design ``count`` placements (touch kinds) or readings for ``dataset``'s set-up.
 
-    ``index``: ``cond`` (= ``O2``) or ``O1`` ... ``O5``; ``seed`` fixes the random search;
+    ``index``: ``tool`` (predicted tool-position error, the default), ``cond`` (=
+    ``O2``) or ``O1`` ... ``O5``; ``seed`` fixes the random search;
     ``pool`` the number of feasible candidates drawn (default ``pool_size_for``);
     ``refine`` runs up to ``refine_rounds`` continuous refinements; ``quiet`` silences
     the progress line.
@@ -115,8 +142,10 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
     setup = setup_from_dataset(dataset)
+    setup = replace(setup, robot=working_ranges(setup.robot))
     kinematics = Kinematics(setup.robot)
-    workspace = Workspace(kinematics, table_height=setup.table_height)
+    workspace = Workspace(kinematics, table_height=setup.table_height,
+                          body=Body.of(setup, kinematics))
     rng = np.random.default_rng(seed)
     size = pool or pool_size_for(count, setup.kind)
     stream = io.StringIO() if quiet else None  # Progress stays silent on a non-terminal
@@ -126,7 +155,9 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
         raise InputError(f"only {len(candidates)} feasible candidates found; ask for at most "
                          f"that many (--count {count})", file=setup.path)
     row_model = RowModel(setup, kinematics)
-    info = Information(row_model.blocks(candidates), row_model.parameters, row_model.shared)
+    weights = tool_weights(setup, workspace, row_model.parameters, np.random.default_rng(seed))
+    info = Information(row_model.blocks(candidates), row_model.parameters, row_model.shared,
+                       weights)
     needed = math.ceil((info.m + info.shared) / info.rows_per_candidate())
     if count < needed:
         what = "placements" if setup.kind in ("cross_bar", "artifact_touches") else "readings"
@@ -160,7 +191,15 @@ def design_plan(dataset: Dataset, count: int, index: str = "cond", *, seed: int 
     if not np.isfinite(value) or spectrum[-1] <= 1e-10 * spectrum[0]:
         raise InputError(f"no plan of {count} found that identifies all {info.m} parameters; "
                          f"ask for more (--count)", file=setup.path)
+    randoms = random_designs(info, count, RANDOM_PLANS, rng)
     random_values = np.array([index_value(index, info.spectrum(d, scaling(index)))
-                              for d in random_designs(info, count, RANDOM_PLANS, rng)])
-    return Plan(setup, chosen_candidates, index, value, random_values, spectrum,
-                info.identifiable_names, len(candidates), swaps, refined)
+                              for d in randoms])
+    random_tool = np.array([tool_error(info.spectrum(d, "tool"), setup.noise) for d in randoms])
+    blocks = row_model.blocks(list(chosen_candidates))
+    predicted = tool_error(info.spectrum_of([info.restrict(b) for b in blocks], "tool"),
+                           setup.noise)
+    ordered, travel = order_candidates(chosen_candidates, workspace)
+    return Plan(setup, ordered, index, value, random_values, spectrum,
+                info.identifiable_names, len(candidates), swaps, refined, predicted,
+                random_tool, exact_condition(blocks, row_model.parameters, row_model.shared),
+                travel)

@@ -19,6 +19,13 @@ higher.
 * ``O3`` smallest singular value ``s_min`` (maximise; Nahvi and Hollerbach)
 * ``O4`` noise amplification ``s_min^2 / s_max`` (maximise; Nahvi and Hollerbach)
 * ``O5`` ``1 / sum(1 / s_i)`` (maximise; Sun and Hollerbach)
+* ``tool`` ``sqrt(sum 1 / s_i^2)`` of ``J L^-T`` (minimise; the default): the predicted
+  standard error of the tool position over the workspace per unit reading noise, see
+  ``accuracy`` (an I-optimal design; its columns are transformed by ``L^-T``, not scaled)
+
+The condition number rewards balance between parameters, not information: a plan can be
+well conditioned and still leave every parameter noisy. ``tool`` asks directly for the
+accuracy the calibration will deliver, so it is the default.
 """
 
 from __future__ import annotations
@@ -27,22 +34,25 @@ import numpy as np
 
 from robocal_casadi.checks import choice
 
-INDICES = ("O1", "O2", "O3", "O4", "O5")
+INDICES = ("O1", "O2", "O3", "O4", "O5", "tool")
 ALIASES = {"cond": "O2"}
-DEFAULT_INDEX = "cond"
+DEFAULT_INDEX = "tool"
 DESCRIPTIONS = {
     "O1": "geometric mean of the singular values",
     "O2": "condition number",
     "O3": "smallest singular value",
     "O4": "noise amplification index",
     "O5": "inverse sum of inverse singular values",
+    "tool": "predicted tool-position error per unit noise",
 }
-MAXIMISE = {"O1": True, "O2": False, "O3": True, "O4": True, "O5": True}
+MAXIMISE = {"O1": True, "O2": False, "O3": True, "O4": True, "O5": True, "tool": False}
 
 
 def scaling(name: str) -> str:
-    """``'design'`` (columns normalised per design) for ``O2``, else ``'reference'``."""
-    return "design" if canonical(name) == "O2" else "reference"
+    """``'design'`` (columns normalised per design) for ``O2``, ``'tool'`` (columns
+    transformed by ``L^-T``) for ``tool``, else ``'reference'``."""
+    key = canonical(name)
+    return {"O2": "design", "tool": "tool"}.get(key, "reference")
 
 
 def canonical(name: str) -> str:
@@ -73,13 +83,15 @@ def index_value(name: str, s: np.ndarray) -> float:
         raise ValueError("no singular values")
     s_max, s_min = float(s[0]), float(s[-1])
     if s_min <= 0.0:
-        return np.inf if key == "O2" else 0.0
+        return np.inf if key in ("O2", "tool") else 0.0
     if key == "O1":
         return float(np.exp(np.mean(np.log(s))))
     if key == "O2":
         return s_max / s_min
     if key == "O3":
         return s_min
+    if key == "tool":
+        return float(np.sqrt(np.sum(1.0 / s**2)))
     if key == "O4":
         return s_min**2 / s_max
     return float(1.0 / np.sum(1.0 / s))
@@ -101,5 +113,5 @@ def better(name: str, a: float, b: float) -> bool:
 
 
 def score(name: str, value: float) -> float:
-    """A number to maximise for index ``name`` (the value, or minus it for ``O2``)."""
+    """A number to maximise for index ``name`` (the value, or minus it for ``O2``, ``tool``)."""
     return value if maximise(name) else -value

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal_casadi.calibration.identifiability import analyse
+from robocal_casadi.calibration.identifiability import EXACT_TOLERANCE, analyse
 
+from .accuracy import tool_transform
 from .rows import Block
 
 NEGLIGIBLE = 1e-7  # relative column norm counted as no effect
@@ -25,7 +26,8 @@ NEGLIGIBLE = 1e-7  # relative column norm counted as no effect
 class Information:
     """Per-candidate information matrices restricted to identifiable + shared columns."""
 
-    def __init__(self, blocks: list[Block], parameters: tuple[str, ...], shared: int):
+    def __init__(self, blocks: list[Block], parameters: tuple[str, ...], shared: int,
+                 tool_weights: np.ndarray | None = None):
         self.parameters = parameters
         self.shared = shared
         n_par = len(parameters)
@@ -51,6 +53,11 @@ class Information:
         pool = _schur(self.matrices.sum(axis=0)[None], self.m, shared)[0]
         self.reference = np.sqrt(np.clip(np.diag(pool), 1e-300, None) / len(blocks))
         """Fixed column scales: RMS column norm per candidate over the pool."""
+        self.tool = None
+        """``L^-1`` of the tool weights on the identifiable columns (``accuracy``), or None."""
+        if tool_weights is not None:
+            W = np.asarray(tool_weights, float)[np.ix_(self.identifiable, self.identifiable)]
+            self.tool = tool_transform(W)
 
     def __repr__(self) -> str:
         return (f"Information({len(self.blocks)} candidates, {self.m} identifiable of "
@@ -67,9 +74,14 @@ class Information:
         """Singular values (B x m, largest first) of designs with information ``matrices``.
 
         ``scaling``: ``'design'`` normalises each design's columns, ``'reference'``
-        divides them by the fixed ``reference`` (see ``indices``).
+        divides them by the fixed ``reference``, ``'tool'`` transforms them by the tool
+        weights (see ``indices``).
         """
         M = _schur(matrices, self.m, self.shared)
+        if scaling == "tool":
+            L = self._tool_transform()
+            lam = np.linalg.eigvalsh(L @ M @ L.T)[:, ::-1]
+            return np.sqrt(np.clip(lam, 0.0, None))
         if scaling == "design":
             d = np.sqrt(np.clip(np.einsum("bii->bi", M), 1e-300, None))
         else:
@@ -90,10 +102,18 @@ class Information:
         """Exact singular values of the design whose (restricted) row blocks are ``rows``."""
         X = np.vstack(rows)
         J = _project_shared(X[:, :self.m], X[:, self.m:])
+        if scaling == "tool":
+            return np.linalg.svd(J @ self._tool_transform().T, compute_uv=False)
         if scaling == "design":
             norms = np.linalg.norm(J, axis=0)
             return np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
         return np.linalg.svd(J / self.reference, compute_uv=False)
+
+    def _tool_transform(self) -> np.ndarray:
+        if self.tool is None:
+            raise ValueError("the index 'tool' needs tool weights (Information(..., "
+                             "tool_weights=...))")
+        return self.tool
 
     def jacobian(self, chosen) -> np.ndarray:
         """The design's identification Jacobian rows (identifiable then shared columns)."""
@@ -116,3 +136,17 @@ def _project_shared(J: np.ndarray, S: np.ndarray) -> np.ndarray:
     U, s, _ = np.linalg.svd(S, full_matrices=False)
     U = U[:, s > 1e-12 * s.max()]
     return J - U @ (U.T @ J)
+
+
+def exact_condition(blocks: list[Block], parameters: tuple[str, ...], shared: int) -> float:
+    """Condition number of a design's column-scaled Jacobian over every parameter not
+    exactly unidentifiable on it (the engine's rule at ``EXACT_TOLERANCE``): the weak
+    directions that the 1% rule sets aside are counted here."""
+    X = np.vstack([b.X for b in blocks])
+    n_par = len(parameters)
+    names = parameters + tuple(f"placement_{k}" for k in range(shared))
+    judged = analyse(X, names, range(n_par), range(n_par, n_par + shared),
+                     invisible_reason="no effect on these measurements",
+                     absorbed_reason="absorbed by the placement unknowns",
+                     tolerance=EXACT_TOLERANCE)
+    return float(judged.condition_number)

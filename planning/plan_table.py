@@ -1,4 +1,4 @@
-"""Writing a plan as the data table an operator runs (CONTRACT.md ``robocal plan``).
+"""Writing a plan as the data table an operator runs (docs/formats.md#plan-table).
 
 Columns: the dataset kind's data-table columns, joints in the dataset's units, the
 measured columns (``distance`` or ``x, y, z``) left empty for the operator to fill in;

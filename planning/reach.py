@@ -39,7 +39,7 @@ class Workspace:
     """Limits, worktable and inverse kinematics of one robot at parameters ``p`` [SI]."""
 
     def __init__(self, kinematics: Kinematics, p: np.ndarray | None = None, *,
-                 table_height: float | None = None, tolerance: float = 1e-9):
+                 table_height: float | None = None, tolerance: float = 1e-9, body=None):
         self.kinematics = kinematics
         self.robot = kinematics.robot
         self.p = kinematics.nominal if p is None else np.asarray(p, float)
@@ -49,6 +49,8 @@ class Workspace:
         base_z = float(self.robot.base.xyz[2])
         self.table_height = base_z if table_height is None else float(table_height)
         self.tolerance = tolerance
+        self.body = body
+        """``collision.Body`` whose capsules must be clear as well, or None."""
         q = ca.SX.sym("q", self.dof)
         p_sym = ca.SX.sym("p", len(kinematics.registry))
         origin = ca.SX.sym("origin", 3)
@@ -95,8 +97,12 @@ class Workspace:
         return np.vstack(out) if out else np.zeros((0, self.dof))
 
     def clear_of_table(self, Q: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
-        """True where every joint frame origin (and ``points``, N x 3 [m]) is above the table."""
+        """True where every joint frame origin (and ``points``, N x 3 [m]) is above the table
+        and, with a ``body``, its capsules are clear of the table, each other and the line
+        of sight."""
         ok = np.all(self.frame_heights(Q) > self.table_height, axis=1)
+        if self.body is not None and len(ok):
+            ok &= self.body.clear(Q)
         if points is not None:
             ok &= np.atleast_2d(points)[:, 2] > self.table_height
         return ok

@@ -1,6 +1,6 @@
 """Rows of the identification Jacobian contributed by each candidate.
 
-For a candidate with residual ``r`` (the contract's residuals of its kind, [m]) the
+For a candidate with residual ``r`` (the residuals of its kind, [m]) the
 planner needs ``G = dr/d(robot geometry, mounted)``, ``L = dr/d(local placement)`` (the
 sockets of one artifact placement touched more than once, projected out per candidate)
 and ``S = dr/d(shared placement)`` (the tracker frame, the sphere centre, projected out

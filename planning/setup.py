@@ -1,6 +1,7 @@
 """The measurement set-up a dataset file describes, as the planner needs it (SI).
 
-Besides the contract's keys, a dataset file may carry an optional ``planning`` block, in
+Besides the keys of docs/formats.md#dataset-file, a dataset file may carry an optional
+``planning`` block (docs/formats.md#planning-block), in
 the file's units::
 
     planning:
@@ -10,6 +11,10 @@ the file's units::
       laser_range: [50, 300]   # sphere_laser: usable readings (default 0.05-0.30 m)
       max_incidence: 45        # sphere_laser: largest beam angle from the surface normal
       visibility_cone: 60      # tracker_points: target axis within this of the instrument
+      noise: 0.01              # reading noise (length), for the predicted tool error
+      laser_rate: 50           # sphere_laser: readings per second [Hz] of a scan
+      max_joint_speed: 60      # sphere_laser scans: per joint (angle per s)
+      max_joint_acceleration: 120  # sphere_laser scans: per joint (angle per s^2)
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ from robocal_casadi.robot import Robot
 from robocal_casadi.units import Units
 
 PLANNING_KEYS = {"table_height", "touches_per_socket", "max_tilt", "laser_range",
-                 "max_incidence", "visibility_cone"}
+                 "max_incidence", "visibility_cone", "noise", "laser_rate", "max_joint_speed",
+                 "max_joint_acceleration"}
 
 
 @dataclass(frozen=True)
@@ -59,6 +65,11 @@ class PlanSetup:
     max_incidence: float = np.radians(45.0)
     instrument: np.ndarray | None = None
     visibility_cone: float = np.radians(60.0)
+    noise: float = 10e-6  # [m] standard deviation of one reading
+    laser_rate: float = 50.0  # [Hz]
+    max_joint_speed: float = np.radians(60.0)  # [rad/s]
+    max_joint_acceleration: float = np.radians(120.0)  # [rad/s^2]
+    sensor_only: bool = False  # sphere_laser with pendant poses: only the 8 laser unknowns
 
     def __repr__(self) -> str:
         return f"PlanSetup({self.path.name!r}, kind={self.kind}, robot={self.robot.name!r})"
@@ -81,8 +92,19 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
             return default
         return number(options[key], file=path, where=f"planning.{key}") * scale
 
+    def positive(key, default, scale):
+        value = option(key, default, scale)
+        if not value > 0:
+            raise InputError(f"expected a positive value, got {options[key]!r}", file=path,
+                             where=f"planning.{key}")
+        return value
+
     common = dict(path=path, kind=dataset.kind, robot=dataset.robot, units=units,
-                  table_height=option("table_height", None, L))
+                  table_height=option("table_height", None, L),
+                  noise=positive("noise", 10e-6, L), laser_rate=positive("laser_rate", 50.0, 1.0),
+                  max_joint_speed=positive("max_joint_speed", np.radians(60.0), A),
+                  max_joint_acceleration=positive("max_joint_acceleration",
+                                                  np.radians(120.0), A))
     if isinstance(dataset, TrackerPoints):
         return PlanSetup(offset=np.asarray(dataset.target, float), instrument=dataset.instrument,
                          visibility_cone=option("visibility_cone", np.radians(60.0), A), **common)
@@ -113,7 +135,7 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
     return PlanSetup(offset=np.asarray(dataset.origin_guess, float),
                      axis=np.asarray(dataset.direction_guess, float),
                      centre=np.asarray(dataset.centre_guess, float), radius=dataset.radius,
-                     laser_range=laser_range,
+                     laser_range=laser_range, sensor_only=dataset.flange_poses is not None,
                      max_incidence=option("max_incidence", np.radians(45.0), A), **common)
 
 

@@ -14,7 +14,7 @@ import sys
 
 from .errors import RobocalError
 
-VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "demo")
+VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "demo", "fleet")
 
 
 class _Parser(argparse.ArgumentParser):

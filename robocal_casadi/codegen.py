@@ -18,6 +18,12 @@ folder instead, with a warning). A library that does not load (truncated, corrup
 compiled again. Build folders of killed runs (``robocal_build_<pid>_*``) are removed
 once their process is gone.
 
+Processes sharing the cache (the workers of a fleet calibration) never compile the same
+library at once: a compilation holds an exclusive lock on ``<library>.lock`` beside it,
+and a process that waited for the lock loads what the other one wrote instead of
+compiling it again. The library itself only appears by an atomic rename once complete,
+so a reader never sees half a file, with or without the lock.
+
 ``BatchFunction`` evaluates a function over many rows (e.g. joint readings) that share
 the other inputs (e.g. the parameter vector): whatever depends on the shared inputs
 alone (sines and cosines of DH angles, base and tool rotations, ...) is computed once
@@ -27,6 +33,7 @@ place.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -37,9 +44,15 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+from typing import Iterator
 
 import casadi as ca
 import numpy as np
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: the atomic rename alone keeps readers safe
+    fcntl = None  # type: ignore[assignment]
 
 FLAGS = ("-O2", "-shared", "-fPIC")
 _warned: set[str] = set()
@@ -121,7 +134,9 @@ def compiled(function: ca.Function) -> ca.Function:
     for attempt in range(2):
         if not library.is_file():
             try:
-                _compile(cc, source, library)
+                with _compile_lock(library):
+                    if not library.is_file():  # another process may have made it meanwhile
+                        _compile(cc, source, library)
             except (OSError, subprocess.SubprocessError) as error:
                 _warn_once(f"compiling {function.name()!r} failed ({_short(error)})")
                 return function
@@ -214,6 +229,32 @@ def _alive(pid: int) -> bool:
     except OSError:
         return True
     return True
+
+
+@contextlib.contextmanager
+def _compile_lock(library: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``<library>.lock`` (made 0600 on first use) while the
+    block runs, so that processes sharing the cache compile one library one at a time.
+    Where the file system offers no locks, the block runs unlocked (still safe: the
+    library appears by rename; at worst two processes do the same work)."""
+    if fcntl is None:
+        yield
+        return
+    library.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        handle = os.open(library.with_name(library.name + ".lock"),
+                         os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:
+            pass  # no lock on this file system: carry on unlocked
+        yield
+    finally:
+        os.close(handle)  # closing releases the lock
 
 
 def _compile(cc: str, source: str, library: Path) -> None:

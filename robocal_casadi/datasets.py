@@ -1,4 +1,4 @@
-"""Dataset files (CONTRACT.md "Dataset file"): reading and checking, all kinds.
+"""Dataset files (docs/formats.md#dataset-file): reading and checking, all kinds.
 
 A dataset is a YAML file naming its ``kind``, its robot file, its units, the
 instrument's geometry and a CSV table. ``load_dataset`` returns a frozen object per

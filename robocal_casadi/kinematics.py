@@ -26,7 +26,8 @@ from .transforms import pose_from_xyz_rpy, rot_x, rot_y, rot_z, translation
 
 
 def dh_transform(convention: str, revolute: bool, reading, theta, d, a, alpha, beta):
-    """One link transform ``T(i-1,i)`` (CONTRACT.md); works on floats and CasADi symbols.
+    """One link transform ``T(i-1,i)`` (docs/conventions.md#standard-dh,
+    docs/conventions.md#modified-dh); works on floats and CasADi symbols.
 
     ``reading`` is the joint reading, added to ``theta`` (revolute) or ``d`` (prismatic).
     """

@@ -7,7 +7,8 @@ convert to a file's units by name, never by position or substring.
 Robot geometry names, joint i counted from 1: ``theta{i}``, ``d{i}``, ``a{i}``,
 ``alpha{i}``, ``beta{i}``; the base (world to joint-1 frame) ``base_x, base_y, base_z,
 base_rx, base_ry, base_rz``; the tool (flange to tool) ``tool_x ... tool_rz``. ``*_rx,
-*_ry, *_rz`` are the contract's rpy angles ``R = Rz(rz) Ry(ry) Rx(rx)``.
+*_ry, *_rz`` are rpy angles ``R = Rz(rz) Ry(ry) Rx(rx)``; see
+docs/conventions.md#parameter-names.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """The robot as a pinocchio model: the independent reference for kinematics and gravity.
 
 Every DH link transform splits into a fixed part, the joint motion along or about a z
-axis, and another fixed part (CONTRACT.md conventions)::
+axis, and another fixed part (docs/conventions.md#standard-dh,
+docs/conventions.md#modified-dh)::
 
     standard DH   T(i-1,i) = Jz(q_i) . [Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)]
     modified DH   T(i-1,i) = [Rx(alpha_{i-1}) Tx(a_{i-1})] . Jz(q_i)

@@ -1,4 +1,4 @@
-"""Typed, immutable results of a calibration, and the contract's ``result.json``.
+"""Typed, immutable results of a calibration, and ``result.json`` (docs/formats.md#result-file).
 
 Values are SI inside; ``to_json`` converts to the robot file's units (lengths in its
 length unit, angles in its angle unit, residual RMS in its length unit).
@@ -20,6 +20,8 @@ if TYPE_CHECKING:
     from .calibration.selection import Selection
     from .calibration.solver import Solution
     from .effects.base import Effect
+
+DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,7 @@ class EffectFinding:
     summary: str = ""
 
     def to_json(self, units: Units | None = None) -> dict:
-        """Contract entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
+        """The ``result.json`` entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
         scale = units.length_scale if units is not None else 1.0
         evidence = {k: float(v) / (scale if k.startswith("cv_rms") else 1.0)
                     for k, v in self.evidence.items()}
@@ -102,7 +104,7 @@ class PriorSummary:
     weak parameters held); ``noise`` [m] the residual's standard deviation estimated from
     distinct readings (NaN when they leave no degree of freedom); per prior parameter its
     ``tolerance`` [SI of ``quantities``] and the data's share of its estimate (1: data
-    alone, 0: prior alone); ``dominated`` those whose share is below one half.
+    alone, 0: prior alone).
     """
 
     rule: str
@@ -110,7 +112,12 @@ class PriorSummary:
     tolerance: dict[str, float] = field(default_factory=dict)
     data_share: dict[str, float] = field(default_factory=dict)
     quantities: dict[str, str] = field(default_factory=dict)
-    dominated: tuple[str, ...] = ()  # whose estimate owes more to the prior than to the data
+
+    @property
+    def dominated(self) -> tuple[str, ...]:
+        """Parameters whose estimate owes more to the prior than to the data."""
+        return tuple(n for n, s in self.data_share.items()
+                     if np.isfinite(s) and s < DOMINATED_SHARE)
 
     def entry(self, name: str, units: Units) -> dict:
         """``tolerance`` (file units), ``data_share`` and ``prior_dominated`` of ``name``."""
@@ -230,7 +237,7 @@ class DatasetResiduals:
 
 @dataclass(frozen=True)
 class CalibrationResult:
-    """Everything a calibration produced. See ``to_json`` for the contract's file."""
+    """Everything a calibration produced. See ``to_json`` for ``result.json``."""
 
     datasets: tuple[str, ...]
     robot_nominal: Robot
@@ -347,7 +354,7 @@ class CalibrationResult:
         raise KeyError(f"no parameter {name!r}; names: {[p.name for p in self.parameters]}")
 
     def to_json(self) -> dict:
-        """The contract's ``result.json`` content, in the robot file's units."""
+        """The ``result.json`` content (docs/formats.md#result-file), in the robot file's units."""
         units = self.units
         out: dict[str, Any] = {
             "datasets": list(self.datasets),

@@ -3,14 +3,9 @@
 A ``Robot`` holds everything in SI (metres, radians, kilograms) and remembers the units
 of the file it came from, so ``save_robot`` writes it back in those units.
 
-Conventions (CONTRACT.md):
-
-* standard DH, joint i: ``T(i-1,i) = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)``
-* modified DH (Craig): ``T(i-1,i) = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i) Ry(beta_i)``;
-  joint i's entry stores ``a_{i-1}``, ``alpha_{i-1}`` as its ``a``, ``alpha``.
-* a revolute reading adds to ``theta_i``, a prismatic one to ``d_i``.
-* ``world_T_tool = base * T(0,1) ... T(n-1,n) * tool``; the end of the chain is the flange.
-* a link's ``com`` is in the frame after its joint's transform.
+The file format is docs/formats.md#robot-file; the conventions (which DH row a joint's
+entry holds, how readings enter, the ``com`` frame) are docs/conventions.md. In one line:
+``world_T_tool = base * T(0,1) ... T(n-1,n) * tool`` (docs/conventions.md#pose-chain).
 """
 
 from __future__ import annotations
@@ -146,7 +141,7 @@ class Robot:
 
 
 def load_robot(path: str | Path) -> Robot:
-    """Read a robot file (CONTRACT.md "Robot file"); errors name the file and the key."""
+    """Read a robot file (docs/formats.md#robot-file); errors name the file and the key."""
     path = Path(path)
     content = load_yaml(path, what="robot file")
     return robot_from_dict(content, file=path)

@@ -3,7 +3,7 @@
 ``simulate(robot, kind, ...)`` builds a TRUE robot (the nominal robot plus chosen
 geometric errors), mounts an instrument with its own small errors, places the artifact
 or instrument in the room, optionally adds effects the DH model lacks, and writes a
-contract dataset: ``robot.yaml`` (the nominal robot), ``dataset.yaml``, its table, and
+complete dataset: ``robot.yaml`` (the nominal robot), ``dataset.yaml``, its table, and
 ``truth.yaml`` with everything that was true, all at once (nothing on failure).
 
 The simulator is independent of the estimator: its only model is the forward
@@ -113,7 +113,7 @@ class TrueEffects:
                    for c in effect.required_columns())
 
     def as_dict(self) -> dict:
-        """The contract's effect names with estimator-style parameter names (SI)."""
+        """The effect names of ``result.json`` with estimator-style parameter names (SI)."""
         out: dict[str, Any] = {}
         for effect, values in self.entries:
             entry: dict[str, Any] = {"joints": sorted(set(effect.joints)), "unit": effect.unit}

@@ -1,4 +1,6 @@
-"""Point-laser sensor calibration on a sphere from known flange poses (METHODS.md section 2).
+"""Point-laser sensor calibration on a sphere from known flange poses.
+
+The method and its source: docs/methods.md#point-laser-and-sphere.
 
 Unknowns: the laser reference point ``p0`` [m] (flange frame), the unit beam direction
 ``n`` (flange frame) and the sphere centre ``c`` [m] (base frame). Reading ``i`` has the
@@ -75,7 +77,8 @@ class SensorFit:
     covariance: np.ndarray
 
     def patent_vector(self) -> np.ndarray:
-        """``[x0, y0, z0, nx, ny, xc, yc, zc]`` (lengths [m]), the patent's layout."""
+        """``[x0, y0, z0, nx, ny, xc, yc, zc]`` (lengths [m]), the layout of the published
+        example (docs/methods.md#point-laser-and-sphere)."""
         return np.concatenate([self.origin, self.direction[:2], self.centre])
 
     def __repr__(self) -> str:

@@ -1,8 +1,8 @@
-"""Homogeneous transforms, the contract's rpy and quaternions, in numpy and CasADi.
+"""Homogeneous transforms, rpy angles and quaternions, in numpy and CasADi.
 
-Conventions (CONTRACT.md): ``rpy = [r, p, y]`` means ``R = Rz(y) Ry(p) Rx(r)``; a
-quaternion is ``(qw, qx, qy, qz)``. The same builders work on floats (numpy) and on
-CasADi symbols, so the kinematics are written once.
+Conventions (docs/conventions.md#rpy, docs/conventions.md#quaternions): ``rpy = [r, p, y]``
+means ``R = Rz(y) Ry(p) Rx(r)``; a quaternion is ``(qw, qx, qy, qz)``. The same builders
+work on floats (numpy) and on CasADi symbols, so the kinematics are written once.
 """
 
 from __future__ import annotations

@@ -15,14 +15,10 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 
 
 def real_data_folder() -> Path:
-    """The real data sets: ``$ROBOCAL_DATA`` if set, else ``shared/data`` beside the
-    checkout (or beside a folder holding it), else the copies shipped in the package."""
+    """The real data sets: ``$ROBOCAL_DATA`` if set, else the copies shipped in the
+    package (``robocal_casadi/data``)."""
     if os.environ.get("ROBOCAL_DATA"):
         return Path(os.environ["ROBOCAL_DATA"])
-    for parent in REPOSITORY.parents:
-        candidate = parent / "shared" / "data"
-        if candidate.is_dir():
-            return candidate
     return REPOSITORY / "robocal_casadi" / "data"
 
 

@@ -1,4 +1,4 @@
-"""`robocal calibrate` end to end: outputs per the contract, refusals with exit 2."""
+"""`robocal calibrate` end to end: outputs per docs/formats.md, refusals with exit 2."""
 
 from __future__ import annotations
 

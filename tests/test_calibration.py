@@ -120,7 +120,8 @@ def test_parallel_axes_need_hayati_beta(tmp_path):
 
 
 def test_patent_rules_are_special_cases():
-    """All-zero columns are dropped; of two identical columns one is kept."""
+    """The published cross-bar method's rules (docs/methods.md#cross-bar-calibration):
+    all-zero columns are dropped; of two identical columns one is kept."""
     from robocal_casadi.calibration.identifiability import analyse
 
     rng = np.random.default_rng(0)
@@ -141,7 +142,7 @@ def test_methods_agree_with_levenberg_marquardt(method, tmp_path):
                     geometric_errors=ERRORS, seed=21, progress=False).load()
     reference = calibrate([data], diagnose=False)
     other = calibrate([data], diagnose=False, method=method)
-    # The patent's two-stage scheme alternates between blocks and converges slowly; it
+    # The cross-bar method's two-stage scheme alternates between blocks and converges slowly; it
     # must still land on the same minimum within a small part of a standard error.
     tolerance = 0.01 if method == "two_stage" else 1e-4
     assert other.fit.rms_geometric == pytest.approx(reference.fit.rms_geometric, rel=tolerance)

@@ -1,4 +1,4 @@
-"""`robocal fk` against a plain numpy implementation of the contract's conventions."""
+"""`robocal fk` against a plain numpy implementation of docs/conventions.md."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 from robocal_casadi.cli import main
 
 # ------------------------------------------------------------------ independent reference
-# Written from CONTRACT.md alone: DH / modified DH with beta, rpy = Rz(y) Ry(p) Rx(r),
+# Written from docs/conventions.md alone: DH / modified DH with beta, rpy = Rz(y) Ry(p) Rx(r),
 # world_T_tool = base * T(0,1) ... T(n-1,n) * tool, readings add to theta (revolute) or d.
 
 

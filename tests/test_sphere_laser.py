@@ -30,14 +30,15 @@ from robocal_casadi.sphere_fit import (
     tangent_basis,
 )
 
-# The patent's example: [x0, y0, z0, nx, ny, xc, yc, zc] in mm (nx, ny unitless).
+# The published method's example (docs/methods.md#point-laser-and-sphere):
+# [x0, y0, z0, nx, ny, xc, yc, zc] in mm (nx, ny unitless).
 PATENT = np.array([61.236, -15.643, 139.778, 0.016, 0.020, -119.193, -305.573, 106.620])
 RADIUS = 0.025  # [m], our choice of sphere
 NOISE = 0.01e-3  # [m], laser distance noise (standard deviation)
 
 
 def patent_truth() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``p0`` [m], unit ``n``, ``c`` [m] of the patent's example (``nz > 0``)."""
+    """``p0`` [m], unit ``n``, ``c`` [m] of the published example (``nz > 0``)."""
     nx, ny = PATENT[3], PATENT[4]
     n = np.array([nx, ny, math.sqrt(1.0 - nx * nx - ny * ny)])
     return PATENT[0:3] * 1e-3, n, PATENT[5:8] * 1e-3
@@ -200,7 +201,7 @@ def test_algebraic_start_is_exact_without_noise():
     np.testing.assert_allclose(centre, c, atol=1e-9)
 
 
-# ----------------------------------------------------------------------------- the patent's case
+# ----------------------------------------------------------------------------- the published case
 
 
 @pytest.mark.parametrize("method", ["lm", "ipopt"])

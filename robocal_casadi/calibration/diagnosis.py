@@ -49,8 +49,8 @@ The screening is unweighted least squares even when the refits use ``loss='huber
 Data that carry their own flange poses (pendant readings) see no joint effect and are
 not diagnosed.
 
-Residual RMS values are over the contract's per-measurement errors [m] (for tracker data
-the 3-D point error), as ``Problem.rms``.
+Residual RMS values are over the per-measurement errors [m] of
+docs/formats.md#result-file (for tracker data the 3-D point error), as ``Problem.rms``.
 """
 
 from __future__ import annotations

@@ -1,16 +1,18 @@
 """Which parameters the data can determine, and why the others cannot.
 
+Described in docs/methods.md#identifiability.
+
 Method: take the Jacobian of the residual at a start point, project out the columns of
 the placement unknowns (they are always estimated), and measure every remaining column
 as a fraction of its own unprojected length (so metres and radians compare, and what
 the placement takes away counts). A column-pivoted QR then picks parameters; among
 columns nearly as good, the earlier one in a preference order wins. A column is
 
-* "invisible" when its unscaled norm is zero: it changes no residual (the patent's
-  all-zero column);
+* "invisible" when its unscaled norm is zero: it changes no residual (the all-zero
+  column of the published cross-bar method, docs/methods.md#cross-bar-calibration);
 * "absorbed by the placement" when its projection is zero: the placement unknowns make
   the same change (e.g. base parameters against an unknown tracker frame);
-* "dependent" when it is a combination of columns already chosen (the patent's "keep
+* "dependent" when it is a combination of columns already chosen (that method's "keep
   one of linearly dependent columns"); the combination is reported as a base-parameter
   relation.
 

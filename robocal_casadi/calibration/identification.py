@@ -272,8 +272,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     diagnosis add more. ``method``, ``loss`` and ``max_iterations`` go to ``solver.solve``;
     a geometric fit that has not converged within ``max_iterations`` is a ``SolverError``. With
     ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
-    than that fraction are dropped first, as in the bar patent (``selection``); what was
-    dropped is in ``result.selection``.
+    than that fraction are dropped first, as in the published cross-bar method
+    (``selection``, docs/methods.md#cross-bar-calibration); what was dropped is in
+    ``result.selection``.
 
     ``rule`` decides which parameters the data estimate. ``"prior"`` (default): every
     parameter that is not exactly undeterminable (no effect, absorbed by the placement,
@@ -548,9 +549,7 @@ def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
     return PriorSummary(rule=rule, noise=statistics.sigma,
                         tolerance=dict(zip(prior.names, map(float, prior.tolerance))),
                         data_share=share,
-                        quantities={n: problem.unknowns.quantity(n) for n in prior.names},
-                        dominated=tuple(n for n, s in share.items()
-                                        if np.isfinite(s) and s < DOMINATED_SHARE))
+                        quantities={n: problem.unknowns.quantity(n) for n in prior.names})
 
 
 def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..results import DOMINATED_SHARE
+
 DEGREE = math.pi / 180.0
 DEFAULT_TOLERANCE = {
     "dh_length": 1e-3,           # [m] d, a of a joint
@@ -39,7 +41,6 @@ DEFAULT_TOLERANCE = {
     "instrument_length": 5e-3,   # [m] probe, target, laser origin in the flange frame
     "instrument_direction": 3.0 * DEGREE,  # [rad ~ unit vector component] laser beam
 }
-DOMINATED_SHARE = 0.5  # data share below which the prior dominates a parameter
 SIGMA_ITERATIONS = 6  # fixed-point rounds for the noise estimate
 SIGMA_SETTLED = 0.02  # relative change of sigma that ends the rounds
 

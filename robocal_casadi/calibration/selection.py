@@ -1,4 +1,5 @@
-"""Data selection by condition number, as the bar patent does it.
+"""Data selection by condition number, as the published cross-bar method does it
+(docs/methods.md#cross-bar-calibration).
 
 Units of data (a bar or artifact placement, a tracker or laser reading) are taken in
 the order recorded. Once the identifiable parameters are determined by what has been

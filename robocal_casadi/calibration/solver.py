@@ -6,8 +6,9 @@ Methods:
   ``least_squares.levenberg_marquardt``: Marquardt-scaled damping, a Cholesky solve of
   the damped normal equations; the default, as it exploits the least-squares structure);
 * ``ipopt``: the same objective ``0.5 |r|^2`` handed to IPOPT through CasADi;
-* ``linearised``: the patent's iterated ``A dx = b`` (undamped Gauss-Newton steps);
-* ``two_stage``: the patent's scheme: angles with lengths held, then lengths with angles
+* ``linearised``: the published cross-bar method's iterated ``A dx = b`` (undamped
+  Gauss-Newton steps; docs/methods.md#cross-bar-calibration);
+* ``two_stage``: that method's scheme: angles with lengths held, then lengths with angles
   held, each stage iterated, repeated until the update is small; a last joint
   linearised pass over all free unknowns settles what the alternation leaves.
 

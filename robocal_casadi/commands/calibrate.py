@@ -82,9 +82,10 @@ def _clean(value):
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                   pdf: bool = False, keep: tuple[str, ...] = (), info=None,
                   templates: Path | None = None) -> None:
-    """Write the contract's three files into ``out`` atomically (``info``: the report's
-    customer fields, ``templates``: a folder of report templates); the files named in
-    ``keep`` that ``out`` already holds are carried over into the new folder."""
+    """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out``
+    atomically (``info``: the report's customer fields, ``templates``: a folder of report
+    templates); the files named in ``keep`` that ``out`` already holds are carried over
+    into the new folder."""
     with atomic_directory(out) as staging:
         for name in keep:
             if (out / name).is_file() and not (out / name).is_symlink():

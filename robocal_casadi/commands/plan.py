@@ -20,7 +20,7 @@ from ..table import Table, read_table
 from .arguments import add_allow_outside_data, output_file, seed
 
 MAX_COUNT = 10_000  # placements or readings in one plan
-INDEX_CHOICES = ("cond", "O1", "O2", "O3", "O4", "O5")
+INDEX_CHOICES = ("tool", "cond", "O1", "O2", "O3", "O4", "O5")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,14 +30,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--count", type=int, required=True, metavar="N",
                         help="bar or artifact placements, or readings, to plan")
     parser.add_argument("--out", required=True, metavar="PLAN.csv", help="plan table to write")
-    parser.add_argument("--index", default="cond", choices=INDEX_CHOICES,
-                        help="observability index to optimise: cond = O2 condition number "
-                             "(default), O1 geometric mean of singular values, O3 smallest "
-                             "singular value, O4 noise amplification, O5 inverse sum of inverses")
+    parser.add_argument("--index", default="tool", choices=INDEX_CHOICES,
+                        help="index to optimise: tool = predicted tool-position error over "
+                             "the workspace (default), cond = O2 condition number, O1 "
+                             "geometric mean of singular values, O3 smallest singular value, "
+                             "O4 noise amplification, O5 inverse sum of inverses")
     parser.add_argument("--seed", type=seed, default=0, metavar="S",
                         help="random seed of the candidate search (default 0)")
     parser.add_argument("--no-refine", action="store_true",
                         help="skip the continuous refinement of the chosen joints")
+    parser.add_argument("--sensor-only", action="store_true",
+                        help="sphere_laser: plan the scan for the laser and sphere alone (the "
+                             "robot taken as exact; PLAN.csv gets pendant pose columns); the "
+                             "default when the dataset's table holds pendant poses")
+    parser.add_argument("--urscript", metavar="OUT.script",
+                        help="also write the plan as a URScript program (6 revolute joints)")
+    parser.add_argument("--krl", metavar="OUT.src",
+                        help="also write the plan as a KUKA KRL program (6 axes)")
     add_allow_outside_data(parser)
 
 
@@ -65,6 +74,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
                          "plan in parts", where="--count")
     output_file(args.out, inputs=[args.dataset])
+    for option, path in (("--urscript", args.urscript), ("--krl", args.krl)):
+        if path is not None:
+            output_file(path, option, inputs=[args.dataset])
     dataset = load_dataset(args.dataset, require_data=False,
                            allow_outside_data=args.allow_outside_data)
     output_file(args.out, inputs=[dataset.robot_path])
@@ -74,9 +86,51 @@ def run(args: argparse.Namespace) -> int:
         if holds_readings(read_table(data), dataset.kind):
             raise InputError(f"{args.out} is the dataset's own data table and it holds "
                              "readings; write the plan to another file", where="--out")
+    if dataset.kind == "sphere_laser":
+        return _scan(dataset, args)
+    if args.sensor_only:
+        raise InputError("--sensor-only is for sphere_laser scans", where="--sensor-only")
     plan = design_plan(dataset, args.count, args.index, seed=args.seed,
                        refine=not args.no_refine)
+    programs = _programs(plan.setup.robot, plan.joints, None, args)
     write_plan(plan, args.out)
+    _write_programs(programs)
     print(plan.summary())
     print(f"wrote {args.out}")
     return 0
+
+
+def _scan(dataset, args) -> int:
+    """A sphere_laser plan: a scan trajectory sampled at the laser's rate."""
+    from planning.export import write_scan
+    from planning.trajectory import design_scan
+
+    scan = design_scan(dataset, args.count, args.index, seed=args.seed,
+                       sensor_only=True if args.sensor_only else None)
+    programs = _programs(scan.setup.robot, scan.joints, scan.times, args)
+    write_scan(scan, args.out)
+    _write_programs(programs)
+    print(scan.summary())
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _programs(robot, joints, times, args) -> list[tuple[str, str]]:
+    """The controller programs asked for, as (text, path); made before anything is written
+    so that a refusal (e.g. not 6 axes) leaves no file behind."""
+    from planning.export import krl, urscript
+
+    out = []
+    if args.urscript is not None:
+        out.append((urscript(robot, joints, times), args.urscript))
+    if args.krl is not None:
+        out.append((krl(robot, joints, times), args.krl))
+    return out
+
+
+def _write_programs(programs) -> None:
+    from planning.export import write_text
+
+    for text, path in programs:
+        write_text(text, path)
+        print(f"wrote {path}")

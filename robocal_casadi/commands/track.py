@@ -1,6 +1,6 @@
 """Joints that keep the tool facing a moving target, level with the worktable.
 
-Reads a tracking job (kind: tracking; CONTRACT.md "Tracking job"): the robot, the
+Reads a tracking job (kind: tracking; docs/formats.md#tracking-job): the robot, the
 camera on the end frame, the standoff Z, the worktable normal `up`, and a table of
 camera observations time,q1..qn,x,y,z,roll,pitch,yaw. For each row it solves one small
 NLP (target at (0, 0, Z) in the end frame, end z axis on the target, end x axis level,

@@ -1,6 +1,6 @@
 """Effects the DH model lacks, each a small ``Effect`` subclass in its own module.
 
-``EFFECTS`` is the registry: it maps the contract's effect names to their classes, in
+``EFFECTS`` is the registry: it maps the effect names of ``result.json`` to their classes, in
 the order diagnosis tries them, and is what diagnosis, the simulator, the ``simulate``
 command and the report read. Adding an effect means writing its module and adding its
 class to ``REGISTERED`` below. ``make_effect`` builds one for a robot and the fit data

@@ -149,7 +149,7 @@ class Effect(ABC):
 
     Class attributes every subclass sets:
 
-    ``name``: the contract name in result.json (``joint_compliance``); ``title``: the
+    ``name``: the name in result.json (``joint_compliance``); ``title``: the
     name in words (``Joint compliance``); ``unit``: of the parameters in result.json
     (``rad/Nm``); ``typical``: a typical parameter magnitude [unit], for judging whether
     the data see the effect; ``sentence``: a ``str.format`` template of one sentence

@@ -12,8 +12,8 @@ minimum is the calibration. Its unknowns besides the robot are of two sorts:
 The engine hands the model ``points(offsets)``: world positions [m] (3 x N, one column
 per data row) of flange-frame points ``offsets`` (3 x 1 or 3 x N) [m], with the robot
 and effect parameters already inside. ``residual`` returns an MX column; ``errors``
-turns a numeric residual into the per-measurement error lengths the contract's RMS is
-taken over.
+turns a numeric residual into the per-measurement error lengths the RMS values of
+``result.json`` are taken over (docs/formats.md#result-file).
 """
 
 from __future__ import annotations
@@ -71,11 +71,11 @@ class MeasurementModel(ABC):
 
     @abstractmethod
     def residual(self, points: PointsFunction, mounted: ca.MX, placement: ca.MX) -> ca.MX:
-        """Residual column [m] (the contract's residuals, before any weighting)."""
+        """Residual column [m] (the residuals of the dataset's kind, before any weighting)."""
 
     @abstractmethod
     def errors(self, residual: np.ndarray) -> np.ndarray:
-        """Per-measurement error lengths [m] (the contract's RMS is taken over these)."""
+        """Per-measurement error lengths [m] (the RMS in ``result.json`` is taken over these)."""
 
     def error_rows(self) -> np.ndarray:
         """For each entry of ``errors``, the data row it belongs to (-1 if none)."""

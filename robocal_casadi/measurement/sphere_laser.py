@@ -1,6 +1,6 @@
 """A point laser on the flange measuring a sphere of known radius (``sphere_laser``).
 
-Unknowns (METHODS.md section 2):
+Unknowns (docs/methods.md#point-laser-and-sphere):
 
 * mounted, shared by name: the laser reference point ``laser_x, laser_y, laser_z`` [m]
   and the beam direction ``laser_nx, laser_ny, laser_nz``, both in the flange frame;

@@ -1,4 +1,6 @@
-"""Tracking: keep the tool facing a moving target, level with the worktable (METHODS.md 3).
+"""Tracking: keep the tool facing a moving target, level with the worktable.
+
+The method and its source: docs/methods.md#tracking.
 
 ``goal`` the method's chain of frames, ``problem`` the per-cycle NLP in CasADi, ``solver``
 its real-time and reference solvers, ``tracker`` the ``Tracker`` a control loop uses,

@@ -1,4 +1,4 @@
-"""The goal pose of one tracking cycle: the method's chain of frames (METHODS.md section 3).
+"""The goal pose of one tracking cycle: the method's chain of frames (docs/methods.md#tracking).
 
 A camera fixed on the end frame (the robot's tool frame, the flange when the robot file
 has no tool) at ``camera_xyz = (a, b, c)`` [m], axes parallel to the end frame, sees the

@@ -1,4 +1,4 @@
-"""The tracking job file (CONTRACT.md "Tracking job"): reading and checking.
+"""The tracking job file (docs/formats.md#tracking-job): reading and checking.
 
 ```yaml
 kind: tracking

@@ -1,0 +1,494 @@
+"""Laser scans of the sphere as an optimal control problem (CasADi Opti).
+
+A point laser samples at ``laser_rate`` [Hz] while the robot moves, so a scan is a joint
+trajectory, not a set of poses. The trajectory is a clamped cubic B-spline ``q(t) = sum
+B_k(t) C_k`` over ``[0, T]``, ``T = (count - 1) / laser_rate`` [s]; the control points
+``C`` (K x dof) are the unknowns. Sampled at the laser's instants ``t_i``:
+
+* constraints: joint limits (on ``C``: a B-spline stays in its control points' hull), joint
+  speed and acceleration within ``max_joint_speed``, ``max_joint_acceleration`` (on the
+  derivative's control points, so everywhere, not only at samples), at rest at both
+  ends; at every sample the beam meets the sphere within the incidence limit
+  (``sqrt(disc) >= R cos(max_incidence)``: ``sqrt(disc) / R`` is the cosine of the
+  angle between the beam and the surface normal), the reading within ``laser_range``,
+  and every joint frame and the laser origin a capsule radius above the table;
+* objective: the chosen index of the sampled readings' information (rows as in
+  ``rows``, the sphere centre projected out): ``tool`` exactly (``trace(W S^-1)``),
+  the others through ``-log det`` of the reference-scaled information.
+
+Unknowns: sensor only (pendant poses: the robot is taken as exact) the 8 of the laser
+and sphere (origin 3, beam 2, centre 3); robot plus laser the robot parameters the pool
+of feasible poses identifies, the laser's 5 and the centre.
+
+Start: informative feasible laser poses (greedy ``log det`` on a pool, as ``design``),
+in a short order (``order``), joined by beams that slide over the sphere (hit normal,
+beam direction and stand-off interpolated, inverse kinematics from the previous sample),
+then fitted by the spline. After the solve every sample is checked again (limits,
+beam, capsules of ``collision``); a scan that fails is refused.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import time
+from dataclasses import dataclass, replace
+
+import casadi as ca
+import numpy as np
+from scipy import sparse
+from scipy.interpolate import BSpline
+
+from robocal_casadi.datasets import Dataset
+from robocal_casadi.errors import ArgumentError, InputError
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.progress import Progress
+
+from .accuracy import measured_point, tool_error, tool_weights
+from .candidates import generate
+from .collision import Body
+from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling
+from .information import Information
+from .ranges import working_ranges
+from .reach import Workspace
+from .rows import Block, RowModel
+from .setup import PlanSetup, setup_from_dataset
+
+DEGREE = 3
+POOL = 150  # feasible laser poses the waypoints are chosen from
+MARGIN = 1e-3  # [m] extra clearance above the table
+SPEED_SHARE = 0.6  # of the speed limit the start path may use (the rest for acceleration)
+LASER_NAMES = ("laser_x", "laser_y", "laser_z", "laser_n1", "laser_n2")
+MIN_SAMPLES = 20
+ANGLE_MARGIN = np.radians(1.0)  # [rad] kept inside the incidence limit by the solver
+RANGE_MARGIN = 0.01  # share of the laser's range kept inside its ends by the solver
+CENTRES = 4  # pool poses tried as the centre of the start sweep
+WAYPOINTS = 12  # poses of the start sweep (fewer when the joint speed does not allow)
+CAP = np.radians(35.0)  # [rad] hit normals of the start sweep, from the centre's
+
+
+@dataclass(frozen=True)
+class Scan:
+    """A planned scan: samples at the laser's instants.
+
+    ``times`` (N,) [s]; ``joints`` (N x dof) [rad or m]; ``flange_poses`` (N x 4 x 4) [m],
+    base frame; ``readings`` (N,) [m] what the laser reads on the nominal sphere;
+    ``index``, ``value`` the index of the scan and ``start_value`` of the start path;
+    ``tool_error`` [m] the predicted standard error (``accuracy``; sensor only: of the
+    laser spot at mid-range in the flange frame); ``laser_errors`` (5,) [m, m, m, rad,
+    rad] predicted standard errors of the laser origin and beam direction;
+    ``identifiable`` the parameters; ``seconds`` the solve time.
+    """
+
+    setup: PlanSetup
+    times: np.ndarray
+    joints: np.ndarray
+    flange_poses: np.ndarray
+    readings: np.ndarray
+    index: str
+    value: float
+    start_value: float
+    tool_error: float
+    laser_errors: np.ndarray
+    identifiable: tuple[str, ...]
+    seconds: float
+    solver_status: str
+    waypoints: int
+
+    @property
+    def sensor_only(self) -> bool:
+        return self.setup.sensor_only
+
+    def __repr__(self) -> str:
+        return (f"Scan({len(self.times)} samples over {self.times[-1]:.3g} s, {self.index} = "
+                f"{self.value:.6g} (start {self.start_value:.6g}), "
+                f"{'sensor only' if self.sensor_only else 'robot and laser'})")
+
+    def summary(self) -> str:
+        speeds = np.abs(np.diff(self.joints, axis=0)) * self.setup.laser_rate
+        return (f"planned a scan of {len(self.times)} readings over {self.times[-1]:.3g} s at "
+                f"{self.setup.laser_rate:g} Hz for {len(self.identifiable)} identifiable "
+                f"parameters ({'laser and sphere only' if self.sensor_only else 'robot and laser'}"
+                f"), through {self.waypoints} start poses, solved in {self.seconds:.3g} s "
+                f"({self.solver_status})\n"
+                f"{self.index} ({DESCRIPTIONS[self.index]}): scan {self.value:.6g}, start path "
+                f"{self.start_value:.6g}\n"
+                f"predicted {'laser spot' if self.sensor_only else 'tool-position'} error at "
+                f"{1e3 * self.setup.noise:.3g} mm reading noise: {1e3 * self.tool_error:.4g} mm;"
+                f" laser origin +-{1e3 * np.max(self.laser_errors[:3]):.3g} mm, beam "
+                f"+-{1e3 * np.max(self.laser_errors[3:]):.3g} mrad\n"
+                f"readings {1e3 * self.readings.min():.4g}-{1e3 * self.readings.max():.4g} mm; "
+                f"fastest joint {np.degrees(speeds.max()):.3g} deg/s")
+
+
+# ---------------------------------------------------------------------------- splines
+
+
+def spline_basis(times: np.ndarray, count: int, duration: float):
+    """Clamped uniform cubic B-spline over ``[0, duration]`` with ``count`` control points:
+    ``(B, knots)``, ``B`` (len(times) x count) the basis at ``times`` [s]."""
+    inner = np.linspace(0.0, duration, count - DEGREE + 1)
+    knots = np.concatenate([[0.0] * DEGREE, inner, [duration] * DEGREE])
+    B = BSpline.design_matrix(np.clip(times, 0, duration), knots, DEGREE).toarray()
+    return B, knots
+
+
+def derivative_map(knots: np.ndarray, count: int, degree: int) -> np.ndarray:
+    """``D`` ((count - 1) x count): control points of the derivative of a degree-``degree``
+    B-spline are ``D @ C`` (per second)."""
+    D = np.zeros((count - 1, count))
+    for i in range(count - 1):
+        span = knots[i + degree + 1] - knots[i + 1]
+        if span > 0:
+            D[i, i], D[i, i + 1] = -degree / span, degree / span
+    return D
+
+
+# ---------------------------------------------------------------------------- rows
+
+
+class ScanRows:
+    """Per-sample information rows and constraint values of a laser at joint readings."""
+
+    def __init__(self, setup: PlanSetup, kinematics: Kinematics, row_model: RowModel,
+                 columns: np.ndarray, body: Body):
+        kin = kinematics
+        p = kin.nominal
+        q = ca.SX.sym("q", kin.dof)
+        T = kin.flange_pose(q, p)
+        axis = setup.axis / np.linalg.norm(setup.axis)
+        o = T[:3, :3] @ setup.offset + T[:3, 3]
+        d = T[:3, :3] @ axis
+        v = o - setup.centre
+        b = ca.dot(d, v)
+        disc = b**2 - (ca.dot(v, v) - setup.radius**2)
+        reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
+        G, S = row_model._sphere(q, p, setup.offset, np.zeros(2), setup.centre, reading)
+        row = ca.horzcat(G, S)
+        g = ca.vertcat(*[row[0, int(j)] for j in columns])
+        frames = kin.joint_frames(q, p)
+        heights = ca.vertcat(*[frames[i][2, 3] for i in range(1, kin.dof + 1)], o[2])
+        self.function = ca.Function("scan_row", [q], [g, disc, reading, heights])
+        self.rows = ca.Function("scan_information", [q], [g])
+        self.geometry = ca.Function("scan_geometry", [q], [disc, reading, heights])
+        self.size = len(columns)
+        self.clearance = float(setup.table_height) + MARGIN + float(body.radii[0])
+
+    def evaluate(self, Q: np.ndarray):
+        """``(rows N x size, disc, readings, heights)`` at joint readings ``Q`` (N x dof)."""
+        f = self.function.map(len(Q))
+        g, disc, reading, heights = f(np.asarray(Q, float).T)
+        return (np.asarray(g).T, np.asarray(disc).ravel(), np.asarray(reading).ravel(),
+                np.asarray(heights).T)
+
+
+# ---------------------------------------------------------------------------- design
+
+
+def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, seed: int = 0,
+                sensor_only: bool | None = None, max_iterations: int = 150,
+                quiet: bool = False) -> Scan:
+    """A scan of ``count`` readings for ``dataset``'s sphere and laser (see the module
+    docstring); ``sensor_only`` overrides what the dataset says (pendant poses or not)."""
+    index = canonical(index)
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
+    setup = setup_from_dataset(dataset)
+    if setup.kind != "sphere_laser":
+        raise InputError(f"scans are planned for sphere_laser data, not {setup.kind}",
+                         file=setup.path, where="kind")
+    if count < MIN_SAMPLES:
+        raise InputError(f"--count {count} is too few readings for a scan; ask for at least "
+                         f"{MIN_SAMPLES}", file=setup.path)
+    setup = replace(setup, robot=working_ranges(setup.robot),
+                    sensor_only=setup.sensor_only if sensor_only is None else sensor_only)
+    kinematics = Kinematics(setup.robot)
+    body = Body.of(setup, kinematics)
+    workspace = Workspace(kinematics, table_height=setup.table_height, body=body)
+    setup = replace(setup, table_height=workspace.table_height)
+    rng = np.random.default_rng(seed)
+    stream = io.StringIO() if quiet else None
+    with Progress("plan: laser poses", total=POOL, stream=stream) as progress:
+        pool = generate(setup, workspace, POOL, rng, progress)
+    row_model = RowModel(setup, kinematics)
+    info, columns = _information(setup, workspace, row_model, pool, rng)
+    duration = (count - 1) / setup.laser_rate
+    times = np.arange(count) / setup.laser_rate
+    rows = ScanRows(setup, kinematics, row_model, columns, body)
+    start_path, waypoints = _start_path(setup, workspace, rows, info, pool, times, rng)
+    started = time.perf_counter()
+    with Progress("plan: scan", total=None, stream=stream):
+        Q, status = _solve(setup, workspace, rows, info, index, times, duration, start_path,
+                           max_iterations)
+    seconds = time.perf_counter() - started
+    start_value = _index_of(info, index, rows.evaluate(start_path)[0])
+    problems = _problems(setup, workspace, rows, Q, times)
+    if problems:
+        problems_start = _problems(setup, workspace, rows, start_path, times)
+        if problems_start:
+            raise InputError(f"no runnable scan of {count} readings found (the optimised scan: "
+                             f"{problems}; the start path: {problems_start}); try another "
+                             f"--seed or other laser_rate, max_joint_speed", file=setup.path)
+        Q, status = start_path, f"start path kept: {problems}"
+    g, disc, readings, _ = rows.evaluate(Q)
+    value = _index_of(info, index, g)
+    if not math.isfinite(value):
+        raise InputError(f"a scan of {count} readings does not identify all "
+                         f"{info.m} parameters; ask for more (--count)", file=setup.path)
+    predicted = tool_error(info.spectrum_of([g], "tool"), setup.noise)
+    laser = _laser_errors(info, g, setup.noise)
+    poses = kinematics.flange_poses(Q)
+    return Scan(setup, times, Q, poses, readings, index, value, start_value, predicted, laser,
+                info.identifiable_names, seconds, status, waypoints)
+
+
+def _information(setup, workspace, row_model, pool, rng):
+    """Information of the pool over the scan's unknowns, and the row-model columns used."""
+    blocks = row_model.blocks(pool)
+    n_p = len(row_model.parameters)
+    weights = tool_weights(setup, workspace, row_model.parameters, rng)
+    if not setup.sensor_only:
+        info = Information(blocks, row_model.parameters, row_model.shared, weights)
+        return info, info.columns
+    laser = np.arange(n_p - len(LASER_NAMES), n_p)
+    keep = np.concatenate([laser, np.arange(n_p, n_p + row_model.shared)])
+    sensor_blocks = [Block(b.X[:, keep]) for b in blocks]
+    info = Information(sensor_blocks, LASER_NAMES, row_model.shared,
+                       weights[np.ix_(laser, laser)])
+    return info, keep[info.columns]
+
+
+def _index_of(info, index, g) -> float:
+    return index_value(index, info.spectrum_of([g], scaling(index)))
+
+
+def _laser_errors(info, g, noise) -> np.ndarray:
+    """Predicted standard errors of the laser's 5 values from rows ``g`` [m, rad]."""
+    X = g
+    m = info.m
+    M = X.T @ X
+    S = M[:m, :m] - M[:m, m:] @ np.linalg.solve(M[m:, m:], M[m:, :m]) if info.shared else M
+    try:
+        C = noise**2 * np.linalg.inv(S)
+    except np.linalg.LinAlgError:
+        return np.full(5, np.inf)
+    names = info.identifiable_names
+    out = []
+    for k, name in enumerate(LASER_NAMES):
+        if name in names:
+            j = names.index(name)
+            scale = 1.0
+            if k >= 3:  # a tangent unit moves the beam by 1 rad
+                scale = 1.0
+            out.append(scale * math.sqrt(max(C[j, j], 0.0)))
+        else:
+            out.append(math.nan)
+    return np.array(out)
+
+
+# ---------------------------------------------------------------------------- start path
+
+
+def _start_path(setup, workspace, rows, info, pool, times, rng):
+    """A continuous feasible joint path at ``times``: a sweep of the beam over a cap of the
+    sphere around the best of a few pool poses, as far as the joint speed allows."""
+    duration = times[-1]
+    budget = SPEED_SHARE * setup.max_joint_speed * duration
+    best = None
+    for centre in rng.choice(len(pool), size=min(CENTRES, len(pool)), replace=False):
+        Q = _local_waypoints(setup, workspace, pool[centre].joints[0], budget)
+        if len(Q) < 2:
+            continue
+        g = rows.evaluate(Q)[0]
+        A = g.T @ g
+        ridge = 1e-9 * np.trace(A) / len(A) * np.eye(len(A))
+        score = np.linalg.slogdet(A + ridge)[1]
+        if best is None or score > best[0]:
+            best = (score, Q)
+    if best is None:
+        raise InputError("no sweep of the beam over the sphere is reachable from the planned "
+                         "laser poses", file=setup.path, where="sphere.centre_guess")
+    Q = best[1]
+    moves = np.maximum(np.max(np.abs(np.diff(Q, axis=0)), axis=1), 1e-6)
+    shares = np.concatenate([[0.0], np.cumsum(moves)])
+    shares /= shares[-1]
+    phase = times / duration
+    path = [Q[0]]
+    for t in phase[1:]:
+        k = min(int(np.searchsorted(shares, t, side="right")) - 1, len(Q) - 2)
+        s = (t - shares[k]) / (shares[k + 1] - shares[k])
+        s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1))  # at rest at every waypoint
+        path.append(_slide(setup, workspace, Q[k], Q[k + 1], s, path[-1]))
+    return np.array(path), len(Q)
+
+
+def _local_waypoints(setup, workspace, q0, budget):
+    """Poses around ``q0`` whose beams circle over the sphere: hit normals on a cone of
+    ``CAP`` about ``q0``'s, beams tilted alternately to 70% of the incidence limit,
+    stand-offs alternately near both ends of the range; each solved from the previous,
+    kept while the total largest joint move stays within ``budget`` [rad]."""
+    d0, n0, _ = _beam(setup, workspace, q0)
+    helper = np.array([1.0, 0, 0]) if abs(n0[0]) < 0.9 else np.array([0, 1.0, 0])
+    u = np.cross(n0, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n0, u)
+    lo, hi = setup.laser_range
+    tilt = 0.7 * setup.max_incidence
+    out = [q0]
+    travel = 0.0
+    for k in range(WAYPOINTS):
+        phi = 2 * np.pi * k / WAYPOINTS
+        side = np.cos(phi) * u + np.sin(phi) * v
+        normal = np.cos(CAP) * n0 + np.sin(CAP) * side
+        across = np.cross(normal, side)
+        across /= np.linalg.norm(across)
+        lean = tilt * (1 if k % 2 else -1)
+        beam = -(np.cos(lean) * normal + np.sin(lean) * across)
+        reading = lo + (0.3 if k % 2 else 0.7) * (hi - lo)
+        hit = setup.centre + setup.radius * normal
+        origin = hit - reading * beam
+        if hit[2] <= workspace.table_height:
+            continue
+        solved = workspace.solve_beams(origin[None], beam[None], setup.offset, setup.axis,
+                                       out[-1][None])
+        q = solved.joints[0]
+        if not (solved.ok[0] and workspace.clear_of_table(q[None], origin[None])[0]):
+            continue
+        move = float(np.max(np.abs(q - out[-1])))
+        if travel + move > budget:
+            break
+        travel += move
+        out.append(q)
+    return np.array(out)
+
+
+def _beam(setup, workspace, q):
+    """Laser origin, beam direction, hit normal and stand-off of joints ``q``."""
+    T = workspace.kinematics.flange_poses(q[None], workspace.p)[0]
+    o = T[:3, :3] @ setup.offset + T[:3, 3]
+    d = T[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
+    v = o - setup.centre
+    b = d @ v
+    disc = max(b * b - (v @ v - setup.radius**2), 0.0)
+    reading = -b - math.sqrt(disc)
+    normal = (o + reading * d - setup.centre) / setup.radius
+    return d, normal / np.linalg.norm(normal), reading
+
+
+def _slerp(a, b, s):
+    angle = math.acos(float(np.clip(a @ b, -1.0, 1.0)))
+    if angle < 1e-9:
+        return a
+    return (math.sin((1 - s) * angle) * a + math.sin(s * angle) * b) / math.sin(angle)
+
+
+def _slide(setup, workspace, qa, qb, s, previous):
+    """Joints a fraction ``s`` of the way from pose ``qa`` to ``qb`` with the beam kept on
+    the sphere (task-space interpolation, inverse kinematics from ``previous``); the joint
+    interpolation where inverse kinematics fails."""
+    da, na, la = _beam(setup, workspace, qa)
+    db, nb, lb = _beam(setup, workspace, qb)
+    d = _slerp(da, db, s)
+    n = _slerp(na, nb, s)
+    reading = (1 - s) * la + s * lb
+    origin = setup.centre + setup.radius * n - reading * d
+    guess = (1 - s) * qa + s * qb
+    for seed in (previous, guess):
+        solved = workspace.solve_beams(origin[None], d[None], setup.offset, setup.axis,
+                                       seed[None], iterations=60)
+        step = np.max(np.abs(solved.joints[0] - previous))
+        if solved.ok[0] and step <= setup.max_joint_speed / setup.laser_rate * 2:
+            return solved.joints[0]
+    return guess
+
+
+# ---------------------------------------------------------------------------- the OCP
+
+
+def _solve(setup, workspace, rows, info, index, times, duration, start, max_iterations):
+    dof = workspace.dof
+    N = len(times)
+    K = int(np.clip(round(duration * 2.0) + 6, 8, max(8, N // 6)))
+    B, knots = spline_basis(times, K, duration)
+    D1 = derivative_map(knots, K, DEGREE)
+    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
+    C0, *_ = np.linalg.lstsq(B, start, rcond=None)
+    lower = np.where(np.isfinite(workspace.lower), workspace.lower, -1e3)
+    upper = np.where(np.isfinite(workspace.upper), workspace.upper, 1e3)
+    C0 = np.clip(C0, lower, upper)
+    C0[1], C0[-2] = C0[0], C0[-1]
+
+    opti = ca.Opti()
+    C = opti.variable(K, dof)
+    # sparse basis: each sample depends on DEGREE + 1 control points only, which keeps the
+    # constraint Jacobian sparse (its cost grows with its colours, not with K x dof)
+    Q = ca.mtimes(ca.DM(sparse.csc_matrix(np.where(np.abs(B) > 1e-14, B, 0.0))), C)
+    g = rows.rows.map(N, "serial")(Q.T)
+    disc, reading, heights = rows.geometry.map(N, "serial")(Q.T)
+    M = ca.mtimes(g, g.T)
+    m, shared = info.m, info.shared
+    Sm = M[:m, :m]
+    if shared:
+        Sm = Sm - M[:m, m:] @ ca.solve(M[m:, m:], M[m:, :m])
+    # a start path may not identify everything yet: a ridge far below any real
+    # information keeps the objective finite there
+    Sm = Sm + 1e-9 * ca.trace(Sm) / m * ca.DM.eye(m)
+    if index == "tool":
+        L = ca.DM(info.tool)
+        objective = ca.trace(L @ ca.solve(Sm, L.T))
+    else:
+        d = ca.DM(info.reference)
+        objective = -ca.log(ca.det(Sm / (d @ d.T)))
+    try:
+        f_start = float(ca.Function("f", [C], [objective])(C0))
+    except RuntimeError:
+        f_start = math.nan
+    scale = abs(f_start) if math.isfinite(f_start) and f_start else 1.0
+    opti.minimize(objective / scale)
+    opti.subject_to(opti.bounded(np.tile(lower, (K, 1)), C, np.tile(upper, (K, 1))))
+    vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
+    opti.subject_to(opti.bounded(-vmax, ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C), vmax))
+    opti.subject_to(opti.bounded(-amax, ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C), amax))
+    opti.subject_to(C[1, :] == C[0, :])
+    opti.subject_to(C[K - 2, :] == C[K - 1, :])
+    # constraints a little inside the limits: an iterate stopped early still passes
+    cos_limit = math.cos(setup.max_incidence - ANGLE_MARGIN)
+    opti.subject_to(disc >= (setup.radius * cos_limit) ** 2)
+    lo, hi = setup.laser_range
+    inset = RANGE_MARGIN * (hi - lo)
+    opti.subject_to(opti.bounded(lo + inset, reading, hi - inset))
+    opti.subject_to(ca.vec(heights) >= rows.clearance)
+    opti.set_initial(C, C0)
+    opti.solver("ipopt", {"print_time": False},
+                {"print_level": 0, "sb": "yes", "max_iter": max_iterations,
+                 "hessian_approximation": "limited-memory", "tol": 1e-5,
+                 "constr_viol_tol": 1e-9, "acceptable_tol": 1e-3, "acceptable_iter": 5,
+                 "acceptable_constr_viol_tol": 1e-9})
+    try:
+        solution = opti.solve()
+        values = solution.value(C)
+        status = "solved"
+    except RuntimeError:
+        values = opti.debug.value(C)
+        status = opti.debug.stats().get("return_status", "not solved")
+    values = np.asarray(values, float).reshape(K, dof)
+    return B @ values, status
+
+
+def _problems(setup, workspace, rows, Q, times) -> str:
+    """What makes joint samples ``Q`` unrunnable ('' when nothing)."""
+    _, disc, reading, heights = rows.evaluate(Q)
+    found = []
+    if not workspace.within_limits(Q, margin=-1e-9).all():
+        found.append("joint limits")
+    lo, hi = setup.laser_range
+    if np.any(disc < (setup.radius * math.cos(setup.max_incidence)) ** 2 * (1 - 1e-6)):
+        found.append("beam off the sphere or beyond the incidence limit")
+    if np.any((reading < lo - 1e-7) | (reading > hi + 1e-7)):
+        found.append("reading out of the laser's range")
+    if not workspace.body.clear(Q).all():
+        found.append("a link touches the table or another link")
+    speed = np.abs(np.diff(Q, axis=0)) / np.diff(times)[:, None]
+    if np.any(speed > setup.max_joint_speed * (1 + 1e-3)):
+        found.append("joint speed")
+    return ", ".join(found)

@@ -1,0 +1,178 @@
+"""Calibrate a fleet of robots on a Dask cluster; write each robot's result and fleet.html/json.
+
+FLEET.yaml lists the robots, each with a name, its datasets and optional held-out
+datasets (the files `robocal calibrate` reads; paths relative to FLEET.yaml):
+
+  robots:
+    - name: cell3-r1
+      datasets: [cell3/r1/tracker.yaml]
+      validate: [cell3/r1/check.yaml]
+
+Each robot is one task: it writes what `robocal calibrate` writes (result.json,
+robot_calibrated.yaml, report.html) into DIR/<name>/. Without --scheduler a local
+cluster of --workers processes (default: one per core) runs the tasks; with it, an
+existing Dask cluster does (its workers must see the same paths). A rerun skips robots
+whose input files (content) and settings are unchanged and whose result is complete.
+A robot whose files are bad fails alone, with its one-line error in the summary.
+
+DIR/fleet.json and DIR/fleet.html compare the robots: every robot's error before and
+after, its effects, and the robots that stand out (an RMS error or a joint compliance
+far above the fleet's, or, with --previous DIR, a joint offset that moved since that
+run beyond its standard errors), with a plot per quantity across the robots.
+
+Exit status: 0 when every robot was calibrated (or unchanged), 1 when any robot failed,
+2 when FLEET.yaml or an option is bad (nothing is run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Iterator
+
+from ..calibration import METHODS
+from ..errors import InputError
+from ..output import MARKER, MARKER_TEXT, atomic_file, written_by_robocal
+from ..progress import Progress
+from .arguments import add_allow_outside_data, positive_count
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: runs on one folder are not kept apart
+    fcntl = None  # type: ignore[assignment]
+
+LOCK = ".robocal-fleet.lock"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("fleet", type=Path, metavar="FLEET.yaml")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="output folder: DIR/<name>/ per robot, DIR/fleet.json, "
+                        "DIR/fleet.html (kept between runs; unchanged robots are skipped)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: "
+                        "a local cluster on this machine)")
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="worker processes of the local cluster (default: one per core)")
+    parser.add_argument("--previous", type=Path, metavar="DIR",
+                        help="an earlier fleet output folder: flag joint offsets that moved "
+                        "since then beyond their standard errors")
+    parser.add_argument("--recompute", action="store_true",
+                        help="calibrate every robot again, even when unchanged")
+    parser.add_argument("--no-diagnose", action="store_true",
+                        help="stop after the geometric model")
+    parser.add_argument("--method", choices=METHODS, default="lm",
+                        help="the solver, as for calibrate (default lm)")
+    parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
+                        help="huber down-weights outliers")
+    parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
+                        help="iterations allowed to each geometric fit (default 200)")
+    parser.add_argument("--no-report", action="store_true",
+                        help="skip each robot's report.html (fleet.html is always written)")
+    parser.add_argument("--force", action="store_true",
+                        help="write into an --out folder that robocal did not write")
+    add_allow_outside_data(parser)
+
+
+@contextlib.contextmanager
+def _only_run(folder: Path) -> Iterator[None]:
+    """Keep two fleet runs from writing into one folder at the same time."""
+    if fcntl is None:
+        yield
+        return
+    handle = os.open(folder / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"another fleet run is writing into {folder}; wait for it to end",
+                             where="--out") from None
+        except OSError:
+            pass  # no locks on this file system
+        yield
+    finally:
+        os.close(handle)
+
+
+def _prepare_out(out: Path, force: bool) -> None:
+    """The fleet folder is kept between runs (robots are replaced one by one), so it may
+    be new, empty, or one robocal wrote; any other folder needs --force."""
+    if str(out).strip() == "":
+        raise InputError("expected a folder name", where="--out")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out} is a file; expected a folder", where="--out")
+    if out.is_dir() and not force and not written_by_robocal(out) and any(out.iterdir()):
+        raise InputError(f"{out} is a folder robocal did not write and it is not empty; name a "
+                         "new folder (or give --force to write the fleet's results into it)",
+                         where="--out")
+    out.mkdir(parents=True, exist_ok=True)
+    if not written_by_robocal(out):
+        (out / MARKER).write_text(MARKER_TEXT)
+
+
+def _previous(folder: Path | None, fleet) -> dict | None:
+    from ..fleet import previous_parameters
+
+    if folder is None:
+        return None
+    if not folder.is_dir():
+        raise InputError(f"{folder} is not a folder (expected an earlier fleet output)",
+                         where="--previous")
+    found = {}
+    for robot in fleet.robots:
+        parameters = previous_parameters(folder / robot.name)
+        if parameters is not None:
+            found[robot.name] = parameters
+    return found
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..fleet import Settings, load_fleet, summarise
+    from ..fleet.engine import run_fleet
+    from ..fleet.page import render
+    from .calibrate import _clean
+
+    if args.workers is not None:
+        positive_count(args.workers, "--workers")
+        if args.scheduler is not None:
+            raise InputError("--workers sizes the local cluster; an existing cluster "
+                             "(--scheduler) has its own workers", where="--workers")
+    positive_count(args.max_iterations, "--max-iterations")
+    fleet = load_fleet(args.fleet)
+    previous = _previous(args.previous, fleet)  # read now: a robot may replace it below
+    settings = Settings(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
+                        max_iterations=args.max_iterations, report=not args.no_report,
+                        allow_outside_data=args.allow_outside_data, recompute=args.recompute)
+    _prepare_out(args.out, args.force)
+    with _only_run(args.out):
+        failed = 0
+        with Progress("fleet", total=len(fleet.robots)) as bar:
+            done = 0
+
+            def show(outcome) -> None:
+                nonlocal done, failed
+                done += 1
+                failed += not outcome.ok
+                bar.update(done, f"robots ({failed} failed)" if failed else "robots")
+
+            outcomes = run_fleet(fleet, args.out, settings, scheduler=args.scheduler,
+                                 workers=args.workers, on_done=show)
+        summary = summarise(fleet, outcomes, previous=previous,
+                            previous_folder=None if args.previous is None else str(args.previous))
+        with atomic_file(args.out / "fleet.json") as staging:
+            staging.write_text(json.dumps(_clean(summary.to_json()), indent=1) + "\n")
+        with atomic_file(args.out / "fleet.html") as staging:
+            staging.write_text(render(summary))
+    print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
+          f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
+    for outcome in summary.failed:
+        print(f"failed: {outcome.name}: {outcome.error}")
+    for reason in summary.reasons():
+        print(f"stands out: {reason['robot']}: {reason['reason']}")
+    print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
+    sys.stdout.flush()
+    return 1 if summary.failed else 0

@@ -1,0 +1,123 @@
+"""Which robots stand out from the fleet: a robust rule over one quantity at a time.
+
+For a quantity with one value per robot (an RMS error, a joint's compliance), the
+fleet's centre is the median ``m`` and its spread the robust standard deviation
+``s = 1.4826 * median(|x - m|)`` (the median absolute deviation, scaled to equal the
+standard deviation for normally distributed values), so a few outlying robots cannot
+hide themselves by inflating the spread. A robot stands out when
+
+    score = (x - m) / sqrt(s^2 + sigma^2 + (FLOOR * |m|)^2) > LIMIT
+
+with ``sigma`` the standard error of the robot's own estimate (0 where it has none) and
+``FLOOR`` a small relative spread that keeps a fleet of nearly identical robots from
+turning a hair's difference into an outlier. Only values far ABOVE the fleet count: a
+compliance or an error far below the others is no fault. At least ``MIN_ROBOTS`` values
+are needed to speak of a fleet.
+
+A joint offset moved since an earlier run when ``|now - before| > LIMIT * sqrt(sigma_now^2
++ sigma_before^2)``: the robot compared with itself, beyond both standard errors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+MAD_TO_SD = 1.4826  # robust sd per median absolute deviation (normal values)
+LIMIT = 5.0  # scores above this stand out
+FLOOR = 0.01  # relative spread always allowed around the median
+MIN_ROBOTS = 3
+
+
+@dataclass(frozen=True)
+class Spread:
+    """The fleet's median and robust standard deviation of one quantity (its unit)."""
+
+    median: float
+    robust_sd: float
+    count: int
+
+    def score(self, value: float, std: float | None = None) -> float:
+        """How far ``value`` lies above the median, in combined standard deviations
+        (infinite for a value above a fleet with no spread at all)."""
+        scale = math.sqrt(self.robust_sd ** 2 + (std or 0.0) ** 2
+                          + (FLOOR * abs(self.median)) ** 2)
+        excess = value - self.median
+        if scale == 0.0:
+            return math.inf if excess > 0 else 0.0
+        return excess / scale
+
+    @property
+    def threshold(self) -> float:
+        """The value above which a robot without a standard error stands out."""
+        return self.median + LIMIT * math.hypot(self.robust_sd, FLOOR * self.median)
+
+
+def spread(values: Sequence[float]) -> Spread:
+    """Median and robust standard deviation of the finite ``values``."""
+    data = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if data.size == 0:
+        return Spread(math.nan, math.nan, 0)
+    median = float(np.median(data))
+    return Spread(median, MAD_TO_SD * float(np.median(np.abs(data - median))), int(data.size))
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One robot standing out on one quantity: its ``value`` and the fleet's ``median``
+    and ``robust_sd`` (the quantity's unit), and the ``score``."""
+
+    robot: str
+    quantity: str
+    value: float
+    median: float
+    robust_sd: float
+    score: float
+
+
+def high_outliers(quantity: str, values: Mapping[str, tuple[float, float | None]]
+                  ) -> tuple[Spread, list[Finding]]:
+    """The fleet's spread of ``values`` (robot -> (value, standard error or None)) and
+    the robots whose score exceeds ``LIMIT``, highest first."""
+    fleet = spread([v for v, _ in values.values()])
+    if fleet.count < MIN_ROBOTS:
+        return fleet, []
+    found = []
+    for robot, (value, std) in values.items():
+        if value is None or not math.isfinite(value):
+            continue
+        score = fleet.score(value, std)
+        if score > LIMIT:
+            found.append(Finding(robot, quantity, value, fleet.median, fleet.robust_sd, score))
+    return fleet, sorted(found, key=lambda f: -f.score)
+
+
+@dataclass(frozen=True)
+class Move:
+    """A joint offset that changed since an earlier run: ``before`` and ``now`` with
+    their standard errors (SI: [rad] or [m]) and the change in combined standard errors."""
+
+    robot: str
+    joint: int
+    name: str
+    quantity: str
+    before: float
+    before_std: float
+    now: float
+    now_std: float
+
+    @property
+    def change(self) -> float:
+        return self.now - self.before
+
+    @property
+    def score(self) -> float:
+        scale = math.hypot(self.now_std, self.before_std)
+        return math.inf if scale == 0.0 else abs(self.change) / scale
+
+    @property
+    def moved(self) -> bool:
+        return self.score > LIMIT

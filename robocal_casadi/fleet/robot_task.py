@@ -1,0 +1,275 @@
+"""One robot of a fleet, calibrated as one task on a worker.
+
+``calibrate_robot`` reads the robot's datasets, hashes every input file's content with
+the calibration settings, and either finds the robot's folder ``DIR/<name>/`` already
+complete for exactly these inputs (status ``unchanged``: nothing is computed) or runs
+the same calibration as ``robocal calibrate`` and writes the same files there with the
+same writer. Last it writes ``fleet_robot.json`` beside them: the input hash, the files
+written and the few numbers the fleet summary compares, in SI. That record is the mark
+of a complete result: a run killed before it is written is computed again next time.
+
+Whatever goes wrong with one robot (a bad file, a solver that does not converge, a
+folder that cannot be written) ends that task with a one-line error in its outcome; the
+task itself never raises, so other robots are not affected.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import resource
+import sys
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ..errors import InputError, RobocalError
+from ..output import atomic_file, written_by_robocal
+from .spec import FleetRobot
+
+RECORD = "fleet_robot.json"
+RECORD_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Calibration settings shared by every robot of a run (those of ``robocal
+    calibrate``), and whether to recompute robots whose result is complete."""
+
+    diagnose: bool = True
+    method: str = "lm"
+    loss: str = "linear"
+    max_iterations: int = 200
+    report: bool = True
+    allow_outside_data: bool = False
+    recompute: bool = False
+
+    def hashed(self) -> dict:
+        """The settings a result depends on (not ``recompute``)."""
+        values = asdict(self)
+        values.pop("recompute")
+        return values
+
+
+@dataclass(frozen=True)
+class RobotOutcome:
+    """What became of one robot.
+
+    ``status`` is ``calibrated``, ``unchanged`` (complete for the same inputs, skipped)
+    or ``failed`` (``error`` the one-line reason). ``summary`` (SI, see
+    ``robot_summary``) is None for a failed robot. ``seconds`` and ``cpu_seconds`` [s]
+    are the task's wall and processor time; ``worker`` names the process that ran it;
+    ``memory`` and ``peak_memory`` [bytes] are that process's resident size after the
+    task and the most it has held so far; ``finished`` when the task ended.
+    """
+
+    name: str
+    status: str
+    error: str | None = None
+    summary: dict | None = None
+    input_hash: str | None = None
+    warnings: tuple[str, ...] = ()
+    seconds: float = 0.0
+    cpu_seconds: float = 0.0
+    worker: str = ""
+    memory: int = 0
+    peak_memory: int = 0
+    finished: float = 0.0  # [s] since the epoch
+
+    @property
+    def ok(self) -> bool:
+        return self.status != "failed"
+
+
+@dataclass
+class _Clock:
+    wall: float = field(default_factory=time.perf_counter)
+    cpu: float = field(default_factory=time.process_time)
+
+
+def one_line(error: BaseException) -> str:
+    """The one line a person reads for ``error``: as the command line prints it."""
+    if isinstance(error, RobocalError):
+        text = str(error)
+    elif isinstance(error, OSError):
+        where = f"{error.filename}: " if error.filename else ""
+        text = where + (error.strerror or str(error))
+    else:
+        text = f"unexpected {type(error).__name__}: {error}"
+    return " ".join(text.split())
+
+
+def input_files(datasets, validation) -> list[tuple[str, Path]]:
+    """(role, path) of every file the calibration reads: each dataset file, its table
+    and its robot file, fitted ones first."""
+    files = []
+    for role, group in (("fit", datasets), ("validate", validation)):
+        for dataset in group:
+            for path in (dataset.path, dataset.data_path, dataset.robot_path):
+                if path is not None:
+                    files.append((role, Path(path)))
+    return files
+
+
+def input_hash(files: list[tuple[str, Path]], settings: Settings) -> str:
+    """SHA-256 over the settings and, in order, each input file's role, name and bytes."""
+    from .. import __version__
+
+    digest = hashlib.sha256()
+    digest.update(json.dumps({"robocal": __version__, "settings": settings.hashed()},
+                             sort_keys=True).encode())
+    for role, path in files:
+        data = path.read_bytes()
+        digest.update(f"\0{role}\0{path.name}\0{len(data)}\0".encode())
+        digest.update(data)
+    return digest.hexdigest()
+
+
+def complete_record(folder: Path, digest: str) -> dict | None:
+    """The record of ``folder`` when it is complete for inputs hashing to ``digest``:
+    written by robocal, the record readable and matching, every file it lists present."""
+    if not written_by_robocal(folder):
+        return None
+    try:
+        record = json.loads((folder / RECORD).read_text())
+    except (OSError, ValueError):
+        return None
+    if (not isinstance(record, dict) or record.get("version") != RECORD_VERSION
+            or record.get("input_hash") != digest or not isinstance(record.get("summary"), dict)
+            or not isinstance(record.get("files"), list)):
+        return None
+    if not all(isinstance(name, str) and (folder / name).is_file() for name in record["files"]):
+        return None
+    return record
+
+
+def robot_summary(result) -> dict:
+    """The numbers the fleet compares, SI: RMS errors [m] before and after (fit and
+    validation), the effects added (parameters and standard errors in their unit), the
+    gravity compliance per joint [rad/Nm] and each joint's offset (``theta_i`` [rad] of
+    a revolute joint, ``d_i`` [m] of a prismatic one) with its standard error."""
+    def rms(summary):
+        if summary is None:
+            return None
+        return {"rms_nominal": summary.rms_nominal, "rms_geometric": summary.rms_geometric,
+                "rms_final": summary.rms_final}
+
+    effects = []
+    compliance = {}
+    for effect in result.effects:
+        std = {k: float(v) for k, v in (effect.std or {}).items()}
+        effects.append({"name": effect.name, "joints": list(effect.joints), "unit": effect.unit,
+                        "parameters": {k: float(v) for k, v in effect.parameters.items()},
+                        "std": std})
+        if effect.name == "joint_compliance":
+            for joint in effect.joints:
+                key = f"c{joint}"
+                if key in effect.parameters:
+                    compliance[str(joint)] = {"value": float(effect.parameters[key]),
+                                              "std": std.get(key)}
+    estimates = {p.name: p for p in result.parameters}
+    offsets = {}
+    for index, joint in enumerate(result.robot_nominal.joints, start=1):
+        name = f"theta{index}" if joint.revolute else f"d{index}"
+        estimate = estimates.get(name)
+        if estimate is None:
+            continue
+        offsets[str(index)] = {"name": name, "quantity": estimate.quantity,
+                               "estimate": float(estimate.estimate),
+                               "std": None if estimate.std is None else float(estimate.std),
+                               "identifiable": bool(estimate.identifiable)}
+    return {"units": result.units.as_dict(), "fit": rms(result.fit),
+            "validation": rms(result.validation), "effects": effects,
+            "compliance": compliance, "joint_offsets": offsets,
+            "recommended": result.recommended,
+            "condition_number": float(result.condition_number)}
+
+
+def _memory() -> tuple[int, int]:
+    """This process's resident size now and at most so far [bytes]."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    peak *= 1 if sys.platform == "darwin" else 1024  # Linux reports kilobytes
+    try:
+        import psutil
+
+        now = psutil.Process().memory_info().rss
+    except ImportError:
+        now = peak
+    return now, peak
+
+
+def _finish(clock: _Clock, name: str, status: str, caught: list, **fields) -> RobotOutcome:
+    now, peak = _memory()
+    messages = tuple(dict.fromkeys(" ".join(str(w.message).split()) for w in caught))
+    return RobotOutcome(name=name, status=status, warnings=messages,
+                        seconds=time.perf_counter() - clock.wall,
+                        cpu_seconds=time.process_time() - clock.cpu,
+                        worker=f"{os.uname().nodename}:{os.getpid()}", memory=now,
+                        peak_memory=peak, finished=time.time(), **fields)
+
+
+def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> RobotOutcome:
+    """Calibrate ``robot`` into ``out/<name>/`` unless complete for the same inputs; never
+    raises (see the module docstring)."""
+    from ..datasets import load_dataset
+
+    clock = _Clock()
+    folder = Path(out) / robot.name
+    digest = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            outside = settings.allow_outside_data
+            datasets = [load_dataset(p, allow_outside_data=outside) for p in robot.datasets]
+            validation = [load_dataset(p, allow_outside_data=outside) for p in robot.validate]
+            files = input_files(datasets, validation)
+            digest = input_hash(files, settings)
+            record = None if settings.recompute else complete_record(folder, digest)
+            if record is not None:
+                return _finish(clock, robot.name, "unchanged", caught,
+                               summary=record["summary"], input_hash=digest)
+            summary = _calibrate(robot, folder, settings, datasets, validation, files, digest)
+            return _finish(clock, robot.name, "calibrated", caught, summary=summary,
+                           input_hash=digest)
+        except Exception as error:  # noqa: BLE001 - one robot's failure is its own
+            return _finish(clock, robot.name, "failed", caught, error=one_line(error),
+                           input_hash=digest)
+
+
+def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, validation,
+               files: list[tuple[str, Path]], digest: str) -> dict:
+    from ..calibration import calibrate
+    from ..commands.arguments import not_replacing_inputs
+    from ..commands.calibrate import write_outputs
+
+    if folder.exists() and not written_by_robocal(folder):
+        if not folder.is_dir() or any(folder.iterdir()):
+            raise InputError(f"{folder} exists and robocal did not write it; move it away so "
+                             "the robot's result can be written there", where=robot.name)
+    not_replacing_inputs(folder, [path for _, path in files], option=robot.name)
+    result = calibrate(datasets, validation, diagnose=settings.diagnose,
+                       method=settings.method, loss=settings.loss,
+                       max_iterations=settings.max_iterations, progress=False)
+    if input_hash(files, settings) != digest:
+        raise InputError("its input files changed while it was being calibrated; run again",
+                         where=robot.name)
+    info = None
+    if settings.report:
+        # The report's customer fields come from the datasets' report blocks, as for
+        # `robocal calibrate` without command-line overrides.
+        from ..report.info import ReportInfo, info_from_dataset_file
+
+        info = ReportInfo()
+        for dataset in [*datasets, *validation]:
+            info = info.merged(info_from_dataset_file(dataset.path))
+    write_outputs(result, folder, report=settings.report, info=info)
+    summary = robot_summary(result)
+    written = ["result.json", "robot_calibrated.yaml"] + (["report.html"] if settings.report
+                                                          else [])
+    record = {"version": RECORD_VERSION, "input_hash": digest, "files": written,
+              "summary": summary}
+    with atomic_file(folder / RECORD) as staging:
+        staging.write_text(json.dumps(record, indent=1) + "\n")
+    return summary

@@ -1,0 +1,269 @@
+"""Fleet calibration on the real engine: a local Dask cluster of two worker processes.
+
+Four simulated robots (one with a compliance four times the others') and one whose table
+is broken go through ``robocal fleet``; results are compared with ``calibrate`` run
+directly, reruns skip what is unchanged, an offset moved between runs is flagged, a bad
+fleet file is refused before anything runs, and concurrent processes never compile one
+library at the same time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from robocal_casadi import codegen, examples  # noqa: E402
+from robocal_casadi.calibration import calibrate  # noqa: E402
+from robocal_casadi.cli import main  # noqa: E402
+from robocal_casadi.datasets import load_dataset  # noqa: E402
+from robocal_casadi.fleet import high_outliers, load_fleet, spread  # noqa: E402
+from robocal_casadi.fleet.outliers import LIMIT, Move  # noqa: E402
+from robocal_casadi.errors import InputError  # noqa: E402
+from robocal_casadi.simulate import simulate  # noqa: E402
+
+ROWS = 100
+COMPLIANT = "r2"  # simulated with four times the fleet's compliance at joint 3
+
+
+def _simulate(folder: Path, seed: int, c3: float, theta2_error: float = 0.0) -> None:
+    errors = {"a2": 3e-4, "d4": -2e-4, "alpha3": 2e-4, "theta2": 1e-3 + theta2_error}
+    simulate(examples.ROBOTS["industrial_6r"](), "tracker_points", out_dir=folder, rows=ROWS,
+             noise=1e-5, geometric_errors=errors, seed=seed, progress=False,
+             effects={"joint_compliance": {2: 1.0e-6 * (1 + 0.05 * seed), 3: c3}})
+
+
+@pytest.fixture(scope="module")
+def fleet_files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fleet")
+    for k in range(4):
+        _simulate(root / f"r{k}", seed=k, c3=(4.0 if f"r{k}" == COMPLIANT else 1.0 + 0.1 * k)
+                  * 1e-6)
+    _simulate(root / "broken", seed=9, c3=1e-6)
+    table = root / "broken" / "points.csv"
+    lines = table.read_text().splitlines()
+    lines[5] = lines[5].replace(",", ",oops,", 1)  # one cell too many on line 6
+    table.write_text("\n".join(lines) + "\n")
+    (root / "fleet.yaml").write_text("robots:\n" + "".join(
+        f"  - {{name: {n}, datasets: [{n}/dataset.yaml]}}\n"
+        for n in ("r0", "r1", "r2", "r3", "broken")))
+    return root
+
+
+@pytest.fixture(scope="module")
+def first_run(fleet_files):
+    """The fleet run once on its own local cluster of two worker processes."""
+    out = fleet_files / "out"
+    status = main(["fleet", str(fleet_files / "fleet.yaml"), "--out", str(out),
+                   "--workers", "2", "--no-report"])
+    return status, out, json.loads((out / "fleet.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """An existing cluster, as an operator would run one, for the --scheduler runs."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address="127.0.0.1:0") as local:
+        yield local.scheduler_address
+
+
+def test_fleet_calibrates_each_robot_and_fails_the_broken_one_alone(first_run, fleet_files,
+                                                                    capsys):
+    status, out, summary = first_run
+    assert status == 1  # a robot failed; the fleet file was fine
+    statuses = {r["name"]: r["status"] for r in summary["robots"]}
+    assert statuses == {"r0": "calibrated", "r1": "calibrated", "r2": "calibrated",
+                        "r3": "calibrated", "broken": "failed"}
+    [failure] = summary["failed"]
+    assert failure["robot"] == "broken"
+    assert "points.csv" in failure["error"] and "line 6" in failure["error"]
+    assert "\n" not in failure["error"]
+    assert not (out / "broken").exists()
+    for name in ("r0", "r1", "r2", "r3"):
+        assert {p.name for p in (out / name).iterdir()} >= {"result.json",
+                                                           "robot_calibrated.yaml",
+                                                           "fleet_robot.json"}
+    workers = {r["worker"] for r in summary["robots"] if r["status"] == "calibrated"}
+    assert all(str(os.getpid()) not in w.split(":")[-1] for w in workers)  # other processes
+
+
+def test_fleet_result_equals_a_single_calibrate_run(first_run, fleet_files):
+    _, out, _ = first_run
+    dataset = load_dataset(fleet_files / "r1" / "dataset.yaml")
+    direct = calibrate([dataset])
+    written = json.loads((out / "r1" / "result.json").read_text())
+    scale = {"length": dataset.units.length_scale, "angle": dataset.units.angle_scale}
+    for row, estimate in zip(written["parameters"], direct.parameters):
+        assert row["name"] == estimate.name
+        expected = estimate.estimate / scale.get(estimate.quantity, 1.0)
+        assert math.isclose(row["estimate"], expected, rel_tol=1e-9, abs_tol=1e-12)
+    assert math.isclose(written["fit"]["rms_final"],
+                        direct.fit.rms_final / dataset.units.length_scale, rel_tol=1e-9)
+
+
+def test_fleet_flags_the_robot_with_outlying_compliance(first_run):
+    _, out, summary = first_run
+    flagged = {r["robot"] for r in summary["standing_out"]}
+    assert flagged == {COMPLIANT}
+    reason = next(r for r in summary["standing_out"] if r["robot"] == COMPLIANT)
+    assert reason["quantity"] == "compliance.c3" and reason["score"] > LIMIT
+    compliance = next(q for q in summary["quantities"] if q["key"] == "compliance.c3")
+    assert compliance["values"][COMPLIANT]["value"] == pytest.approx(4e-6, rel=0.1)
+    page = (out / "fleet.html").read_text()
+    assert page.count("src='data:image/png;base64,") == len(summary["quantities"])
+    assert "http://" not in page and "https://" not in page  # self-contained
+    assert COMPLIANT in page and "broken" in page
+
+
+def test_rerun_skips_unchanged_robots_and_redoes_changed_ones(first_run, fleet_files, cluster,
+                                                             capsys):
+    _, out, _ = first_run
+    fleet = str(fleet_files / "fleet.yaml")
+    before = (out / "r0" / "result.json").stat().st_mtime_ns
+    # A changed table (one reading's last digit) makes r3 stale; the others are untouched.
+    table = fleet_files / "r3" / "points.csv"
+    lines = table.read_text().splitlines()
+    lines[-1] = lines[-1][:-1] + ("1" if lines[-1][-1] != "1" else "2")
+    table.write_text("\n".join(lines) + "\n")
+    status = main(["fleet", fleet, "--out", str(out), "--scheduler", cluster, "--no-report"])
+    assert status == 1
+    summary = json.loads((out / "fleet.json").read_text())
+    statuses = {r["name"]: r["status"] for r in summary["robots"]}
+    assert statuses == {"r0": "unchanged", "r1": "unchanged", "r2": "unchanged",
+                        "r3": "calibrated", "broken": "failed"}
+    assert (out / "r0" / "result.json").stat().st_mtime_ns == before
+    # A result made incomplete (its file removed) is computed again.
+    (out / "r1" / "robot_calibrated.yaml").unlink()
+    main(["fleet", fleet, "--out", str(out), "--scheduler", cluster, "--no-report"])
+    summary = json.loads((out / "fleet.json").read_text())
+    assert {r["name"]: r["status"] for r in summary["robots"]}["r1"] == "calibrated"
+    assert (out / "r1" / "robot_calibrated.yaml").is_file()
+    printed = capsys.readouterr()
+    assert "failed: broken:" in printed.out
+    assert "\r" not in printed.err  # progress stays quiet when not on a terminal
+
+
+def test_previous_run_flags_a_moved_joint_offset(first_run, fleet_files, cluster, tmp_path):
+    _, previous, _ = first_run
+    # r0 again from new data in which its joint 2 offset moved by 0.05 deg; r2 unchanged.
+    _simulate(tmp_path / "r0", seed=20, c3=1e-6, theta2_error=math.radians(0.05))
+    (tmp_path / "fleet.yaml").write_text(textwrap.dedent(f"""\
+        robots:
+          - name: r0
+            datasets: [r0/dataset.yaml]
+          - name: r2
+            datasets: ['{fleet_files / "r2" / "dataset.yaml"}']
+        """))
+    out = tmp_path / "out"
+    status = main(["fleet", str(tmp_path / "fleet.yaml"), "--out", str(out), "--scheduler",
+                   cluster, "--previous", str(previous), "--no-report", "--no-diagnose"])
+    assert status == 0
+    summary = json.loads((out / "fleet.json").read_text())
+    moved = [r for r in summary["standing_out"] if r["quantity"].startswith("offset_change")]
+    assert [(r["robot"], r["quantity"]) for r in moved] == [("r0", "offset_change.theta2")]
+    assert moved[0]["value"] == pytest.approx(0.05, abs=0.01)  # deg, the robot file's unit
+    assert any(q["key"] == "offset_change.theta2" for q in summary["quantities"])
+
+
+@pytest.mark.parametrize("content, where", [
+    ("robots: []\n", "robots"),
+    ("robot: []\n", "robot"),
+    ("robots:\n  - {name: a, datasets: [x.yaml], valdate: [y.yaml]}\n", "robots[0].valdate"),
+    ("robots:\n  - {name: a, datasets: [x.yaml]}\n  - {name: A, datasets: [y.yaml]}\n",
+     "robots[1].name"),
+    ("robots:\n  - {name: ../up, datasets: [x.yaml]}\n", "robots[0].name"),
+    ("robots:\n  - {name: a}\n", "robots[0].datasets"),
+    ("robots:\n  - {name: a, datasets: [x.yaml], validate: [x.yaml]}\n",
+     "robots[0].validate[0]"),
+])
+def test_bad_fleet_file_is_refused_before_anything_runs(tmp_path, capsys, content, where):
+    fleet = tmp_path / "fleet.yaml"
+    fleet.write_text(content)
+    status = main(["fleet", str(fleet), "--out", str(tmp_path / "out")])
+    error = capsys.readouterr().err
+    assert status == 2
+    assert error.count("\n") == 1 and f"fleet.yaml: {where}:" in error
+    assert not (tmp_path / "out").exists()
+
+
+def test_fleet_file_paths_are_relative_to_it(tmp_path):
+    (tmp_path / "f.yaml").write_text("robots:\n  - {name: a, datasets: sub/d.yaml}\n")
+    fleet = load_fleet(tmp_path / "f.yaml")
+    assert fleet.robots[0].datasets == (tmp_path / "sub" / "d.yaml",)
+    with pytest.raises(InputError, match="expected a list of dataset files"):
+        (tmp_path / "g.yaml").write_text("robots:\n  - {name: a, datasets: 3}\n")
+        load_fleet(tmp_path / "g.yaml")
+
+
+def test_robust_rule_against_closed_form():
+    # Median 1.0; absolute deviations 0, 0.1, 0.1, 0.2, 0.2 and the outlier's: MAD 0.1.
+    values = {"a": 1.0, "b": 1.1, "c": 0.9, "d": 1.2, "e": 0.8, "f": 3.0}
+    fleet = spread(list(values.values()))
+    assert fleet.median == pytest.approx(1.05)
+    deviations = sorted(abs(v - 1.05) for v in values.values())
+    assert fleet.robust_sd == pytest.approx(1.4826 * np.median(deviations))
+    _, found = high_outliers("x", {k: (v, None) for k, v in values.items()})
+    assert [f.robot for f in found] == ["f"]
+    expected = (3.0 - 1.05) / math.hypot(fleet.robust_sd, 0.01 * 1.05)
+    assert found[0].score == pytest.approx(expected)
+    # The robot's own standard error widens the scale: a noisy estimate is not an outlier.
+    _, found = high_outliers("x", {**{k: (v, None) for k, v in values.items()}, "f": (3.0, 1.0)})
+    assert found == []
+    # Far below the fleet is no fault.
+    _, found = high_outliers("x", {**{k: (v, None) for k, v in values.items()}, "f": (-5.0, None)})
+    assert found == []
+    move = Move("r", 2, "theta2", "angle", before=0.0, before_std=3e-6, now=1e-4, now_std=4e-6)
+    assert move.score == pytest.approx(20.0) and move.moved
+
+
+WRAPPER = """#!/bin/sh
+# Logs the start and end of each compilation and widens the window between them.
+echo "start $$ $(date +%s.%N)" >> "{log}"
+sleep 1
+"{cc}" "$@"
+status=$?
+echo "end $$ $(date +%s.%N)" >> "{log}"
+exit $status
+"""
+
+COMPILE_ONE = """
+import casadi as ca, numpy as np
+from robocal_casadi import codegen
+x = ca.SX.sym("x", 3)
+f = ca.Function("fleet_lock_probe", [x], [ca.sin(x) * 7.25 + ca.dot(x, x)])
+g = codegen.compiled(f)
+assert g.is_a("External"), "not compiled"
+print(float(g(np.array([0.1, 0.2, 0.3]))[0]))
+"""
+
+
+@pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
+def test_concurrent_processes_compile_one_library_once(tmp_path):
+    log = tmp_path / "compilations.log"
+    wrapper = tmp_path / "cc"
+    wrapper.write_text(WRAPPER.format(log=log, cc=codegen.compiler()))
+    wrapper.chmod(0o755)
+    env = {**os.environ, "ROBOCAL_CACHE": str(tmp_path / "cache"), "CC": str(wrapper),
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                          os.environ.get("PYTHONPATH", "")])}
+    processes = [subprocess.Popen([sys.executable, "-c", COMPILE_ONE], env=env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 for _ in range(4)]
+    outputs = [p.communicate(timeout=300) for p in processes]
+    assert all(p.returncode == 0 for p in processes), [err for _, err in outputs]
+    values = {out.strip() for out, _ in outputs}
+    assert len(values) == 1  # every process evaluates the same compiled library
+    events = log.read_text().split()
+    assert events.count("start") == 1 and events.count("end") == 1  # compiled once only
+    assert len(list((tmp_path / "cache").glob("*.so"))) == 1
