@@ -36,9 +36,9 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from planning.candidates import generate  # noqa: E402
 from planning.collision import Body  # noqa: E402
-from planning.ranges import working_ranges  # noqa: E402
 from planning.design import design_plan  # noqa: E402
 from planning.planned import engine_identifiability, planned_dataset  # noqa: E402
+from planning.ranges import working_ranges  # noqa: E402
 from planning.reach import Workspace  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402

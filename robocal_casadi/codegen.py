@@ -43,8 +43,8 @@ import subprocess
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import casadi as ca
 import numpy as np

@@ -28,6 +28,7 @@ from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import model_for
 from ..results import (
+    DOMINATED_SHARE,
     CalibrationResult,
     DatasetResiduals,
     EffectFinding,
@@ -42,7 +43,6 @@ from . import diagnosis, unexplained
 from .degeneracy import check_dataset, check_finite
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
 from .prior import (
-    DOMINATED_SHARE,
     SIGMA_ITERATIONS,
     SIGMA_SETTLED,
     Posterior,

@@ -30,8 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..results import DOMINATED_SHARE
-
 DEGREE = math.pi / 180.0
 DEFAULT_TOLERANCE = {
     "dh_length": 1e-3,           # [m] d, a of a joint
