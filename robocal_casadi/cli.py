@@ -14,7 +14,8 @@ import sys
 
 from .errors import RobocalError
 
-VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "demo", "fleet")
+VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
+         "fleet")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -53,7 +53,8 @@ KINDS = ("cross_bar", "artifact_touches", "sphere_laser", "tracker_points")
 BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
-COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report")
+COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
+               "base_link", "tip_link")
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
 BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),
@@ -256,7 +257,11 @@ def referenced_robot(content: dict, path: Path, robot: Robot | None = None
             raise InputError(f"robot file {robot_path} is a folder", file=path, where="robot")
         if not robot_path.is_file() and not robot_path.is_symlink():  # a loop: named below
             raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
-        robot = load_robot(robot_path)
+        links = {}
+        for key in ("base_link", "tip_link"):  # the chain of a URDF robot
+            if content.get(key) is not None:
+                links[key] = file_name(content[key], file=path, where=key)
+        robot = load_robot(robot_path, **links)
     return robot_path, robot
 
 
@@ -606,14 +611,7 @@ def _reach(robot: Robot) -> float:
     """An upper bound [m] on how far the flange can be from the first joint's frame:
     the sum over links of sqrt(a^2 + d^2), a prismatic joint at its farthest reading,
     plus the tool offset."""
-    total = float(np.linalg.norm(robot.tool.xyz))
-    for joint in robot.joints:
-        d = joint.d
-        if not joint.revolute:
-            lo, hi = joint.limits if joint.limits else (-MAX_LENGTH, MAX_LENGTH)
-            d = max(abs(d + lo), abs(d + hi))
-        total += float(np.hypot(joint.a, d))
-    return total
+    return robot.reach()
 
 
 def _check_spread(points: np.ndarray, robot: Robot, target: np.ndarray, table: Table,

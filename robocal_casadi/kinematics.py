@@ -1,4 +1,4 @@
-"""Forward kinematics of a DH robot, built once as CasADi functions.
+"""Forward kinematics of a DH or URDF robot, built once as CasADi functions.
 
 All functions take the joint readings ``q`` [rad or m] and the full geometric
 parameter vector ``p`` (``ParameterRegistry`` order, SI) as inputs, so the same
@@ -40,19 +40,60 @@ def dh_transform(convention: str, revolute: bool, reading, theta, d, a, alpha, b
     return rot_x(alpha) @ translation(a, 0, 0) @ rot_z(theta) @ translation(0, 0, d) @ rot_y(beta)
 
 
+def axis_motion(revolute: bool, axis, reading):
+    """The joint's motion: rotation by ``reading`` [rad] about the unit ``axis``
+    (Rodrigues), or translation by ``reading`` [m] along it; 4x4, floats or CasADi."""
+    ax, ay, az = (float(v) for v in axis)
+    if not revolute:
+        return translation(ax * reading, ay * reading, az * reading)
+    lib = ca if isinstance(reading, (ca.SX, ca.MX, ca.DM)) else np
+    c, s = lib.cos(reading), lib.sin(reading)
+    v = 1 - c
+    rows = [[c + ax * ax * v, ax * ay * v - az * s, ax * az * v + ay * s, 0],
+            [ay * ax * v + az * s, c + ay * ay * v, ay * az * v - ax * s, 0],
+            [az * ax * v - ay * s, az * ay * v + ax * s, c + az * az * v, 0],
+            [0, 0, 0, 1]]
+    if lib is np:
+        return np.array(rows, dtype=float)
+    return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+
+
+def urdf_transform(revolute: bool, axis, reading, xyz, rpy):
+    """One URDF link transform ``T(i-1,i) = Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)
+    Motion(axis, reading)`` (lengths [m], angles [rad]); floats or CasADi symbols."""
+    return pose_from_xyz_rpy(xyz, rpy) @ axis_motion(revolute, axis, reading)
+
+
+def _fixed(registry: ParameterRegistry, p, frame: str):
+    return pose_from_xyz_rpy([p[registry.index(f"{frame}_{k}")] for k in "xyz"],
+                             [p[registry.index(f"{frame}_r{k}")] for k in "xyz"])
+
+
 def symbolic_frames(robot: Robot, registry: ParameterRegistry, q, p) -> list:
-    """World frames ``[T_world_0, ..., T_world_n, T_world_tool]`` as CasADi expressions."""
-    base = pose_from_xyz_rpy([p[registry.index(f"base_{k}")] for k in "xyz"],
-                             [p[registry.index(f"base_r{k}")] for k in "xyz"])
+    """World frames ``[T_world_0, ..., T_world_n, T_world_tool]`` as CasADi expressions.
+
+    For a ``urdf`` robot frame i is the link joint i moves and frame n the tip link
+    (the last moving link then ``flange``).
+    """
+    base = _fixed(registry, p, "base")
     frames = [base]
     T = base
     for i, joint in enumerate(robot.joints, start=1):
-        link = dh_transform(
-            robot.convention, joint.revolute, q[i - 1],
-            *(p[registry.index(f"{stem}{i}")] for stem in ("theta", "d", "a", "alpha", "beta")),
-        )
+        if robot.convention == "urdf":
+            link = urdf_transform(
+                joint.revolute, joint.axis, q[i - 1],
+                [p[registry.index(f"{stem}{i}")] for stem in ("x", "y", "z")],
+                [p[registry.index(f"{stem}{i}")] for stem in ("roll", "pitch", "yaw")])
+        else:
+            link = dh_transform(
+                robot.convention, joint.revolute, q[i - 1],
+                *(p[registry.index(f"{stem}{i}")] for stem in ("theta", "d", "a", "alpha", "beta")),
+            )
         T = T @ link
         frames.append(T)
+    if robot.convention == "urdf":
+        T = T @ _fixed(registry, p, "flange")
+        frames[-1] = T
     tool = pose_from_xyz_rpy([p[registry.index(f"tool_{k}")] for k in "xyz"],
                              [p[registry.index(f"tool_r{k}")] for k in "xyz"])
     frames.append(T @ tool)
@@ -214,6 +255,12 @@ def nominal_pose(robot: Robot, q: np.ndarray) -> np.ndarray:
     """Tool pose of ``robot`` at ``q`` from plain numpy (for quick checks and tests)."""
     T = robot.base.matrix()
     for joint, reading in zip(robot.joints, q):
-        T = T @ dh_transform(robot.convention, joint.revolute, float(reading), joint.theta,
-                             joint.d, joint.a, joint.alpha, joint.beta)
+        if robot.convention == "urdf":
+            T = T @ urdf_transform(joint.revolute, joint.axis, float(reading),
+                                   joint.origin.xyz, joint.origin.rpy)
+        else:
+            T = T @ dh_transform(robot.convention, joint.revolute, float(reading), joint.theta,
+                                 joint.d, joint.a, joint.alpha, joint.beta)
+    if robot.convention == "urdf":
+        T = T @ robot.flange.matrix()
     return T @ robot.tool.matrix()

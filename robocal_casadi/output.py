@@ -14,6 +14,7 @@ folder is refused unless the caller forces it (see ``commands.arguments``).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import re
 import shutil
@@ -132,3 +133,14 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     if staging.exists():
         os.chmod(staging, 0o666 & ~_umask())
     os.replace(staging, target)
+
+
+def json_safe(value):
+    """A JSON-safe copy of ``value``: NaN and infinities become null (JSON has neither)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value

@@ -25,6 +25,8 @@ if TYPE_CHECKING:  # the robot builds its registry from this module: names only,
 
 JOINT_PARAMETERS = (("theta", "angle"), ("d", "length"), ("a", "length"), ("alpha", "angle"),
                     ("beta", "angle"))
+URDF_PARAMETERS = (("x", "length"), ("y", "length"), ("z", "length"), ("roll", "angle"),
+                   ("pitch", "angle"), ("yaw", "angle"))
 FRAME_PARAMETERS = (("x", "length"), ("y", "length"), ("z", "length"), ("rx", "angle"),
                     ("ry", "angle"), ("rz", "angle"))
 
@@ -77,14 +79,15 @@ class ParameterRegistry:
 
     @staticmethod
     def for_robot(robot: Robot) -> "ParameterRegistry":
-        """The geometric parameters of ``robot``: joints, then base, then tool."""
+        """The geometric parameters of ``robot``: joints, then base, then tool (then the
+        flange of a ``urdf`` robot)."""
         names: list[str] = []
         quantities: list[str] = []
         for i in range(1, robot.dof + 1):
-            for stem, quantity in JOINT_PARAMETERS:
+            for stem, quantity in joint_parameters(robot):
                 names.append(f"{stem}{i}")
                 quantities.append(quantity)
-        for frame in ("base", "tool"):
+        for frame in frames_of(robot):
             for stem, quantity in FRAME_PARAMETERS:
                 names.append(f"{frame}_{stem}")
                 quantities.append(quantity)
@@ -94,9 +97,14 @@ class ParameterRegistry:
         """The robot's geometry as a vector in this registry's order [SI]."""
         values = np.zeros(len(self))
         for i, joint in enumerate(robot.joints, start=1):
+            if robot.convention == "urdf":
+                for k, (stem, _) in enumerate(URDF_PARAMETERS):
+                    source = joint.origin.xyz if k < 3 else joint.origin.rpy
+                    values[self.index(f"{stem}{i}")] = source[k % 3]
+                continue
             for stem, _ in JOINT_PARAMETERS:
                 values[self.index(f"{stem}{i}")] = getattr(joint, stem)
-        for frame_name in ("base", "tool"):
+        for frame_name in frames_of(robot):
             frame: Frame = getattr(robot, frame_name)
             for k, (stem, _) in enumerate(FRAME_PARAMETERS):
                 source = frame.xyz if k < 3 else frame.rpy
@@ -107,11 +115,42 @@ class ParameterRegistry:
         """A copy of ``robot`` with its geometry replaced by ``values`` [SI]."""
         joints = []
         for i, joint in enumerate(robot.joints, start=1):
+            if robot.convention == "urdf":
+                v = [float(values[self.index(f"{stem}{i}")]) for stem, _ in URDF_PARAMETERS]
+                joints.append(replace(joint, origin=replace(joint.origin, xyz=tuple(v[:3]),
+                                                            rpy=tuple(v[3:]))))
+                continue
             changes = {stem: float(values[self.index(f"{stem}{i}")]) for stem, _ in JOINT_PARAMETERS}
             joints.append(replace(joint, **changes))
         frames = {}
-        for frame_name in ("base", "tool"):
+        for frame_name in frames_of(robot):
             v = [float(values[self.index(f"{frame_name}_{stem}")]) for stem, _ in FRAME_PARAMETERS]
             frames[frame_name] = replace(getattr(robot, frame_name), xyz=tuple(v[:3]),
                                          rpy=tuple(v[3:]))
         return replace(robot, joints=tuple(joints), **frames)
+
+
+def joint_parameters(robot: Robot) -> tuple[tuple[str, str], ...]:
+    """``(stem, quantity)`` of each joint's geometric parameters in ``robot``'s convention."""
+    return URDF_PARAMETERS if robot.convention == "urdf" else JOINT_PARAMETERS
+
+
+def frames_of(robot: Robot) -> tuple[str, ...]:
+    """The fixed frames whose placements are parameters: base and tool, and the flange of
+    a ``urdf`` robot."""
+    return ("base", "tool", "flange") if robot.convention == "urdf" else ("base", "tool")
+
+
+def perturbed_stems(robot: Robot, joint) -> tuple[str, ...]:
+    """The stems a random geometric error perturbs on ``joint``: ``theta, d, a, alpha``
+    (and ``beta`` where the file gives one) in DH, the six origin numbers in URDF."""
+    if robot.convention == "urdf":
+        return tuple(stem for stem, _ in URDF_PARAMETERS)
+    return ("theta", "d", "a", "alpha") + (("beta",) if joint.has_beta else ())
+
+
+def length_names(robot: Robot) -> list[str]:
+    """The names of the link lengths [m] of ``robot`` (``d{i}, a{i}`` in DH; ``x{i}, y{i},
+    z{i}`` in URDF): what a uniform thermal expansion scales."""
+    stems = ("x", "y", "z") if robot.convention == "urdf" else ("d", "a")
+    return [f"{stem}{i}" for i in range(1, robot.dof + 1) for stem in stems]

@@ -15,6 +15,11 @@ i-1's frame (``base A_1`` in the world for joint 1), and operational frames mark
 frames: ``frame_0`` (the base, joint-1 frame), ``frame_i = joint_i B_i``, ``flange``
 (= ``frame_n``) and ``tool`` (``flange`` then ``tool``).
 
+A ``urdf`` robot's joint ``T(i-1,i) = origin_i Motion(axis_i, q_i)`` splits the same way
+with ``A_i = origin_i R_i`` and ``B_i = R_i^T`` (``flange`` appended for the last joint),
+where ``R_i`` is a rotation taking z onto ``axis_i``; ``frame_i`` is then URDF link i and
+``frame_n`` the tip link.
+
 Link ``i``'s mass sits at its ``com`` given in ``frame_i`` (point masses: gravity needs
 no rotational inertia). ``model.gravity`` is the robot's ``gravity`` in the world frame.
 Everything is SI: [m], [rad], [kg], [N m].
@@ -38,6 +43,13 @@ LIMITLESS = 1.0e3  # [rad] or [m]: URDF limits written for a joint the robot fil
 def link_parts(robot: Robot) -> list[tuple[np.ndarray, np.ndarray]]:
     """``(A_i, B_i)`` per joint (4x4, [m]) with ``T(i-1,i) = A_i Jz(q_i) B_i``."""
     parts = []
+    if robot.convention == "urdf":
+        for i, joint in enumerate(robot.joints, start=1):
+            R = np.eye(4)
+            R[:3, :3] = z_onto(joint.axis)
+            B = R.T @ (robot.flange.matrix() if i == robot.dof else np.eye(4))
+            parts.append((joint.origin.matrix() @ R, B))
+        return parts
     for joint in robot.joints:
         if robot.convention == "dh":
             A = np.eye(4)
@@ -48,6 +60,17 @@ def link_parts(robot: Robot) -> list[tuple[np.ndarray, np.ndarray]]:
             B = rot_z(joint.theta) @ translation(0, 0, joint.d) @ rot_y(joint.beta)
         parts.append((A, B))
     return parts
+
+
+def z_onto(axis) -> np.ndarray:
+    """A rotation (3x3) that takes the z axis onto the unit vector ``axis``."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    v = np.cross([0.0, 0.0, 1.0], a)
+    c = float(a[2])
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1 + c)
 
 
 def _se3(T: np.ndarray) -> pin.SE3:

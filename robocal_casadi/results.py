@@ -265,6 +265,8 @@ class CalibrationResult:
     prior: PriorSummary | None = None
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
+    profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
+    delivered: Any = None  # ``effect_model.geometry_only``: RMS [m] each output delivers
 
     @classmethod
     def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
@@ -396,6 +398,10 @@ class CalibrationResult:
                               self.unexplained.to_json(units.length_scale, units.length))
         if self.selection:
             out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
+        if self.profile is not None:
+            out["profile"] = self.profile.to_json(units, self.fit, self.validation)
+        if self.delivered is not None:
+            out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
         return out
 
     def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
@@ -425,3 +431,18 @@ class CalibrationResult:
         if self.unexplained is not None:
             lines.append("  unexplained: " + self.unexplained.sentence(s, u.length))
         return "\n".join(lines)
+
+
+def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
+    """``delivered`` in the robot file's length unit, with what each output applies."""
+    def scaled(block):
+        return {role: value / length_scale for role, value in block.items()} | {"unit": unit}
+
+    out = {"robot_calibrated.yaml": {"applies": "the calibrated geometry only (robocal fk, "
+                                                "robocal compensate, a controller's DH table)",
+                                     **scaled(delivered["robot_calibrated.yaml"])}}
+    if delivered.get("with_effects"):
+        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified effects "
+                                        "(robocal fk and robocal compensate --with-effects)",
+                             **scaled(delivered["with_effects"])}
+    return out

@@ -6,6 +6,16 @@ of the file it came from, so ``save_robot`` writes it back in those units.
 The file format is docs/formats.md#robot-file; the conventions (which DH row a joint's
 entry holds, how readings enter, the ``com`` frame) are docs/conventions.md. In one line:
 ``world_T_tool = base * T(0,1) ... T(n-1,n) * tool`` (docs/conventions.md#pose-chain).
+
+A third convention, ``urdf``, holds a serial chain read from a URDF file
+(``robocal_casadi.urdf``): joint i is its fixed placement ``origin_i = Trans(xyz_i)
+Rz(yaw_i) Ry(pitch_i) Rx(roll_i)`` in the previous link's frame, followed by the motion
+about (revolute) or along (prismatic) its unit ``axis`` by the reading q_i::
+
+    T(i-1,i) = origin_i Motion(axis_i, q_i),   T_world_flange = base T(0,1) ... T(n-1,n) flange
+
+where ``flange`` is the fixed placement of the chain's tip link in the last moving
+link's frame (identity for DH robots).
 """
 
 from __future__ import annotations
@@ -19,14 +29,14 @@ import numpy as np
 import yaml
 
 from .errors import InputError
-from .fields import (check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
+from .fields import (MAX_LENGTH, check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
                      vector)
 from .parameters import ParameterRegistry
 from .transforms import pose_from_xyz_rpy
 from .units import SI, Units, units_of
 
 JOINT_TYPES = ("revolute", "prismatic")
-CONVENTIONS = ("dh", "mdh")
+CONVENTIONS = ("dh", "mdh", "urdf")
 JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com", "tolerance"}
 ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity", "tolerance")
 JOINT_TOLERANCE_KEYS = {"theta": "angle", "d": "length", "a": "length", "alpha": "angle",
@@ -37,6 +47,8 @@ TOLERANCE_KEYS = {"length": ("dh_length", "length"), "angle": ("dh_angle", "angl
                   "tool_xyz": ("tool_xyz", "length"), "tool_rpy": ("tool_rpy", "angle"),
                   "instrument": ("instrument_length", "length"),
                   "direction": ("instrument_direction", "angle")}
+URDF_JOINT_KEYS = {"name", "child", "type", "xyz", "rpy", "axis", "limits", "mass", "com"}
+URDF_ROBOT_KEYS = ROBOT_KEYS + ("flange", "urdf")
 MAX_MASS = 1e5  # kg, a link heavier than this is a typo
 MAX_GRAVITY = 1e3  # m/s^2
 MAX_NAME = 200  # characters of a robot's name
@@ -79,12 +91,52 @@ class Frame:
 
 
 @dataclass(frozen=True)
+class UrdfJoint:
+    """One moving joint of a URDF chain, SI: ``T(i-1,i) = origin Motion(axis, q)``.
+
+    ``origin`` [m, rad] places the joint in the frame of the previous moving link (the
+    base link for joint 1), with any fixed joints in between already composed into it;
+    ``axis`` is a unit vector in the joint's own frame. ``name`` is the URDF joint's name
+    and ``child`` the link it moves. ``mass`` [kg] and ``com`` [m] lump that link and the
+    links fixed to it, in its frame (the tip link's frame for the last joint).
+    """
+
+    type: str
+    origin: Frame
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    limits: tuple[float, float] | None = None  # [rad] or [m] for prismatic joints
+    mass: float | None = None
+    com: tuple[float, float, float] | None = None  # [m], in the link's own frame
+    name: str = ""
+    child: str = ""
+    has_beta: bool = False  # a URDF joint has no Hayati beta
+
+    @property
+    def revolute(self) -> bool:
+        return self.type == "revolute"
+
+
+@dataclass(frozen=True)
+class UrdfSource:
+    """Where a ``urdf`` robot came from: the file (absolute path) and the chain's ends."""
+
+    file: str
+    base_link: str
+    tip_link: str
+
+
+@dataclass(frozen=True)
 class Robot:
-    """A serial robot in DH form, everything SI. ``units`` are the source file's units."""
+    """A serial robot, everything SI. ``units`` are the source file's units.
+
+    ``convention`` ``dh`` or ``mdh``: ``joints`` are ``Joint`` rows of a DH table;
+    ``urdf``: ``UrdfJoint`` placements, ``flange`` the tip link in the last moving link's
+    frame and ``urdf`` the file they were read from.
+    """
 
     name: str
     convention: str
-    joints: tuple[Joint, ...]
+    joints: tuple
     base: Frame = field(default_factory=Frame)
     tool: Frame = field(default_factory=Frame)
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -95,6 +147,8 @@ class Robot:
     # Prior tolerances [SI] by parameter name (``theta2``) or kind (``dh_length``), as the
     # file gave them; see ``prior``.
     tolerance: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
+    flange: Frame = field(default_factory=Frame)
+    urdf: UrdfSource | None = field(default=None, compare=False)  # where, not what
 
     @property
     def dof(self) -> int:
@@ -114,6 +168,23 @@ class Robot:
     def has_inertia(self) -> bool:
         """True when every joint carries ``mass`` and ``com``."""
         return all(j.mass is not None and j.com is not None for j in self.joints)
+
+    def reach(self) -> float:
+        """An upper bound [m] on how far the flange can be from the joint-1 frame: the sum
+        over links of their length (``sqrt(a^2 + d^2)`` in DH, ``|xyz|`` in URDF), a
+        prismatic joint at its farthest reading, plus the flange and tool offsets."""
+        total = float(np.linalg.norm(self.tool.xyz)) + float(np.linalg.norm(self.flange.xyz))
+        for joint in self.joints:
+            travel = 0.0
+            if not joint.revolute:
+                lo, hi = joint.limits if joint.limits else (-MAX_LENGTH, MAX_LENGTH)
+                travel = max(abs(lo), abs(hi))
+            if isinstance(joint, UrdfJoint):
+                total += float(np.linalg.norm(joint.origin.xyz)) + travel
+            else:
+                d = joint.d if joint.revolute else max(abs(joint.d + lo), abs(joint.d + hi))
+                total += float(np.hypot(joint.a, d))
+        return total
 
     def reading_scales(self) -> np.ndarray:
         """SI per file unit of each joint reading (angle unit for revolute, length for prismatic)."""
@@ -140,9 +211,20 @@ class Robot:
 # ----------------------------------------------------------------------------- reading
 
 
-def load_robot(path: str | Path) -> Robot:
-    """Read a robot file (docs/formats.md#robot-file); errors name the file and the key."""
+def load_robot(path: str | Path, *, base_link: str | None = None,
+               tip_link: str | None = None) -> Robot:
+    """Read a robot file (docs/formats.md#robot-file) or a URDF file (``.urdf``, or text
+    that starts with ``<``); errors name the file and the key. ``base_link`` and
+    ``tip_link`` choose a URDF's chain (default: its root to its single leaf)."""
     path = Path(path)
+    from .urdf.description import is_urdf, read_description
+
+    if is_urdf(path):
+        return robot_from_dict(read_description(path, base_link=base_link, tip_link=tip_link),
+                               file=path)
+    if base_link is not None or tip_link is not None:
+        raise InputError("base_link and tip_link choose the chain of a URDF robot; this "
+                         "robot file is not URDF", file=path)
     content = load_yaml(path, what="robot file")
     return robot_from_dict(content, file=path)
 
@@ -155,6 +237,8 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     key written with no value (``tool:``) counts as absent. A joint's ``mass`` and ``com``
     go together.
     """
+    if content.get("convention") == "urdf":
+        return _urdf_robot_from_dict(content, file=file)
     check_keys(content, ROBOT_KEYS, file=file, expected="a robot file")
     convention = require(content, "convention", file=file)
     if not isinstance(convention, str) or convention not in CONVENTIONS:
@@ -324,6 +408,53 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
     )
 
 
+def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
+    """A robot file in the ``urdf`` convention (what ``robot_to_dict`` writes for a robot
+    read from a URDF file): joints ``{name, child, type, xyz, rpy, axis, limits, mass,
+    com}``, ``flange: {xyz, rpy}`` and ``urdf: {file, base_link, tip_link}``."""
+    check_keys(content, URDF_ROBOT_KEYS, file=file, expected="a robot file")
+    units = units_of(content, file=file)
+    raw_joints = require(content, "joints", file=file)
+    if not isinstance(raw_joints, list) or not raw_joints:
+        raise InputError(f"expected a non-empty list of joints, got {cut(raw_joints)}",
+                         file=file, where="joints")
+    joints = []
+    for i, raw in enumerate(raw_joints):
+        where = f"joints[{i}] (joint {i + 1})"
+        mapping(raw, file=file, where=where, hint="{type, xyz, rpy, axis, ...}")
+        unknown = set(raw) - URDF_JOINT_KEYS
+        if unknown:
+            raise InputError(f"unknown key(s) {sorted(map(str, unknown))}; allowed: "
+                             f"{sorted(URDF_JOINT_KEYS)}", file=file, where=where)
+        dh_like = _joint_from_dict(
+            {"type": raw.get("type", "revolute"), "theta": 0, "d": 0, "a": 0, "alpha": 0,
+             **{k: raw[k] for k in ("limits", "mass", "com") if k in raw}},
+            units, file=file, where=where)
+        origin = _frame_from_dict({k: raw[k] for k in ("xyz", "rpy") if k in raw}, units,
+                                  file=file, where=where)
+        axis = np.array(vector(raw.get("axis", [0, 0, 1]), 3, file=file, where=f"{where}.axis"))
+        if not np.linalg.norm(axis) > 1e-9:
+            raise InputError("the axis has no direction", file=file, where=f"{where}.axis")
+        joints.append(UrdfJoint(
+            type=dh_like.type, origin=origin,
+            axis=tuple(float(v) for v in axis / np.linalg.norm(axis)),  # type: ignore[arg-type]
+            limits=dh_like.limits, mass=dh_like.mass, com=dh_like.com,
+            name=str(raw.get("name", f"joint_{i + 1}")), child=str(raw.get("child", ""))))
+    source = None
+    if content.get("urdf") is not None:
+        block = mapping(content["urdf"], file=file, where="urdf",
+                        hint="{file, base_link, tip_link}")
+        check_keys(block, ("file", "base_link", "tip_link"), file=file, where="urdf")
+        source = UrdfSource(*(str(require(block, k, file=file, where="urdf"))
+                              for k in ("file", "base_link", "tip_link")))
+    plain = {k: v for k, v in content.items() if k not in ("joints", "flange", "urdf")}
+    plain.update(convention="dh", joints=[{"theta": 0, "d": 0, "a": 0, "alpha": 0}])
+    shell = robot_from_dict(plain, file=file)
+    return replace(shell, convention="urdf", joints=tuple(joints), urdf=source,
+                   flange=_frame_from_dict(content.get("flange"), units, file=file,
+                                           where="flange"))
+
+
 def _within_a_turn(value: float, units: Units, *, file, where: str) -> None:
     """Refuse a fixed angle [rad] beyond a full turn in a file that declares rad."""
     if units.angle == "rad" and abs(value) > FULL_TURN + 1e-9:
@@ -372,6 +503,8 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
     """The robot file mapping in ``units`` (default: the robot's own file units)."""
     units = units or robot.units
     L, A = units.length_scale, units.angle_scale
+    if robot.convention == "urdf":
+        return _urdf_robot_to_dict(robot, units)
     joints = []
     for i, joint in enumerate(robot.joints, start=1):
         entry: dict[str, Any] = {"type": joint.type}
@@ -415,6 +548,41 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
             block[key] = to_file_units(robot.tolerance[name], units.scale(kind))
     if block:
         content["tolerance"] = block
+    return content
+
+
+def _frame_to_dict(frame: Frame, units: Units) -> dict:
+    return {"xyz": [to_file_units(v, units.length_scale) for v in frame.xyz],
+            "rpy": [to_file_units(v, units.angle_scale) for v in frame.rpy]}
+
+
+def _urdf_robot_to_dict(robot: Robot, units: Units) -> dict:
+    """The ``urdf``-convention robot file mapping (see ``_urdf_robot_from_dict``)."""
+    L, A = units.length_scale, units.angle_scale
+    joints = []
+    for joint in robot.joints:
+        entry: dict[str, Any] = {"name": joint.name, "child": joint.child, "type": joint.type,
+                                 **_frame_to_dict(joint.origin, units),
+                                 "axis": [float(v) for v in joint.axis]}
+        if joint.limits is not None:
+            scale = A if joint.revolute else L
+            entry["limits"] = [to_file_units(limit, scale) for limit in joint.limits]
+        if joint.mass is not None:
+            entry["mass"] = joint.mass
+            entry["com"] = [to_file_units(c, L) for c in joint.com]
+        joints.append(entry)
+    content: dict[str, Any] = {"name": robot.name, "convention": "urdf",
+                               "units": units.as_dict(), "joints": joints,
+                               "flange": _frame_to_dict(robot.flange, units)}
+    if robot.urdf is not None:
+        content["urdf"] = {"file": robot.urdf.file, "base_link": robot.urdf.base_link,
+                           "tip_link": robot.urdf.tip_link}
+    for key, frame, present in (("base", robot.base, robot.has_base),
+                                ("tool", robot.tool, robot.has_tool)):
+        if present or any(frame.xyz) or any(frame.rpy):
+            content[key] = _frame_to_dict(frame, units)
+    if robot.has_gravity or tuple(robot.gravity) != (0.0, 0.0, -9.81):
+        content["gravity"] = list(robot.gravity)
     return content
 
 

@@ -63,6 +63,7 @@ from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .output import atomic_directory, written_by_robocal
 from .progress import Progress
+from .parameters import perturbed_stems
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
 from .transforms import (
@@ -213,8 +214,7 @@ def true_parameters(robot: Robot, geometric_errors, rng: np.random.Generator
             raise InputError("standard deviations must not be negative",
                              where="geometric_errors")
         for i, joint in enumerate(robot.joints, start=1):
-            stems = ["theta", "d", "a", "alpha"] + (["beta"] if joint.has_beta else [])
-            for stem in stems:
+            for stem in perturbed_stems(robot, joint):
                 std = length_std if registry.quantity(f"{stem}{i}") == "length" else angle_std
                 errors[registry.index(f"{stem}{i}")] = rng.normal(0.0, std)
     named = {n: float(e) for n, e in zip(registry.names, errors) if e != 0.0}

@@ -176,11 +176,11 @@ def test_fk_with_calibrated_robot(tmp_path):
     check_poses(out, calibrated, Q, 1e-9)
 
 
-def test_help_says_effects_are_not_applied(capsys):
+def test_help_says_effects_are_applied_only_when_asked(capsys):
     with pytest.raises(SystemExit):
         main(["fk", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "robot_calibrated.yaml" in text and "are NOT applied" in text
+    assert "robot_calibrated.yaml" in text and "geometry is used unless --with-effects" in text
 
 
 def bad_case(tmp_path: Path, case: str) -> tuple[list[str], str]:

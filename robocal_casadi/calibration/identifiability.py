@@ -51,7 +51,7 @@ def preference(name: str) -> tuple:
         return (0, 0, 0, name)
     if name.startswith("base_"):
         return (3, 0, 0, name)
-    if name.startswith("tool_"):
+    if name.startswith(("tool_", "flange_")):
         return (2, 0, 0, name)
     stem = name.rstrip("0123456789")
     joint = int(name[len(stem):]) if name[len(stem):] else 0
@@ -59,10 +59,13 @@ def preference(name: str) -> tuple:
         return (4, joint, 0, name)
     if stem in DH_STEMS:
         return (1, joint, DH_STEMS.index(stem), name)
+    if stem in URDF_STEMS:
+        return (1, joint, URDF_STEMS.index(stem), name)
     return (5, 0, 0, name)
 
 
 DH_STEMS = ("theta", "d", "a", "alpha")
+URDF_STEMS = ("x", "y", "z", "roll", "pitch", "yaw")  # a URDF joint origin
 
 
 def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],

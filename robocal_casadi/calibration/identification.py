@@ -224,6 +224,7 @@ class NominalFit:
     solution: Solution
     identifiability: Identifiability
     selection: Selection | None
+    candidates: tuple[str, ...] | None = None  # the unknowns that may be fitted (None: all)
 
 
 @dataclass(frozen=True)
@@ -265,7 +266,8 @@ class Validation:
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False, rule: Rule = "prior") -> CalibrationResult:
+              progress: bool = False, rule: Rule = "prior",
+              parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
@@ -289,7 +291,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
     closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
-    a number >= 0, ``rule`` one of ``RULES``.
+    a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
+    restricts the robot parameters that may be fitted, e.g. to a controller's set
+    (``profiles``); the others are held at nominal. Default: all of them.
     """
     method = choice(method, METHODS, "method")
     rule = choice(rule, RULES, "rule")
@@ -307,7 +311,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         check_dataset(dataset)
     robot = datasets[0].robot
 
-    nominal = _nominal_fit(robot, datasets, effects, select_growth, method=method, loss=loss)
+    nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
+                           loss=loss)
     problem = nominal.problem
     identifiability, least_squares = _geometric_fit(nominal, method=method, loss=loss,
                                                     max_iterations=max_iterations)
@@ -350,12 +355,20 @@ def _check_effects(effects: Sequence) -> None:
 
 
 def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Effect],
-                 select_growth: float | None, *, method: Method, loss: Loss) -> NominalFit:
+                 select_growth: float | None, parameters: Sequence[str] | None, *,
+                 method: Method, loss: Loss) -> NominalFit:
     """Stage 1-2: the nominal fit and identifiability there, after selection if asked."""
     problem = Problem(robot, models_for(datasets), effects)
+    candidates = None
+    if parameters is not None:
+        allowed = set(parameters)
+        robot_names = set(problem.kinematics.registry.names)
+        open_ = problem.mask("robot", "effects", "mounted")
+        candidates = tuple(n for i, n in enumerate(problem.unknowns.names)
+                           if open_[i] and (n not in robot_names or n in allowed))
     nominal = solve(problem, problem.initial(), problem.mask("placement"), method=method,
                     loss=loss)
-    identifiability = analyse_identifiability(problem, nominal.x)
+    identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
@@ -366,11 +379,11 @@ def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Ef
             problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)
-            identifiability = analyse_identifiability(problem, nominal.x)
+            identifiability = analyse_identifiability(problem, nominal.x, candidates)
     if not identifiability.identifiable:
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
-    return NominalFit(tuple(datasets), problem, nominal, identifiability, selection)
+    return NominalFit(tuple(datasets), problem, nominal, identifiability, selection, candidates)
 
 
 def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
@@ -392,7 +405,7 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
-    revised = analyse_identifiability(problem, geometric.x)
+    revised = analyse_identifiability(problem, geometric.x, nominal.candidates)
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)
@@ -428,7 +441,7 @@ def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squa
         determined = identifiability
         identifiability, geometric, prior = _map_geometric(
             problem, nominal.solution.x, geometric.x, noise, distinct, method=method, loss=loss,
-            max_iterations=max_iterations)
+            max_iterations=max_iterations, candidates=nominal.candidates)
         # The condition number describes the data: that of the parameters with a fair share
         # of their effect their own (the weak ones lean on the prior, not on the data).
         identifiability = replace(identifiability,
@@ -571,16 +584,20 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 
 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
-                   distinct, *, method: Method, loss: Loss, max_iterations: int):
-    """Identifiability with exact dependencies only, and the MAP fit of the rest."""
+                   distinct, *, method: Method, loss: Loss, max_iterations: int,
+                   candidates: Sequence[str] | None = None):
+    """Identifiability with exact dependencies only, and the MAP fit of the rest
+    (``candidates``: the unknowns that may be fitted, default all)."""
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(problem.rms(x_start), 1e-12)
-    identifiability = analyse_identifiability(problem, x_nominal, tolerance=EXACT_TOLERANCE)
+    identifiability = analyse_identifiability(problem, x_nominal, candidates,
+                                              tolerance=EXACT_TOLERANCE)
     free = _free_mask(problem, identifiability)
     solution, prior = _map_solve(problem, x_start, free, _prior_of(problem, free, sigma),
                                  distinct, method=method, loss=loss,
                                  max_iterations=max_iterations)
-    revised = analyse_identifiability(problem, solution.x, tolerance=EXACT_TOLERANCE)
+    revised = analyse_identifiability(problem, solution.x, candidates,
+                                      tolerance=EXACT_TOLERANCE)
     if set(revised.identifiable) > set(identifiability.identifiable):
         free = _free_mask(problem, revised)
         candidate, candidate_prior = _map_solve(

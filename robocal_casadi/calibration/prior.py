@@ -47,12 +47,12 @@ def kind_of(name: str, quantity: str) -> str | None:
     """The kind of parameter ``name`` (a key of ``DEFAULT_TOLERANCE``); None: no prior."""
     if name.startswith(("probe_", "target_", "laser_")):
         return "instrument_length" if quantity == "length" else "instrument_direction"
-    if name.startswith(("base_", "tool_")):
+    if name.startswith(("base_", "tool_", "flange_")):
         return "frame_length" if quantity == "length" else "frame_angle"
     stem = name.rstrip("0123456789")
-    if stem in ("d", "a"):
+    if stem in ("d", "a", "x", "y", "z"):  # x, y, z: a URDF joint origin, like d and a
         return "dh_length"
-    if stem in ("theta", "alpha", "beta"):
+    if stem in ("theta", "alpha", "beta", "roll", "pitch", "yaw"):
         return "dh_angle"
     return None
 

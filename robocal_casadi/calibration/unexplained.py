@@ -47,7 +47,7 @@ KNOTS = 5  # knots of a single variable's piecewise-linear function
 PAIR_KNOTS = 3  # knots per variable of a pair's function
 MAX_ENTRIES = 9000  # residual entries tested (whole units drawn at random beyond)
 MIN_SPAN = {True: 1e-3, False: 1e-4}  # [rad] / [m]: a joint that moves less is still
-STEMS = ("theta", "d", "a", "alpha")
+STEMS = ("theta", "d", "a", "alpha", "x", "y", "z", "roll", "pitch", "yaw")  # DH or URDF
 PAIR_GAIN = 1.25  # a pair's statistic over the better of its two variables alone
 LISTED = 0.25  # variables listed down to this fraction of the strongest statistic
 

@@ -16,14 +16,18 @@ import json
 import math
 import shutil
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
 from ..calibration import METHODS, calibrate
+from ..effect_model import delivered_lines, geometry_only, save_effects
 from ..output import atomic_directory
+from ..profiles import PROFILES, ProfileCost, profile_parameters
 from ..results import CalibrationResult
 from ..robot import save_robot
+from ..output import json_safe as _clean
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 
@@ -47,6 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "condition number by more than the fraction G, e.g. 0.05")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to the geometric fit (default 200)")
+    parser.add_argument("--profile", choices=PROFILES, default=None,
+                        help="fit only the robot parameters this controller accepts "
+                             "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
+                             "offsets, base and tool) and report what that costs")
     parser.add_argument("--no-report", action="store_true", help="skip report.html")
     add_force(parser)
     add_allow_outside_data(parser)
@@ -68,17 +76,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
-def _clean(value):
-    """JSON-safe copy: NaN and infinities become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
-
-
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                   pdf: bool = False, keep: tuple[str, ...] = (), info=None,
                   templates: Path | None = None) -> None:
@@ -92,6 +89,7 @@ def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                 shutil.copy2(out / name, staging / name)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
+        save_effects(result, staging)
         if report:
             from ..report import write_report
 
@@ -127,6 +125,10 @@ def summary(result: CalibrationResult) -> str:
         lines.append("effects: none added")
     if result.effects:
         lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
+    if result.profile is not None:
+        lines.append(result.profile.sentence(units, result.fit, result.validation))
+    if result.delivered is not None:
+        lines += delivered_lines(result.delivered, s, units.length)
     stand_ins = _rejected(result, "implausible")
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
@@ -139,6 +141,18 @@ def summary(result: CalibrationResult) -> str:
     else:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
+
+
+def profiled(datasets, validation, profile: str, options: dict) -> CalibrationResult:
+    """The calibration restricted to ``profile``'s parameters, carrying what the
+    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    allowed = profile_parameters(profile, datasets[0].robot)
+    free = calibrate(datasets, validation, **options)
+    restricted = calibrate(datasets, validation, parameters=allowed, **options)
+    held = tuple(n for n in free.identifiability.identifiable
+                 if n in free.robot_nominal.parameters() and n not in allowed)
+    cost = ProfileCost(profile, allowed, held, free.fit, free.validation)
+    return replace(restricted, profile=cost)
 
 
 def _rejected(result: CalibrationResult, word: str) -> list[str]:
@@ -194,13 +208,18 @@ def run(args: argparse.Namespace) -> int:
     info = report_info(args, datasets + validation)
     not_replacing_inputs(args.out, [p for d in datasets + validation
                                     for p in (d.path, d.data_path, d.robot_path)])
-    result = calibrate(datasets, validation, diagnose=not args.no_diagnose, method=args.method,
-                       loss=args.loss, select_growth=args.select_growth,
-                       max_iterations=args.max_iterations,
-                       progress=sys.stderr.isatty())
+    options = dict(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
+                   select_growth=args.select_growth, max_iterations=args.max_iterations,
+                   progress=sys.stderr.isatty())
+    if args.profile is None:
+        result = calibrate(datasets, validation, **options)
+    else:
+        result = profiled(datasets, validation, args.profile, options)
+    result = replace(result, delivered=geometry_only(result, datasets, validation))
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
                   templates=args.report_templates)
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
-          + ("" if args.no_report else ", report.html"))
+          + (", effects_calibrated.yaml" if (args.out / "effects_calibrated.yaml").is_file()
+             else "") + ("" if args.no_report else ", report.html"))
     return 0

@@ -10,7 +10,11 @@ residual of the solve, ROBOT's units).
 
 Position-only targets leave the tool orientation free; each solve starts from the
 previous solution, so a path of targets gives a smooth joint path. Only the calibrated
-geometry is used: effects listed in the folder's result.json are not applied.
+geometry is used unless --with-effects: then the joints are refined until the geometry
+with the effects the calibration identified (the folder's effects_calibrated.yaml) reaches
+each target, so the robot lands with the accuracy result.json reports for the model with
+effects. Effects that read a payload [kg] or a temperature [C] take them from TARGETS.csv's
+payload/temperature columns, or from --payload/--temperature.
 """
 
 from __future__ import annotations
@@ -48,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--restarts", type=int, default=10,
                         help="random starts per target before it is unreachable (default 10)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of the random starts")
+    from .fk import add_effect_options
+
+    add_effect_options(parser)
 
 
 def robot_of(argument: str) -> Robot:
@@ -122,7 +129,18 @@ def run(args: argparse.Namespace) -> int:
                              where="--start")
     if args.restarts < 0:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
-    result = compensate(robot, targets, start=start, restarts=args.restarts, seed=args.seed)
+    model = extras_values = None
+    if args.with_effects:
+        if not robot_argument.is_dir():
+            raise InputError("effects come from a calibration: give the calibration folder, "
+                             "not a robot file", file=robot_argument, where="--with-effects")
+        from ..effect_model import load_effects, row_values
+
+        model = load_effects(robot_argument, robot)
+        extras_values = row_values(model, table, payload=args.payload,
+                                   temperature=args.temperature)
+    result = compensate(robot, targets, start=start, restarts=args.restarts, seed=args.seed,
+                        effects=model, extras=extras_values)
     out_columns = extras + joint_names + ["status", "position_error"]
     if has_orientation:
         out_columns.append("orientation_error")

@@ -7,8 +7,11 @@ through, before the pose columns. Readings outside the robot's joint limits are 
 
 With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml (a result of
 `robocal calibrate`); the readings and the output keep ROBOT.yaml's units. Only the
-calibrated geometry is used: effects listed in DIR/result.json (joint compliance,
-cyclic errors, thermal drift, ...) are NOT applied by fk.
+calibrated geometry is used unless --with-effects: then the effects the calibration
+identified (DIR/effects_calibrated.yaml: joint compliance, periodic joint errors, gear-ratio
+errors, thermal drift, ...) are applied too, so the poses carry the accuracy result.json
+reports for the model with effects. Effects that read a payload [kg] or a temperature [C]
+take them from JOINTS.csv's payload/temperature columns, or from --payload/--temperature.
 """
 
 from __future__ import annotations
@@ -38,8 +41,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="POSES.csv", required=True,
                         help="output table: extra input columns, then x,y,z,qw,qx,qy,qz")
     parser.add_argument("--calibrated", metavar="DIR",
-                        help="use DIR/robot_calibrated.yaml (geometry only; effects in "
-                        "DIR/result.json are not applied)")
+                        help="use DIR/robot_calibrated.yaml (geometry only unless "
+                        "--with-effects)")
+    parser.add_argument("--base-link", metavar="NAME", help="first link of a URDF robot's chain")
+    parser.add_argument("--tip-link", metavar="NAME", help="last link of a URDF robot's chain")
+    add_effect_options(parser)
+
+
+def add_effect_options(parser: argparse.ArgumentParser) -> None:
+    """``--with-effects``, ``--payload`` and ``--temperature`` (fk and compensate)."""
+    parser.add_argument("--with-effects", action="store_true",
+                        help="also apply the effects the calibration identified "
+                        "(effects_calibrated.yaml of the calibration folder)")
+    parser.add_argument("--payload", type=float, metavar="KG",
+                        help="payload [kg] for every row, where the effects need one and the "
+                        "table has no payload column")
+    parser.add_argument("--temperature", type=float, metavar="C",
+                        help="temperature [C] for every row, where the effects need one and "
+                        "the table has no temperature column")
 
 
 def calibrated_robot(folder: Path, nominal: Robot, nominal_path: Path) -> Robot:
@@ -60,8 +79,12 @@ def calibrated_robot(folder: Path, nominal: Robot, nominal_path: Path) -> Robot:
 
 def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
     """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7), robot file units, for readings ``Q`` [SI]."""
-    poses = Kinematics(robot).tool_poses(Q)
-    rows = np.empty((len(Q), 7))
+    return pose_rows(Kinematics(robot).tool_poses(Q), robot)
+
+
+def pose_rows(poses: np.ndarray, robot: Robot) -> np.ndarray:
+    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7) of world poses [m], robot file units."""
+    rows = np.empty((len(poses), 7))
     rows[:, :3] = poses[:, :3, 3] / robot.units.length_scale
     rows[:, 3:] = [quaternion_from_matrix(T[:3, :3]) for T in poses]
     return rows
@@ -71,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     robot_path = input_file(args.robot, "robot file")
     calibrated = Path(args.calibrated) / CALIBRATED_ROBOT if args.calibrated else None
     output_file(args.out, inputs=[robot_path, args.joints, calibrated])
-    robot = load_robot(robot_path)
+    robot = load_robot(robot_path, base_link=args.base_link, tip_link=args.tip_link)
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), robot, robot_path)
     table = read_table(args.joints)
@@ -84,7 +107,17 @@ def run(args: argparse.Namespace) -> int:
     if clashes:
         raise InputError(f"column(s) {clashes} would clash with the pose columns "
                          f"{list(POSE_COLUMNS)} of the output; rename them", file=table.path)
-    poses = tool_pose_rows(robot, Q)
+    if args.with_effects:
+        if args.calibrated is None:
+            raise InputError("effects come from a calibration: give --calibrated DIR",
+                             where="--with-effects")
+        from ..effect_model import load_effects, row_values
+
+        model = load_effects(Path(args.calibrated), robot)
+        extras = row_values(model, table, payload=args.payload, temperature=args.temperature)
+        poses = pose_rows(model.tool_poses(Q, extras), robot)
+    else:
+        poses = tool_pose_rows(robot, Q)
     copied = [[row[table.columns.index(c)] for c in extras] for row in table.rows]
     with atomic_file(args.out) as staging:
         write_table(staging, [*extras, *POSE_COLUMNS],

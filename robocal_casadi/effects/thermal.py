@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError, RobocalError
+from ..parameters import length_names
 from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld
@@ -128,9 +129,8 @@ class ThermalDrift(Effect):
         factor = values[self.parameter_names()[0]] * (float(temperature)
                                                       - world.reference_temperature)
         dp = np.zeros(len(registry))
-        for i in range(1, world.robot.dof + 1):
-            for stem in ("d", "a"):
-                dp[registry.index(f"{stem}{i}")] = factor * p[registry.index(f"{stem}{i}")]
+        for name in length_names(world.robot):  # d_i, a_i in DH; x_i, y_i, z_i in URDF
+            dp[registry.index(name)] = factor * p[registry.index(name)]
         return dp
 
     def required_columns(self) -> tuple[str, ...]:
@@ -163,8 +163,7 @@ class ThermalDrift(Effect):
                              where=self.column)
         change = theta[0] * (row.extras[self.column] - reference)
         entries = {}
-        for i in range(1, row.robot.dof + 1):
-            for stem in ("d", "a"):
-                index = row.registry.index(f"{stem}{i}")
-                entries[index] = change * row.p[index]
+        for name in length_names(row.robot):  # d_i, a_i in DH; x_i, y_i, z_i in URDF
+            index = row.registry.index(name)
+            entries[index] = change * row.p[index]
         return column({}, row.robot.dof), column(entries, len(row.registry))

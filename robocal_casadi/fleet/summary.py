@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ..units import ANGLE_SCALE, LENGTH_SCALE, SI, Units
+from ..output import json_safe as _clean
 from .outliers import FLOOR, LIMIT, MAD_TO_SD, MIN_ROBOTS, Finding, Move, Spread, high_outliers
 from .robot_task import RobotOutcome
 from .spec import Fleet
@@ -195,17 +196,6 @@ def _number(value: float) -> str:
 
 def _score(score: float) -> str:
     return "infinitely many" if math.isinf(score) else f"{score:.1f}"
-
-
-def _clean(value):
-    """JSON-safe copy: NaN and infinities become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    return value
 
 
 # ----------------------------------------------------------------------------- previous run

@@ -7,8 +7,9 @@ the statistics are the mean, RMS, 99th percentile and maximum of their magnitude
 
 ``delivered`` says what each output file delivers: ``robot_calibrated.yaml`` carries the
 geometry only, so a controller loading it gets the geometric model's accuracy; the
-effects in ``result.json`` add their share only where the controller applies them
-(``robocal compensate`` and ``robocal fk`` use the geometry alone).
+effects (``effects_calibrated.yaml``) add their share where they are applied
+(``robocal compensate`` and ``robocal fk`` with ``--with-effects``, or the controller's own
+compensation).
 """
 
 from __future__ import annotations
@@ -99,10 +100,11 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
                      "and tool; load it into the controller or the offline programming system",
                      "geometric", stats["geometric"])]
     if effects_differ(result):
-        out.append(Delivered("robot_calibrated.yaml with the effects of result.json",
-                             "geometry plus the effects found; the effects take hold only where "
-                             "the controller's own compensation applies them (robocal "
-                             "compensate and robocal fk use the geometry alone)", "final",
+        out.append(Delivered("robot_calibrated.yaml with effects_calibrated.yaml",
+                             "geometry plus the effects found; the effects take hold where they "
+                             "are applied: robocal compensate and robocal fk with "
+                             "--with-effects, or the controller's own compensation; without "
+                             "them robocal fk and compensate use the geometry alone", "final",
                              stats["final"]))
     return out
 

@@ -106,14 +106,7 @@ def reach_bound(robot: Robot, p: np.ndarray | None = None) -> float:
     plus the tool offset.
     """
     model = robot if p is None else robot.with_parameters(p)
-    total = float(np.linalg.norm(model.tool.xyz))
-    for joint in model.joints:
-        d = joint.d
-        if not joint.revolute:
-            lo, hi = joint.limits if joint.limits else (-math.inf, math.inf)
-            d = max(abs(d + lo), abs(d + hi))
-        total += math.hypot(joint.a, d)
-    return total
+    return model.reach()
 
 
 class Tracker:

@@ -1,0 +1,107 @@
+"""Write a calibration result in the formats controllers and ROS read.
+
+DIR is a result of `robocal calibrate`. --urdf OUT.urdf writes the calibrated chain over
+the user's own URDF: the --like file, or the URDF the calibration read; link and joint
+names, meshes, inertias, limits and comments are kept and only joint origins change. A
+robot calibrated in DH (or modified DH) form is written into the --like file's link
+frames: the fixed transforms between its DH frames and the file's link frames come from
+the nominal robot, so the --like file must describe the arm the calibration started from,
+with its root link as the robot file's world frame. Without --like a DH robot is written
+as a plain description (links frame_0..frame_n, joints joint_1..joint_n).
+--ur-calibration OUT.yaml writes UR's kinematics file (x, y, z, roll, pitch, yaw per joint,
+as ur_description and the UR ROS drivers read it) for six-joint UR arms.
+
+Only the geometry is exported: effects listed in DIR/result.json are not part of a URDF.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..errors import InputError
+from ..fields import read_text
+from ..output import atomic_file
+from ..robot import Robot, dump_yaml, load_robot
+from .arguments import output_file
+
+CALIBRATED_ROBOT = "robot_calibrated.yaml"
+RESULT = "result.json"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("folder", metavar="DIR", type=Path, help="a calibration result folder")
+    parser.add_argument("--urdf", metavar="OUT.urdf", type=Path,
+                        help="write the calibrated chain as URDF")
+    parser.add_argument("--like", metavar="VENDOR.urdf", type=Path,
+                        help="the URDF to write over (default: the one the calibration read)")
+    parser.add_argument("--base-link", metavar="NAME", help="first link of the --like chain")
+    parser.add_argument("--tip-link", metavar="NAME", help="last link of the --like chain")
+    parser.add_argument("--ur-calibration", metavar="OUT.yaml", type=Path,
+                        help="write UR's kinematics file (six-joint UR arms)")
+
+
+def nominal_of(calibrated: Robot, folder: Path) -> Robot:
+    """The robot the calibration started from: ``calibrated`` with every parameter at the
+    ``nominal`` value result.json lists (robot file units)."""
+    path = folder / RESULT
+    try:
+        content = json.loads(read_text(path, what="result file"))
+        rows = {row["name"]: float(row["nominal"]) for row in content["parameters"]}
+    except (ValueError, KeyError, TypeError):
+        raise InputError("not a result.json of robocal calibrate (no parameters with "
+                         "nominal values)", file=path, where="parameters") from None
+    registry = calibrated.parameters()
+    values = calibrated.parameter_vector()
+    for i, name in enumerate(registry.names):
+        if name in rows:
+            values[i] = rows[name] * calibrated.units.scale(registry.quantity(name))
+    return calibrated.with_parameters(values)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..urdf.writer import ur_calibration, urdf_over
+
+    folder: Path = args.folder
+    if not folder.is_dir():
+        raise InputError("calibration folder not found", file=folder)
+    if args.urdf is None and args.ur_calibration is None:
+        raise InputError("nothing to write: give --urdf OUT.urdf and/or --ur-calibration "
+                         "OUT.yaml", where="export")
+    robot_path = folder / CALIBRATED_ROBOT
+    if not robot_path.is_file():
+        raise InputError(f"no {CALIBRATED_ROBOT} in the calibration folder", file=folder)
+    inputs = [robot_path, folder / RESULT, args.like]
+    for option, path in (("--urdf", args.urdf), ("--ur-calibration", args.ur_calibration)):
+        if path is not None:
+            output_file(path, option, inputs=inputs)
+    calibrated = load_robot(robot_path)
+    like = args.like
+    if like is None and calibrated.urdf is not None:
+        like = Path(calibrated.urdf.file)
+        if not like.is_file():
+            raise InputError(f"the URDF the calibration read ({like}) is gone; name it with "
+                             "--like", file=robot_path, where="urdf.file")
+    nominal = None if calibrated.convention == "urdf" else nominal_of(calibrated, folder)
+    texts = {}
+    if args.urdf is not None:
+        if like is None:
+            from ..pinocchio_model import urdf_text
+
+            texts[args.urdf] = urdf_text(calibrated)
+        else:
+            texts[args.urdf] = urdf_over(calibrated, like, nominal=nominal,
+                                         base_link=args.base_link, tip_link=args.tip_link)
+    if args.ur_calibration is not None:
+        content = ur_calibration(calibrated, args.like, nominal=nominal,
+                                 base_link=args.base_link, tip_link=args.tip_link)
+        texts[args.ur_calibration] = dump_yaml(content)
+    for path, text in texts.items():  # everything computed before anything is written
+        with atomic_file(path) as staging:
+            staging.write_text(text)
+        print(f"wrote {path}")
+    return 0
+
+
+__all__ = ["add_arguments", "nominal_of", "run"]

@@ -1,0 +1,236 @@
+"""The identified effects applied: tool poses a calibrated robot really reaches.
+
+A calibration whose recommended model carries effects (joint compliance, periodic joint
+errors, gear-ratio errors, thermal drift, ...) only delivers its reported accuracy when
+forward kinematics and compensation apply them too. ``effects_calibrated.yaml`` in the
+result folder holds them (SI values by parameter name, and what each needs to be rebuilt:
+a thermal reference, whether compliance saw a payload); ``EffectModel`` evaluates
+
+    T_world_tool = FK(q + dq(q, extras), p + dp(q, extras))          [m]
+
+with the effects' own corrections (``effects.base``), the calibrated geometry ``p`` and a
+row's ``extras``: ``payload`` [kg] (a column, or one value for all rows), ``temperature``
+[C] or ``time`` [s] as the effects need. The payload is a point mass at ``payload_com``
+[m] in the flange frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
+from .effects.coupling import JointCoupling
+from .effects.motion import is_direction_column, with_directions
+from .errors import InputError
+from .fields import load_yaml
+from .kinematics import Kinematics
+from .robot import Robot, dump_yaml
+
+EFFECTS_FILE = "effects_calibrated.yaml"
+
+
+def effects_to_dict(result) -> dict | None:
+    """The recommended model's effects of a ``CalibrationResult`` as the mapping
+    ``effects_calibrated.yaml`` holds, or None when it has none."""
+    if result.recommended != "final" or not result.effect_models:
+        return None
+    values = np.asarray(result.effect_values, dtype=float)
+    entries, start = [], 0
+    payload_in_data = any("payload" in r.extras for r in result.residuals)
+    for effect in result.effect_models:
+        names = effect.parameter_names()
+        entry = {"name": effect.name, "joints": list(effect.joints),
+                 "parameters": {n: float(v) for n, v in zip(names, values[start:start + len(names)])}}
+        start += len(names)
+        if isinstance(effect, ThermalDrift):
+            entry["column"] = effect.column
+            entry["reference"] = float(effect.constants()[0])
+        if isinstance(effect, JointCompliance):
+            entry["payload"] = bool(effect.payload or payload_in_data)
+        if isinstance(effect, JointCoupling):
+            entry["drivers"] = [int(d) for d in effect.drivers]
+        entries.append(entry)
+    com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
+    return {"units": {"length": "m", "angle": "rad"}, "effects": entries,
+            "payload_com": [0.0, 0.0, 0.0] if com is None else [float(v) for v in com]}
+
+
+def save_effects(result, folder: Path) -> bool:
+    """Write ``effects_calibrated.yaml`` into ``folder`` when the recommended model has
+    effects; True when written."""
+    content = effects_to_dict(result)
+    if content is None:
+        return False
+    (folder / EFFECTS_FILE).write_text(dump_yaml(content))
+    return True
+
+
+@dataclass(frozen=True)
+class EffectModel:
+    """A calibrated ``robot`` with its ``effects`` and their ``values`` (SI, in the
+    effects' parameter order); ``payload_com`` [m] in the flange frame; ``payload``
+    whether compliance was identified with a payload in the data."""
+
+    robot: Robot
+    effects: tuple[Effect, ...]
+    values: np.ndarray = field(repr=False)
+    payload_com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    payload: bool = False
+
+    def columns(self) -> tuple[str, ...]:
+        """The per-row values the effects read (``payload``, ``temperature``, ``time``)."""
+        names: list[str] = []
+        for effect in self.effects:
+            needed = list(effect.required_columns())
+            if isinstance(effect, JointCompliance):
+                needed.append("payload")
+            names += [n for n in needed if n not in names]
+        return tuple(names)
+
+    @cached_property
+    def _pose(self) -> ca.Function:
+        kinematics = Kinematics(self.robot)
+        q = ca.SX.sym("q", self.robot.dof)
+        columns = self.columns()
+        extras = ca.SX.sym("extras", len(columns))
+        p = ca.DM(kinematics.nominal)
+        row = RowContext(self.robot, kinematics.registry, q, ca.SX(p),
+                         {c: extras[i] for i, c in enumerate(columns)},
+                         ca.SX(ca.DM(list(self.payload_com))))
+        dq, dp = ca.SX.zeros(self.robot.dof), ca.SX.zeros(len(kinematics.registry))
+        start = 0
+        for effect in self.effects:
+            size = len(effect.parameter_names())
+            delta_q, delta_p = effect.delta(row, ca.SX(ca.DM(self.values[start:start + size])))
+            dq += delta_q
+            if delta_p is not None:
+                dp += delta_p
+            start += size
+        pose = kinematics.tool_pose(q + dq, ca.SX(p) + dp)
+        return ca.Function("tool_pose_with_effects", [q, extras], [pose])
+
+    def tool_poses(self, Q: np.ndarray, extras: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """World tool poses (N x 4 x 4) [m] at readings ``Q`` (N x dof) with the effects;
+        ``extras`` one array (or number) per name in ``columns()``; the directions of
+        motion (backlash) follow from the order of the rows where not given."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        extras = dict(extras or {})
+        if any(is_direction_column(c) for c in self.columns()):
+            extras = with_directions(Q, extras)
+        missing = [c for c in self.columns() if c not in extras]
+        if missing:
+            raise InputError(f"the effects need {', '.join(missing)} for every row")
+        E = np.column_stack([np.broadcast_to(np.asarray(extras[c], dtype=float), (len(Q),))
+                             for c in self.columns()]) if self.columns() else np.zeros((len(Q), 0))
+        mapped = self._pose.map(len(Q)) if len(Q) > 1 else self._pose
+        out = np.asarray(mapped(Q.T, E.T))
+        return out.reshape(4, len(Q), 4).transpose(1, 0, 2)
+
+
+def load_effects(folder: Path, robot: Robot) -> EffectModel:
+    """The ``EffectModel`` of a result folder for its calibrated ``robot``; a folder
+    without effects gives a model with none."""
+    path = Path(folder) / EFFECTS_FILE
+    if not path.is_file():
+        return EffectModel(robot, (), np.zeros(0))
+    content = load_yaml(path, what="effects file")
+    effects, values, payload = [], [], False
+    for k, entry in enumerate(content.get("effects") or []):
+        where = f"effects[{k}]"
+        try:
+            name, joints = entry["name"], tuple(int(j) for j in entry["joints"])
+            parameters = {str(n): float(v) for n, v in entry["parameters"].items()}
+        except (KeyError, TypeError, ValueError, AttributeError):
+            raise InputError("expected {name, joints, parameters}", file=path,
+                             where=where) from None
+        if name == "joint_compliance":
+            payload |= bool(entry.get("payload", False))
+            effect: Effect = JointCompliance(joints, robot=robot, payload=entry.get("payload", False))
+        elif name == "joint_coupling":
+            effect = JointCoupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
+        elif name == "thermal_drift":
+            effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
+                                  reference_value=float(entry["reference"]))
+        elif name in EFFECTS:
+            effect = EFFECTS[name](joints)
+        else:
+            raise InputError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", file=path,
+                             where=where)
+        names = effect.parameter_names()
+        if set(names) != set(parameters):
+            raise InputError(f"{name} on joints {list(joints)} has parameters {list(names)} for "
+                             f"this robot, the file gives {sorted(parameters)}", file=path,
+                             where=where)
+        effects.append(effect)
+        values += [parameters[n] for n in names]
+    com = tuple(float(v) for v in content.get("payload_com", (0.0, 0.0, 0.0)))
+    return EffectModel(robot, tuple(effects), np.array(values, dtype=float), com, payload)  # type: ignore[arg-type]
+
+
+def geometry_only(result, datasets, validation=()) -> dict:
+    """What each output delivers (result.json's ``delivered``, RMS [m]): the calibrated
+    robot file used alone (fit and, with held-out data, validation RMS of its geometry with
+    the placements fitted again and no effect applied) and, when the recommended model has
+    effects, the same geometry with them (the final model's RMS)."""
+    from .calibration.identification import evaluate
+
+    values = {name: value for name, (value, _) in result.mounted.items()}
+    out = {"robot_calibrated.yaml": {}, "with_effects": None}
+    for role, data in (("fit", datasets), ("validation", validation)):
+        if not data:
+            continue
+        problem, x = evaluate(result.robot_calibrated, list(data), (), values,
+                              label_prefix="validation:" if role == "validation" else "")
+        out["robot_calibrated.yaml"][role] = problem.rms(x)
+    if result.recommended == "final" and result.effects:
+        out["with_effects"] = {"fit": result.fit.rms_final}
+        if result.validation is not None:
+            out["with_effects"]["validation"] = result.validation.rms_final
+    return out
+
+
+def delivered_lines(delivered: dict, length_scale: float, unit: str) -> list[str]:
+    """Terminal lines: the accuracy each output delivers."""
+    def text(block):
+        return ", ".join(f"{role} RMS {value / length_scale:.4g} {unit}"
+                         for role, value in block.items())
+
+    lines = ["delivered: robot_calibrated.yaml alone (geometry only): "
+             + text(delivered["robot_calibrated.yaml"])]
+    if delivered.get("with_effects"):
+        lines.append(f"delivered: with {EFFECTS_FILE} (fk/compensate --with-effects): "
+                     + text(delivered["with_effects"]))
+    return lines
+
+
+def row_values(model: EffectModel, table, *, payload: float | None = None,
+               temperature: float | None = None) -> dict[str, np.ndarray]:
+    """The per-row values ``model`` needs, from ``table``'s columns or the options:
+    ``payload`` [kg] (zero when the calibration data carried none), ``temperature`` [C].
+    A value needed and given nowhere is an ``InputError`` naming the column."""
+    options = {"payload": payload, "temperature": temperature}
+    out: dict[str, np.ndarray] = {}
+    for name in model.columns():
+        if is_direction_column(name) and not table.has(name):
+            continue  # from the order of the rows (``EffectModel.tool_poses``)
+        if table.has(name):
+            if options.get(name) is not None:
+                raise InputError(f"{name} is given both as a column and as --{name}",
+                                 file=table.path, where="line 1")
+            out[name] = np.asarray(table.numbers(name), dtype=float)
+        elif options.get(name) is not None:
+            out[name] = np.asarray(float(options[name]))
+        elif name == "payload" and not model.payload:
+            out[name] = np.asarray(0.0)  # the calibration saw no payload either
+        else:
+            option = f" (or --{name})" if name in options else ""
+            raise InputError(f"the identified effects need a {name!r} column{option}",
+                             file=table.path, where="line 1")
+        if not np.all(np.isfinite(out[name])):
+            raise InputError(f"{name} must be finite numbers", file=table.path, where=name)
+    return out
