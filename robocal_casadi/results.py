@@ -442,7 +442,8 @@ def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
                                                 "robocal compensate, a controller's DH table)",
                                      **scaled(delivered["robot_calibrated.yaml"])}}
     if delivered.get("with_effects"):
-        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified effects "
-                                        "(robocal fk and robocal compensate --with-effects)",
-                             **scaled(delivered["with_effects"])}
+        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified "
+                                                     "effects (robocal fk and robocal compensate "
+                                                     "--with-effects)",
+                                          **scaled(delivered["with_effects"])}
     return out

@@ -62,8 +62,8 @@ from .errors import InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .output import atomic_directory, written_by_robocal
-from .progress import Progress
 from .parameters import perturbed_stems
+from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
 from .transforms import (
