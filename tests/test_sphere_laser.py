@@ -570,7 +570,7 @@ def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
     for name in WEAK:
         assert "too little for these data" in strict.identifiability.unidentifiable[name]
     # Against their tolerances the weak ones are estimated too (and checked below).
-    result = calibrate([dataset], diagnose=False)
+    result = calibrate([dataset], diagnose=False, rule="prior")
 
     identified = {p.name: p for p in result.parameters if p.identifiable}
     assert set(TRUE_ERRORS) | set(WEAK) <= set(identified)

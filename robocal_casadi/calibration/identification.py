@@ -266,7 +266,7 @@ class Validation:
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False, rule: Rule = "prior",
+              progress: bool = False, rule: Rule = "fraction",
               parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
