@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal_casadi.calibration import Problem, analyse_identifiability, models_for, solve
 from robocal_casadi.datasets import TrackerPoints
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.calibration import Problem, analyse_identifiability, models_for, solve
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.simulate import simulate
 from robocal_casadi.transforms import pose_from_xyz_rpy

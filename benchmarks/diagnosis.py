@@ -25,8 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_casadi.calibration import (Problem, analyse_identifiability, calibrate, diagnosis,
-                                        models_for, solve)
+from robocal_casadi.calibration import (
+    Problem,
+    analyse_identifiability,
+    calibrate,
+    diagnosis,
+    models_for,
+    solve,
+)
 from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.examples import industrial_6r
 from robocal_casadi.simulate import simulate

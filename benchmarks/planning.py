@@ -36,14 +36,14 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from planning.candidates import generate  # noqa: E402
 from planning.collision import Body  # noqa: E402
-from planning.ranges import working_ranges  # noqa: E402
 from planning.design import design_plan  # noqa: E402
 from planning.planned import engine_identifiability, planned_dataset  # noqa: E402
+from planning.ranges import working_ranges  # noqa: E402
 from planning.reach import Workspace  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
+from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
 from robocal_casadi.examples import industrial_6r, panda_7dof  # noqa: E402
-from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.kinematics import Kinematics  # noqa: E402
 from robocal_casadi.measurement.tracker import rigid_registration  # noqa: E402
 from robocal_casadi.robot import save_robot  # noqa: E402
@@ -90,7 +90,6 @@ class Simulator:
         self.p_true = p_true
         self.rng = rng
         self.instrument = pose_from_xyz_rpy(rng.normal(0, 1.0, 3), rng.uniform(-np.pi, np.pi, 3))
-        setup = setup_from_dataset(dataset)
         # the true robot, limits widened by 2 deg: a plan at a limit stays reachable
         widened = replace(dataset.robot, joints=tuple(
             replace(j, limits=None if j.limits is None

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.calibration import calibrate
+from robocal_casadi.datasets import load_dataset
 
 PANDA = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
          "mid-high", "mid_left", "mid_right")
@@ -84,7 +84,8 @@ def run_panda(folder: Path, held_out: tuple[str, str], diagnose: bool) -> dict:
     start = time.perf_counter()
     result = calibrate(fit, validation, diagnose=diagnose)
     spread = _socket_spread(result)
-    return {"set": "panda", "held_out": list(held_out), **summary(result, time.perf_counter() - start),
+    return {"set": "panda", "held_out": list(held_out),
+            **summary(result, time.perf_counter() - start),
             "validation_touch_spread_mm": spread}
 
 

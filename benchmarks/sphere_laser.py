@@ -32,14 +32,24 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from test_sphere_laser import (NOISE, RADIUS, joint_scan, noise_floor,  # noqa: E402
-                               patent_truth, tilting_scan)
+from test_sphere_laser import NOISE, RADIUS, joint_scan, noise_floor, patent_truth, tilting_scan  # noqa: E402
 
+from robocal_casadi.calibration import (  # noqa: E402
+    Problem,
+    analyse_identifiability,
+    calibrate,
+    models_for,
+    solve,
+)
 from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.calibration import (Problem, analyse_identifiability,  # noqa: E402
-                                           calibrate, models_for, solve)
-from robocal_casadi.sphere_fit import (Scan, _ipopt, _ipopt_solver,  # noqa: E402
-                                       _levenberg_marquardt, algebraic_start, fit_sensor)
+from robocal_casadi.sphere_fit import (  # noqa: E402
+    Scan,
+    _ipopt,
+    _ipopt_solver,
+    _levenberg_marquardt,
+    algebraic_start,
+    fit_sensor,
+)
 
 PATENT_NAMES = ("x0", "y0", "z0", "nx", "ny", "xc", "yc", "zc")
 MM = np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1e3, 1e3, 1e3])  # SI -> the published example's units
@@ -115,7 +125,7 @@ def sensor_case(repeats: int) -> dict:
                                                0.105]),
         "scipy_2point_without_guesses": np.concatenate([np.zeros(5), t.mean(axis=0)])}
     for key, guess in starts.items():
-        seconds, fitted = _median_seconds(lambda: least_squares(
+        seconds, fitted = _median_seconds(lambda guess=guess: least_squares(
             residual, guess, jac="2-point", method="trf", x_scale="jac"), max(repeats // 5, 3))
         out[key] = {
             "seconds": seconds, "evaluations": int(fitted.nfev), "status": int(fitted.status),

@@ -90,7 +90,7 @@ class DampedLeastSquares:
 
     def solve(self, previous: np.ndarray, goal: np.ndarray, up: np.ndarray):
         q = previous.copy()
-        for iteration in range(1, self.max_iterations + 1):
+        for iteration in range(1, self.max_iterations + 1):  # noqa: B007 (returned below)
             dq, position_error, facing, tilt = self.function(q, goal, up)
             position_error, facing = float(position_error), float(facing)
             if position_error < self.tolerance and facing < self.tolerance:

@@ -100,7 +100,7 @@ class Body:
         frames = kinematics.joint_frames(q, p_sym)
         points, lengths = [frames[0][:3, 3]], []
         for i, joint in enumerate(robot.joints, start=1):
-            before, after = frames[i - 1], frames[i]
+            after = frames[i]
             if robot.convention == "mdh":
                 knee = after[:3, 3] - joint.d * after[:3, 2]
                 first, second = abs(joint.a), abs(joint.d)
@@ -135,7 +135,7 @@ class Body:
                 f"{len(self.pairs)} pairs checked)")
 
     @classmethod
-    def of(cls, setup, kinematics: Kinematics) -> "Body":
+    def of(cls, setup, kinematics: Kinematics) -> Body:
         """The body of a plan set-up: its measured point, table and (tracker) instrument."""
         table = setup.table_height
         if table is None:

@@ -26,10 +26,10 @@ from robocal_casadi.progress import Progress
 
 from .accuracy import tool_error, tool_weights
 from .candidates import Candidate, generate
+from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
 from .information import Information, exact_condition
 from .order import Travel, order_candidates
-from .collision import Body
 from .ranges import working_ranges
 from .reach import Workspace
 from .refine import refine_plan

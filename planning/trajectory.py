@@ -44,7 +44,7 @@ from robocal_casadi.errors import ArgumentError, InputError
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.progress import Progress
 
-from .accuracy import measured_point, tool_error, tool_weights
+from .accuracy import tool_error, tool_weights
 from .candidates import generate
 from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling

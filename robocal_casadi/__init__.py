@@ -3,10 +3,10 @@
 The public API is re-exported here; see the README for a worked example.
 """
 
+from .calibration import calibrate
 from .compensation import compensate
 from .datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
 from .errors import InputError, RobocalError, SolverError
-from .calibration import calibrate
 from .ik import inverse_kinematics
 from .kinematics import Kinematics
 from .parameters import ParameterRegistry

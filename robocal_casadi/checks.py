@@ -10,7 +10,8 @@ from __future__ import annotations
 import difflib
 import math
 import operator
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -23,10 +24,14 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def choice(value: Any, valid: Sequence[str], argument: str) -> str:
+Name = TypeVar("Name", bound=str)
+
+
+def choice(value: Any, valid: Sequence[Name], argument: str) -> Name:
     """``value`` if it is one of ``valid``; otherwise the valid names and the closest."""
-    if isinstance(value, str) and value in valid:
-        return value
+    for name in valid:
+        if isinstance(value, str) and value == name:
+            return name
     listed = ", ".join(repr(v) for v in valid)
     hint = ""
     if isinstance(value, str):

@@ -21,7 +21,7 @@ VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export",
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose refusals are one line, like every other error."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} "
                      f"(see {self.prog} --help)\n")
 

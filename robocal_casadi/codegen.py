@@ -43,8 +43,8 @@ import subprocess
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import casadi as ca
 import numpy as np
@@ -114,7 +114,8 @@ def compiled(function: ca.Function) -> ca.Function:
         _warn_once(f"CasADi cannot generate C for {function.name()!r} ({error})")
         return function
     command = (Path(cc).name, *FLAGS)
-    digest = hashlib.sha256("\0".join([ca.__version__, *command, source]).encode()).hexdigest()
+    version = ca.__version__  # type: ignore[attr-defined]  # set at import, absent from the stub
+    digest = hashlib.sha256("\0".join([version, *command, source]).encode()).hexdigest()
     key = (function.name(), digest)
     if key in _loaded:
         return _loaded[key]
@@ -310,8 +311,8 @@ def hoisted_map(function: ca.Function, count: int,
     shared_inputs = [x for x, n in zip(inputs, names) if n not in per_row]
     results = loop(*[x for x, n in zip(inputs, names) if n in per_row],
                    prepare(*shared_inputs), *shared_inputs)
-    results = results if isinstance(results, (list, tuple)) else [results]
-    return ca.Function(f"{function.name()}_batch{count}", inputs, list(results), names,
+    batch_outputs = list(results) if isinstance(results, (list, tuple)) else [results]
+    return ca.Function(f"{function.name()}_batch{count}", inputs, batch_outputs, names,
                        function.name_out())
 
 
@@ -362,7 +363,8 @@ class BatchFunction:
             arrays.append(value)
         count = count or 0
         outputs = [np.empty((count, columns, rows)) for rows, columns in self.out_shapes]
-        scratch_in = scratch_out = None
+        scratch_in: list[np.ndarray] = []
+        scratch_out: list[np.ndarray] = []
         for start in range(0, count, self.chunk):
             stop = min(start + self.chunk, count)
             full = stop - start == self.chunk
@@ -375,9 +377,12 @@ class BatchFunction:
                 scratch_out = [np.empty((self.chunk,) + o.shape[1:]) for o in outputs]
             for i, (a, v) in enumerate(zip(arrays, self.per_row)):
                 source = (a[start:stop] if full else scratch_in[i]) if v else a
-                self._buffer.set_arg(i, memoryview(source))
+                # casadi's stub asks for a byte size its binding takes from the buffer, and
+                # numpy's stubs do not declare ndarray a buffer: the calls are right as written.
+                self._buffer.set_arg(i, memoryview(source))  # type: ignore[call-arg, arg-type]
             for i, o in enumerate(outputs):
-                self._buffer.set_res(i, memoryview(o[start:stop] if full else scratch_out[i]))
+                result = o[start:stop] if full else scratch_out[i]
+                self._buffer.set_res(i, memoryview(result))  # type: ignore[call-arg, arg-type]
             self._evaluate()
             if not full:
                 for o, s_ in zip(outputs, scratch_out):
@@ -386,6 +391,6 @@ class BatchFunction:
         self._alive = (arrays, outputs, scratch_in, scratch_out)
         # Each row's block is stored column-major: swap to rows x columns.
         shaped = []
-        for o, (rows, columns) in zip(outputs, self.out_shapes):
+        for o, (_, columns) in zip(outputs, self.out_shapes):
             shaped.append(o[:, 0, :] if columns == 1 else o.transpose(0, 2, 1))
         return tuple(shaped)

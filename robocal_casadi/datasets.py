@@ -18,17 +18,32 @@ to the fit and is refused as a likely misspelling.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
 from .effects.motion import with_directions
 from .errors import InputError
-from .fields import (MAX_ANGLE, MAX_LENGTH, check_keys, check_magnitude, cut, file_kind,
-                     file_name, load_yaml, mapping, quantities, quantity, referenced_file,
-                     require, resolved, vector)
+from .fields import (
+    MAX_ANGLE,
+    MAX_LENGTH,
+    check_keys,
+    check_magnitude,
+    cut,
+    file_kind,
+    file_name,
+    load_yaml,
+    mapping,
+    quantities,
+    quantity,
+    referenced_file,
+    require,
+    resolved,
+    vector,
+)
 from .robot import Robot, load_robot
 from .table import Table, read_table
 from .transforms import matrix_from_quaternion
@@ -119,7 +134,7 @@ class TrackerPoints(DatasetBase):
     instrument: np.ndarray | None = None  # [m] instrument origin in the world, for planning
 
 
-Dataset = Union[ArtifactTouches, SphereLaser, TrackerPoints]
+Dataset = ArtifactTouches | SphereLaser | TrackerPoints
 
 
 def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
@@ -127,13 +142,14 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
     mask = np.asarray(mask, dtype=bool)
     # the directions of motion belong to the full table's order: computed before cutting
     extras = with_directions(dataset.joints, dataset.extras)
-    changes = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
+    changes: dict[str, Any] = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
     for name in ("joints", "measured", "distance", "flange_poses", "pose"):
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
-    if getattr(dataset, "point", None):
-        changes["point"] = tuple(p for p, keep in zip(dataset.point, mask) if keep)
+    points = getattr(dataset, "point", None)
+    if points:
+        changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)
     return replace(dataset, **changes)
 
 
@@ -189,8 +205,10 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
                                           file=path, where="payload_com", unit=units.length))
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
                   data_path=data_path, payload_com=payload_com, raw=content)
-    reader = {"cross_bar": _cross_bar, "artifact_touches": _artifact,
-              "sphere_laser": _sphere_laser, "tracker_points": _tracker}[kind]
+    readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
+        "cross_bar": _cross_bar, "artifact_touches": _artifact,
+        "sphere_laser": _sphere_laser, "tracker_points": _tracker}
+    reader = readers[kind]
     return reader(content, table, common)
 
 
@@ -320,7 +338,8 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str],
         hint = ""
         if robot.joints[col].revolute and units.angle == "rad" and abs(value) > 2 * np.pi:
             hint = "; the value looks like degrees in a file that declares rad"
-        elif robot.joints[col].revolute and units.angle == "deg" and np.all(np.abs(raw) < 2 * np.pi):
+        elif (robot.joints[col].revolute and units.angle == "deg"
+              and np.all(np.abs(raw) < 2 * np.pi)):
             hint = "; all readings are small: radians in a file that declares deg?"
         elif not robot.joints[col].revolute:
             hint = "; check the length unit (mm or m)"
@@ -334,8 +353,9 @@ def joint_readings(table: Table, robot: Robot, units: Units, used: set[str],
     if huge.any():
         row, col = map(int, np.argwhere(huge)[0])
         kind = "angle" if robot.joints[col].revolute else "length"
-        check_magnitude(Q[row, col], kind, file=table.path, where=f"line {table.line(row)}, q{col + 1}",
-                        shown=raw[row, col], unit=units.unit_name(kind))
+        check_magnitude(Q[row, col], kind, file=table.path,
+                        where=f"line {table.line(row)}, q{col + 1}", shown=raw[row, col],
+                        unit=units.unit_name(kind))
     return Q
 
 
@@ -561,7 +581,8 @@ def _pendant_poses(table: Table, units: Units) -> np.ndarray:
     if bad.size:
         row = int(bad[0])
         raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 within "
-                         f"{QUATERNION_TOLERANCE:g}", file=table.path, where=f"line {table.line(row)}")
+                         f"{QUATERNION_TOLERANCE:g}", file=table.path,
+                         where=f"line {table.line(row)}")
     poses = np.tile(np.eye(4), (len(xyz), 1, 1))
     for i, q in enumerate(quaternions / norms[:, None]):
         poses[i, :3, :3] = matrix_from_quaternion(q)

@@ -44,8 +44,9 @@ def effects_to_dict(result) -> dict | None:
     payload_in_data = any("payload" in r.extras for r in result.residuals)
     for effect in result.effect_models:
         names = effect.parameter_names()
+        own = values[start:start + len(names)]
         entry = {"name": effect.name, "joints": list(effect.joints),
-                 "parameters": {n: float(v) for n, v in zip(names, values[start:start + len(names)])}}
+                 "parameters": {n: float(v) for n, v in zip(names, own)}}
         start += len(names)
         if isinstance(effect, ThermalDrift):
             entry["column"] = effect.column
@@ -150,7 +151,8 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
                              where=where) from None
         if name == "joint_compliance":
             payload |= bool(entry.get("payload", False))
-            effect: Effect = JointCompliance(joints, robot=robot, payload=entry.get("payload", False))
+            effect: Effect = JointCompliance(joints, robot=robot,
+                                             payload=entry.get("payload", False))
         elif name == "joint_coupling":
             effect = JointCoupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
         elif name == "thermal_drift":

@@ -13,7 +13,7 @@ import re
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import yaml
 
@@ -256,6 +256,12 @@ def resolved(path: Path) -> Path:
     return _resolved(path)
 
 
+@overload
+def referenced_file(content: dict, key: str, *, file: Path, allow_outside: bool = False,
+                    required: Literal[True] = True) -> Path: ...
+@overload
+def referenced_file(content: dict, key: str, *, file: Path, allow_outside: bool = False,
+                    required: bool) -> Path | None: ...
 def referenced_file(content: dict, key: str, *, file: Path, allow_outside: bool = False,
                     required: bool = True) -> Path | None:
     """The file a YAML file names under ``key`` (``data: points.csv``), relative to the

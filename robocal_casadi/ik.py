@@ -33,8 +33,9 @@ from __future__ import annotations
 
 import math
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -105,7 +106,7 @@ class IKBatchResult:
 def orientation_angle(R: np.ndarray, R_target: np.ndarray) -> float:
     """Angle [rad] of ``R_target^T R``, accurate near zero (from the chordal distance)."""
     chord = np.linalg.norm(np.asarray(R) - np.asarray(R_target)) / (2.0 * math.sqrt(2.0))
-    return 2.0 * math.asin(min(1.0, chord))
+    return 2.0 * math.asin(min(1.0, float(chord)))
 
 
 class InverseKinematics:
@@ -166,7 +167,7 @@ class InverseKinematics:
                 problem = {"x": q, "p": parameters, "f": 0.5 * ca.sumsqr(r[3:]), "g": r[:3]}
             else:
                 problem = {"x": q, "p": parameters, "f": 0.5 * ca.sumsqr(r)}
-            options = {"print_time": False,
+            options: dict[str, Any] = {"print_time": False,
                        "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-16,
                                  "acceptable_tol": 1e-14, "max_iter": 300}}
             self._ipopt[constrained] = ca.nlpsol(f"ik_ipopt_{self.mode}", "ipopt", problem,
@@ -327,7 +328,7 @@ class InverseKinematics:
         if weight == 0.0:
             return position_error, math.nan
         chord = np.linalg.norm(r[3:]) / weight / 2.0  # = sin(angle / 2)
-        return position_error, 2.0 * math.asin(min(1.0, chord))
+        return position_error, 2.0 * math.asin(min(1.0, float(chord)))
 
     def _solve_once(self, seed, p, position, rotation, offset, weight, soft, lower, upper,
                     position_tolerance, orientation_tolerance, max_iterations) -> IKResult:
@@ -417,7 +418,7 @@ def _levenberg_marquardt(evaluate, q0, lower, upper, max_iterations: int,
     return fit.x, fit.iterations, reason
 
 
-_CACHE: "weakref.WeakKeyDictionary[Kinematics, dict]" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary[Kinematics, dict] = weakref.WeakKeyDictionary()
 
 
 def inverse_kinematics(kinematics: Kinematics, mode: str = "pose",

@@ -36,7 +36,8 @@ def dh_transform(convention: str, revolute: bool, reading, theta, d, a, alpha, b
     else:
         d = d + reading
     if convention == "dh":
-        return rot_z(theta) @ translation(0, 0, d) @ translation(a, 0, 0) @ rot_x(alpha) @ rot_y(beta)
+        return (rot_z(theta) @ translation(0, 0, d) @ translation(a, 0, 0) @ rot_x(alpha)
+                @ rot_y(beta))
     return rot_x(alpha) @ translation(a, 0, 0) @ rot_z(theta) @ translation(0, 0, d) @ rot_y(beta)
 
 
@@ -188,7 +189,8 @@ class Kinematics:
             W = dR @ R.T
             columns.append(ca.vertcat(W[2, 1], W[0, 2], W[1, 0]))
         angular = ca.horzcat(*columns)
-        return ca.Function("tool_jacobian", [q, p], [ca.vertcat(linear, angular)], ["q", "p"], ["J"])
+        return ca.Function("tool_jacobian", [q, p], [ca.vertcat(linear, angular)], ["q", "p"],
+                           ["J"])
 
     def compiled(self, name: str) -> ca.Function:
         """The function ``name`` (e.g. ``"tool_pose"``) as compiled C, built once and cached.

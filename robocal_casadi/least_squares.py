@@ -23,8 +23,9 @@ manner of ``scipy.optimize.least_squares``; codes above 0 are convergence.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -154,6 +155,14 @@ class _State:
     cost: float
 
 
+def _jacobian(evaluate: Evaluate, x: Any) -> np.ndarray:
+    """The Jacobian ``evaluate`` gives at ``x`` when asked for one."""
+    J = evaluate(x, True)[1]
+    if J is None:
+        raise TypeError("evaluate(x, True) returned no Jacobian")
+    return J
+
+
 def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
                         tolerances: Tolerances = Tolerances(), damping: Damping | None = DAMPING,
                         retract: Callable[[Any, np.ndarray], Any] = _vector_retract,
@@ -178,7 +187,7 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
     history = [state.cost]
     for iteration in range(max_iterations):
         if state.J is None:
-            state.J = evaluate(state.x, True)[1]
+            state.J = _jacobian(evaluate, state.x)
         J, r = _weighted(state.J, state.r, weights)
         stop = _stop_before_step(J, r, state.cost, tolerances, history)
         if stop is not None:

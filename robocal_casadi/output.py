@@ -20,8 +20,8 @@ import re
 import shutil
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 MARKER = ".robocal-output"
 MARKER_TEXT = ("robocal_casadi wrote this folder; a run given it as --out replaces it as a "
@@ -53,7 +53,7 @@ def remove_stale_staging(folder: str | Path, name: str | None = None) -> list[Pa
     """Remove staging files and folders in ``folder`` left by killed runs (of the output
     ``name`` only, when given): those whose process is gone, or older than a day.
     Returns what was removed."""
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(Path(folder).iterdir())
     except OSError:

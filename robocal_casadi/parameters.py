@@ -13,8 +13,9 @@ docs/conventions.md#parameter-names.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -68,17 +69,17 @@ class ParameterRegistry:
     def quantity(self, name: str) -> str:
         return self.quantities[self.index(name)]
 
-    def concat(self, other: "ParameterRegistry") -> "ParameterRegistry":
+    def concat(self, other: ParameterRegistry) -> ParameterRegistry:
         """This registry followed by ``other`` (names must not clash)."""
         return ParameterRegistry(self.names + other.names, self.quantities + other.quantities)
 
-    def subset(self, names: Sequence[str]) -> "ParameterRegistry":
+    def subset(self, names: Sequence[str]) -> ParameterRegistry:
         return ParameterRegistry(tuple(names), tuple(self.quantity(n) for n in names))
 
     # ------------------------------------------------------------------ robot geometry
 
     @staticmethod
-    def for_robot(robot: Robot) -> "ParameterRegistry":
+    def for_robot(robot: Robot) -> ParameterRegistry:
         """The geometric parameters of ``robot``: joints, then base, then tool (then the
         flange of a ``urdf`` robot)."""
         names: list[str] = []
@@ -120,7 +121,8 @@ class ParameterRegistry:
                 joints.append(replace(joint, origin=replace(joint.origin, xyz=tuple(v[:3]),
                                                             rpy=tuple(v[3:]))))
                 continue
-            changes = {stem: float(values[self.index(f"{stem}{i}")]) for stem, _ in JOINT_PARAMETERS}
+            changes = {stem: float(values[self.index(f"{stem}{i}")])
+                       for stem, _ in JOINT_PARAMETERS}
             joints.append(replace(joint, **changes))
         frames = {}
         for frame_name in frames_of(robot):

@@ -23,7 +23,7 @@ class Progress:
         self._last = 0.0
         self._start = time.perf_counter()
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         return self
 
     def __exit__(self, *exc) -> None:

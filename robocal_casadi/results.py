@@ -6,13 +6,20 @@ length unit, angles in its angle unit, residual RMS in its length unit).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .robot import Robot
 from .units import Units
+
+if TYPE_CHECKING:
+    from .calibration.problem import Problem
+    from .calibration.selection import Selection
+    from .calibration.solver import Solution
+    from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 
@@ -74,7 +81,7 @@ class EffectFinding:
     parameters: dict[str, float]
     unit: str
     evidence: dict[str, float]
-    std: dict[str, float] = field(default_factory=dict)
+    std: dict[str, float | None] = field(default_factory=dict)
     summary: str = ""
 
     def to_json(self, units: Units | None = None) -> dict:
@@ -247,7 +254,7 @@ class CalibrationResult:
     mounted_quantities: dict[str, str] = field(default_factory=dict)  # name -> length | none
     placement: dict[str, float] = field(default_factory=dict)
     solver: dict[str, Any] = field(default_factory=dict)
-    effect_models: tuple = ()  # the Effect objects, with ``effect_values`` (SI)
+    effect_models: tuple[Effect, ...] = ()  # the effects fitted, values in ``effect_values``
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
@@ -260,6 +267,72 @@ class CalibrationResult:
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
     delivered: Any = None  # ``effect_model.geometry_only``: RMS [m] each output delivers
+
+    @classmethod
+    def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
+                 final_problem: Problem, nominal: Solution, geometric: Solution,
+                 final: Solution, std: np.ndarray, identifiability: Identifiability,
+                 parameters: Sequence[ParameterEstimate],
+                 parameters_geometric: Sequence[ParameterEstimate],
+                 effects: Sequence[EffectFinding], diagnosis: Sequence[dict], fit: RmsSummary,
+                 validation: RmsSummary | None, residuals: Sequence[DatasetResiduals],
+                 validation_residuals: Sequence[DatasetResiduals],
+                 spheres: Sequence[SphereEstimate], selection: Selection | None,
+                 unexplained: Any, recommended: str, recommendation: str,
+                 prior: PriorSummary | None, notes: Sequence[str], method: str,
+                 loss: str) -> CalibrationResult:
+        """The result of a calibration from its stages.
+
+        ``problem`` is the geometric identification problem (``nominal`` and ``geometric``
+        its solutions), ``final_problem`` the one with the effects diagnosis added
+        (``final`` its solution; the same problem when it added none); ``std`` [SI] the
+        standard error of every unknown of ``final_problem`` (NaN where not estimated).
+        The calibrated robot takes the ``recommended`` model's geometry.
+        """
+        names = final_problem.unknowns.names
+
+        def std_of(i: int) -> float | None:
+            return float(std[i]) if np.isfinite(std[i]) else None
+
+        mounted_slice = final_problem.slices["mounted"]
+        mounted = {names[i]: (float(final.x[i]), std_of(i))
+                   for i in range(mounted_slice.start, mounted_slice.stop)}
+        placement_slice = final_problem.slices["placement"]
+        placement = {names[i]: float(final.x[i])
+                     for i in range(placement_slice.start, placement_slice.stop)}
+        effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
+                                        for n in f.parameters}) for f in effects)
+        chosen = final.x if recommended == "final" else geometric.x
+        return cls(
+            datasets=datasets,
+            robot_nominal=robot,
+            robot_calibrated=robot.with_parameters(chosen[problem.slices["robot"]]),
+            parameters=tuple(parameters),
+            identifiability=identifiability,
+            condition_number=identifiability.condition_number,
+            effects=effects,
+            fit=fit,
+            validation=validation,
+            residuals=tuple(residuals),
+            validation_residuals=tuple(validation_residuals),
+            mounted=mounted,
+            mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
+            placement=placement,
+            solver={"method": method, "loss": loss, "iterations": final.iterations,
+                    "status": final.status, "seconds": geometric.seconds + nominal.seconds,
+                    "residuals": problem.size, "free_unknowns": int(geometric.free.sum())},
+            effect_models=tuple(final_problem.effects),
+            effect_values=final.x[final_problem.slices["effects"]].copy(),
+            diagnosis=tuple(diagnosis),
+            selection={} if selection is None else dict(selection.dropped),
+            parameters_geometric=tuple(parameters_geometric),
+            unexplained=unexplained,
+            recommended=recommended,
+            recommendation=recommendation,
+            prior=prior,
+            spheres=tuple(spheres),
+            notes=tuple(notes),
+        )
 
     @property
     def warning(self) -> str:
@@ -369,7 +442,8 @@ def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
                                                 "robocal compensate, a controller's DH table)",
                                      **scaled(delivered["robot_calibrated.yaml"])}}
     if delivered.get("with_effects"):
-        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified effects "
-                                        "(robocal fk and robocal compensate --with-effects)",
-                             **scaled(delivered["with_effects"])}
+        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified "
+                                                     "effects (robocal fk and robocal compensate "
+                                                     "--with-effects)",
+                                          **scaled(delivered["with_effects"])}
     return out

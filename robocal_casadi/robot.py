@@ -29,8 +29,18 @@ import numpy as np
 import yaml
 
 from .errors import InputError
-from .fields import (MAX_LENGTH, check_keys, cut, load_yaml, mapping, number, quantities, quantity, require,
-                     vector)
+from .fields import (
+    MAX_LENGTH,
+    check_keys,
+    cut,
+    load_yaml,
+    mapping,
+    number,
+    quantities,
+    quantity,
+    require,
+    vector,
+)
 from .parameters import ParameterRegistry
 from .transforms import pose_from_xyz_rpy
 from .units import SI, Units, units_of
@@ -187,7 +197,8 @@ class Robot:
         return total
 
     def reading_scales(self) -> np.ndarray:
-        """SI per file unit of each joint reading (angle unit for revolute, length for prismatic)."""
+        """SI per file unit of each joint reading (angle unit for revolute, length for
+        prismatic)."""
         return np.array(
             [self.units.angle_scale if j.revolute else self.units.length_scale for j in self.joints]
         )
@@ -200,11 +211,11 @@ class Robot:
         """The nominal geometric parameter vector in registry order, SI."""
         return self.parameters().vector_of(self)
 
-    def with_parameters(self, values: np.ndarray) -> "Robot":
+    def with_parameters(self, values: np.ndarray) -> Robot:
         """A copy whose geometry is ``values`` (registry order, SI)."""
         return self.parameters().robot_from(self, np.asarray(values, dtype=float))
 
-    def with_units(self, units: Units) -> "Robot":
+    def with_units(self, units: Units) -> Robot:
         return replace(self, units=units)
 
 

@@ -53,9 +53,10 @@ laser distance.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -68,12 +69,18 @@ from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .measurement import MODELS
 from .output import atomic_directory, written_by_robocal
-from .progress import Progress
 from .parameters import perturbed_stems
+from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import write_table
-from .transforms import (invert, matrix_from_quaternion, pose_from_xyz_rpy,
-                         quaternion_from_matrix, rot_z, rpy_from_matrix)
+from .transforms import (
+    invert,
+    matrix_from_quaternion,
+    pose_from_xyz_rpy,
+    quaternion_from_matrix,
+    rot_z,
+    rpy_from_matrix,
+)
 from .units import Units
 
 TABLES = {kind: model.table for kind, model in MODELS.items()}
@@ -253,7 +260,7 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
             if isinstance(spec, Mapping):
                 value = next(iter(spec.values()), None) if len(spec) == 1 else spec
             try:
-                value = float(value)  # type: ignore[arg-type]
+                value = float(value)
             except (TypeError, ValueError):
                 raise InputError(f"expected a coefficient k [1/K], got {spec!r}",
                                  where=where) from None
@@ -414,7 +421,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
 
     ``robot``: the nominal robot (a ``Robot`` or a robot file). ``rows``: the
     measurement model's units (``unit_name``): readings for the tracker and the laser;
-    placements of the bar or artifact for touches. ``noise`` [m] (module docstring). ``geometric_errors``: see
+    placements of the bar or artifact for touches. ``noise`` [m] (module docstring).
+    ``geometric_errors``: see
     ``true_parameters`` (None, ``(length_std [m], angle_std [rad])`` or ``{name: error}``).
     ``effects``: see ``parse_effects`` (SI). ``seed``: everything random follows from it.
     ``units``: of the dataset file and table (default the robot file's). ``mounted_error``
@@ -742,7 +750,7 @@ def _touches(setup: _Setup) -> _Generated:
             sockets_truth[index] = dict(zip(names, positions))
             bar.update(len(sockets_truth))
     bar_length = float(setup.bar_length)
-    Q_read = setup.in_order(Q_read, Q_true, payloads)
+    Q_read_array = setup.in_order(Q_read, Q_true, payloads)
 
     def fields(units: Units) -> dict:
         out: dict[str, Any] = {"probe": {"xyz": _in(units, DEFAULT_PROBE)}}
@@ -752,7 +760,7 @@ def _touches(setup: _Setup) -> _Generated:
         return out
 
     return _Generated(
-        Q_read=Q_read, extras=_extras(payloads, temperatures, setup),
+        Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
         mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
         leading={"pose": poses, "point": points})
 
@@ -818,9 +826,14 @@ def _laser_scan(setup: _Setup) -> _Generated:
             break
     centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
 
-    Q_read, Q_true, payloads, temperatures, distances = [], [], [], [], []
+    Q_read: list[np.ndarray] = []
+    Q_true: list[np.ndarray] = []
+    payloads: list[float] = []
+    temperatures: list[float | None] = []
+    distances: list[float] = []
     attempts = 0
-    with Progress(f"simulate {setup.kind}", total=setup.rows) if setup.progress else _Quiet() as bar:
+    label = f"simulate {setup.kind}"
+    with Progress(label, total=setup.rows) if setup.progress else _Quiet() as bar:
         while len(Q_read) < setup.rows:
             attempts += 1
             if attempts > 20 * setup.rows + 20:

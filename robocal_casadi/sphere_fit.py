@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -109,7 +110,7 @@ class Scan:
     radius: float
 
     @staticmethod
-    def from_poses(flange_poses: np.ndarray, distance: np.ndarray, radius: float) -> "Scan":
+    def from_poses(flange_poses: np.ndarray, distance: np.ndarray, radius: float) -> Scan:
         flange_poses = np.asarray(flange_poses, float)
         return Scan(np.ascontiguousarray(flange_poses[:, :3, :3].transpose(1, 2, 0)),
                     np.ascontiguousarray(flange_poses[:, :3, 3].T),
@@ -214,8 +215,9 @@ def _levenberg_marquardt(scan: Scan, origin, direction, centre, *, max_iteration
     ``EXACT_FIT`` (noise-free data), or when a step falls below ``step_tolerance`` of the
     scaled state.
     """
-    def evaluate(state, jacobian: bool):
-        return scan.residual_and_jacobian(*state, tangent_basis(state[1]))
+    def evaluate(state: tuple[np.ndarray, np.ndarray, np.ndarray], jacobian: bool):
+        origin, direction, centre = state
+        return scan.residual_and_jacobian(origin, direction, centre, tangent_basis(direction))
 
     def retract(state, delta):
         return _step(*state, delta)
@@ -249,7 +251,7 @@ def _ipopt_solver(count: int) -> ca.Function:
     radius = ca.SX.sym("radius")
     p0, n, c = x[0:3], beam_direction(x[3:6]), x[6:9]
     offset = [p0[j] + distance * n[j] for j in range(3)]
-    squared = 0
+    squared: ca.SX | float = 0
     for k in range(3):  # R_i[k, j] sits at row 3 j + k of vec(R_i)
         coordinate = translations[k, :] - c[k]
         for j in range(3):
@@ -259,8 +261,10 @@ def _ipopt_solver(count: int) -> ca.Function:
     parameters = ca.vertcat(ca.vec(rotations), ca.vec(translations), ca.vec(distance), radius)
     nlp = {"x": x, "p": parameters, "f": 0.5 * ca.sumsqr(residual),
            "g": ca.dot(x[3:6], x[3:6]) - 1.0}  # the length of the free beam vector
-    options = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
-                                              "acceptable_tol": 1e-8, "max_iter": 200}}
+    options: dict[str, Any] = {
+        "print_time": False,
+        "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10, "acceptable_tol": 1e-8,
+                  "max_iter": 200}}
     return ca.nlpsol(f"sphere_fit_{count}", "ipopt", nlp, options)
 
 
@@ -313,13 +317,13 @@ def algebraic_start(scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ``n`` (normalised) and ``c`` are read from the linear part. Exact without noise when
     the orientations and distances vary enough; a start, not an estimate.
     """
-    R, t, l = scan.rotations, scan.translations, scan.distance
-    count = len(l)
+    R, t, distance = scan.rotations, scan.translations, scan.distance
+    count = len(distance)
     rotated = np.einsum("jin,jn->in", R, t)  # R_i^T t_i, 3 x N
     entries = R.reshape(9, count)  # R_i[j, k] at row 3 j + k, matching vec(M) row-major
-    A = np.vstack([np.ones(count), 2 * l, -2 * t, 2 * rotated, 2 * l * rotated,
-                   -2 * entries, -2 * l * entries]).T
-    b = scan.radius ** 2 - l ** 2 - np.sum(t * t, axis=0)
+    A = np.vstack([np.ones(count), 2 * distance, -2 * t, 2 * rotated, 2 * distance * rotated,
+                   -2 * entries, -2 * distance * entries]).T
+    b = scan.radius ** 2 - distance ** 2 - np.sum(t * t, axis=0)
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     z, *_ = np.linalg.lstsq(A / scale, b, rcond=None)

@@ -78,9 +78,9 @@ def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
     else:
         s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0 else -q
+    quaternion = np.array(q)
+    quaternion /= np.linalg.norm(quaternion)
+    return quaternion if quaternion[0] >= 0 else -quaternion
 
 
 def matrix_from_quaternion(q) -> np.ndarray:

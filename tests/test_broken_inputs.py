@@ -19,8 +19,8 @@ import shutil
 import stat
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -303,7 +303,8 @@ CASES = [
     ("robot base rpy of length 2", "bar", "fk",
      yaml_set("robot.yaml", ("base",), {"xyz": [0, 0, 0], "rpy": [0, 0]}),
      ["robot.yaml", "base.rpy", "3 numbers"]),
-    ("robot base unknown key", "bar", "fk", yaml_set("robot.yaml", ("base",), {"position": [0, 0, 0]}),
+    ("robot base unknown key", "bar", "fk",
+     yaml_set("robot.yaml", ("base",), {"position": [0, 0, 0]}),
      ["robot.yaml", "base.position", "unknown key"]),
     ("robot tool a list", "bar", "fk", yaml_set("robot.yaml", ("tool",), [0, 0, 100]),
      ["robot.yaml", "tool", "mapping"]),
@@ -402,7 +403,8 @@ CASES = [
      yaml_set("dataset.yaml", ("artifact", "distances", 0), [["hole_0"], "hole_1", 50.0]),
      ["dataset.yaml", "artifact.distances[0][0]", "socket name"]),
     ("sphere radius zero", "sphere", "calibrate",
-     yaml_set("dataset.yaml", ("sphere", "radius"), 0), ["dataset.yaml", "sphere.radius", "positive"]),
+     yaml_set("dataset.yaml", ("sphere", "radius"), 0),
+     ["dataset.yaml", "sphere.radius", "positive"]),
     ("sphere block missing", "sphere", "calibrate",
      yaml_set("dataset.yaml", ("sphere",), delete=True), ["dataset.yaml", "sphere", "missing"]),
     ("laser direction zero", "sphere", "calibrate",

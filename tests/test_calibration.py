@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
 from robocal_casadi.calibration import calibrate, evaluate
+from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
 from robocal_casadi.simulate import simulate
 
 NOISE = 10e-6  # [m]
@@ -179,8 +179,8 @@ def test_condition_number_selection_drops_what_hurts(tmp_path):
     """A bar placement repeated many times adds no new direction: selection drops copies."""
     from dataclasses import replace
 
-    from robocal_casadi.calibration.selection import select_by_condition
     from robocal_casadi.calibration import Problem, analyse_identifiability, models_for, solve
+    from robocal_casadi.calibration.selection import select_by_condition
 
     robot = industrial_6r()
     data = simulate(robot, "cross_bar", out_dir=tmp_path / "bar", rows=40, noise=NOISE,

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal_casadi.cli import main
 from robocal_casadi.calibration.degeneracy import check_finite
+from robocal_casadi.calibration.identifiability import analyse
+from robocal_casadi.cli import main
 from robocal_casadi.errors import RobocalError, SolverError
 from robocal_casadi.examples import ROBOTS
-from robocal_casadi.calibration.identifiability import analyse
 from robocal_casadi.simulate import simulate
 
 

@@ -11,6 +11,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from test_shipped_reports import REPORTS, check_report_folder
 
 import robocal_casadi.report as report_package
 from robocal_casadi.cli import main
@@ -18,8 +19,6 @@ from robocal_casadi.commands import demo
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.output import MARKER
 from robocal_casadi.simulate import simulate
-
-from test_shipped_reports import REPORTS, check_report_folder
 
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 64  # stands in for a rendered screenshot
 

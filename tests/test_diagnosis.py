@@ -241,8 +241,8 @@ def test_two_effects_each_credited_with_its_own_share(tmp_path):
 ])
 def test_undeclared_effect_in_cross_bar_data(tmp_path, effect, joint, truth):
     """Bar data carry no absolute position, yet a joint error still shows in the lengths."""
-    from robocal_casadi.effects import make_effect
     from robocal_casadi.calibration import evaluate
+    from robocal_casadi.effects import make_effect
 
     robot = ROBOTS["industrial_6r"]()
     values = tuple(truth.values())

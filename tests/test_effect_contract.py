@@ -135,10 +135,10 @@ def test_jacobians_match_finite_differences(name):
         e = np.array([extras[c][i] for c in columns])
         J_q, J_theta, J_dp = (np.asarray(m) for m in jacobians(Q[i], theta, e))
 
-        def dq_of_q(q):
+        def dq_of_q(q, row=row):
             return effect.contribution(ROBOT, theta, q[None], row, com).dq[0]
 
-        def of_theta(t):
+        def of_theta(t, i=i, row=row):
             c = effect.contribution(ROBOT, t, Q[i:i + 1], row, com)
             return np.concatenate([c.dq[0], c.dp[0]])
 

@@ -10,8 +10,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from robocal_casadi.effects import (EFFECTS, JointCompliance, JointCyclic, JointScale, RowContext,
-                                    ThermalDrift, make_effect)
+from robocal_casadi.effects import (
+    EFFECTS,
+    JointCompliance,
+    JointCyclic,
+    JointScale,
+    RowContext,
+    ThermalDrift,
+    make_effect,
+)
 from robocal_casadi.effects.compliance import independent_terms
 from robocal_casadi.effects.gravity import GravityModel
 from robocal_casadi.errors import InputError

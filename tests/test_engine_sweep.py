@@ -23,9 +23,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
 from robocal_casadi.effects import make_effect
 from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp, ur_type
-from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
 from robocal_casadi.measurement.base import MeasurementModel
 from robocal_casadi.measurement.tracker import TrackerModel
 from robocal_casadi.robot import Frame
@@ -196,8 +196,9 @@ def test_compiled_code_does_not_depend_on_the_data(tmp_path):
         extras = {"temperature": np.asarray(data.extras["temperature"], float)}
         problem = Problem(robot, models_for([data]),
                           [make_effect("thermal_drift", (), robot, extras)])
-        _, jacobian, _ = problem._separable(problem.models[0])
-        sources.append(generated_source(jacobian.function))
+        separable = problem._separable(problem.models[0])
+        assert separable is not None
+        sources.append(generated_source(separable.jacobian.function))
         rotations.append(problem.models[0].R0)
         assert problem.effects[0].constants() == (float(np.mean(extras["temperature"])),)
     assert not np.allclose(rotations[0], rotations[1])  # the data did differ

@@ -26,9 +26,9 @@ from robocal_casadi import codegen, examples  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.cli import main  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
+from robocal_casadi.errors import InputError  # noqa: E402
 from robocal_casadi.fleet import high_outliers, load_fleet, spread  # noqa: E402
 from robocal_casadi.fleet.outliers import LIMIT, Move  # noqa: E402
-from robocal_casadi.errors import InputError  # noqa: E402
 from robocal_casadi.simulate import simulate  # noqa: E402
 
 ROWS = 100

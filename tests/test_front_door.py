@@ -12,16 +12,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from planning import design_plan
+from planning.indices import canonical
 from robocal_casadi import Tracker, calibrate, compensate, load_dataset, simulate
+from robocal_casadi.calibration import Problem, models_for
+from robocal_casadi.calibration.solver import solve
 from robocal_casadi.checks import choice, count, positive, rotation_matrix
 from robocal_casadi.errors import ArgumentError, RobocalError
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.calibration import Problem, models_for
 from robocal_casadi.ik import InverseKinematics
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.calibration.solver import solve
-from planning import design_plan
-from planning.indices import canonical
 
 
 @pytest.fixture(scope="module")

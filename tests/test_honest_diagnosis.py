@@ -15,10 +15,9 @@ import numpy as np
 import pytest
 
 from robocal_casadi import load_dataset
-from robocal_casadi.calibration import Problem, calibrate, models_for, solve
+from robocal_casadi.calibration import Problem, calibrate, models_for
 from robocal_casadi.calibration.folds import fold_schemes
 from robocal_casadi.calibration.identification import recommend
-from robocal_casadi.calibration.unexplained import find
 from robocal_casadi.commands.calibrate import summary
 from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.examples import ROBOTS
@@ -128,7 +127,7 @@ def test_recommendation_follows_the_held_out_data():
     assert choice == "geometric" and "worse" in why
 
 
-# ----------------------------------------------------------------------------- effects no library names
+# ------------------------------------------------------------- effects no library names
 
 
 def test_a_link_that_sags_with_its_angle_is_left_unexplained_and_named(tmp_path):

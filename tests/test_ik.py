@@ -12,8 +12,14 @@ import numpy as np
 import pytest
 
 from robocal_casadi.examples import ROBOTS
-from robocal_casadi.ik import (IKResult, inverse_kinematics, orientation_angle, random_joints,
-                               solve_ik, solve_ik_batch)
+from robocal_casadi.ik import (
+    IKResult,
+    inverse_kinematics,
+    orientation_angle,
+    random_joints,
+    solve_ik,
+    solve_ik_batch,
+)
 from robocal_casadi.kinematics import Kinematics, nominal_pose
 from robocal_casadi.transforms import pose_from_xyz_rpy
 

@@ -14,8 +14,12 @@ from hypothesis import strategies as st
 
 from robocal_casadi import examples
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import (export_urdf, frame_placements, gravity_torques,
-                                            pinocchio_model)
+from robocal_casadi.pinocchio_model import (
+    export_urdf,
+    frame_placements,
+    gravity_torques,
+    pinocchio_model,
+)
 
 TOLERANCE = 1e-12  # [m] for positions, dimensionless for rotation matrix entries
 STEP = 1e-6  # central-difference step [m] or [rad]
@@ -110,11 +114,12 @@ def test_point_jacobians_agree_with_finite_differences(any_robot, samples):
         position, J_p, J_q, J_offset = (np.asarray(v)
                                         for v in kinematics.point_jacobians(q, p, offset))
         np.testing.assert_allclose(position.ravel(), point(q, p, offset), rtol=0, atol=1e-15)
-        np.testing.assert_allclose(J_p, central_difference(lambda x: point(q, x, offset), p),
+        np.testing.assert_allclose(J_p, central_difference(lambda x, q=q: point(q, x, offset), p),
                                    rtol=0, atol=FD_TOLERANCE)
         np.testing.assert_allclose(J_q, central_difference(lambda x: point(x, p, offset), q),
                                    rtol=0, atol=FD_TOLERANCE)
-        np.testing.assert_allclose(J_offset, central_difference(lambda x: point(q, p, x), offset),
+        np.testing.assert_allclose(J_offset,
+                                   central_difference(lambda x, q=q: point(q, p, x), offset),
                                    rtol=0, atol=FD_TOLERANCE)
 
 

@@ -5,8 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal_casadi.least_squares import (STATUS, Damping, Tolerances, damped_step,
-                                          levenberg_marquardt)
+from robocal_casadi.least_squares import (
+    STATUS,
+    Damping,
+    Tolerances,
+    damped_step,
+    levenberg_marquardt,
+)
 
 scipy_optimize = pytest.importorskip("scipy.optimize")
 

@@ -11,6 +11,10 @@ import numpy as np
 import pytest
 import yaml
 
+from planning import design_plan
+from planning.collision import Body, segment_distances
+from planning.order import largest_moves, nearest_turns, open_path
+from planning.ranges import ELBOW_LIMIT, elbows, working_ranges
 from robocal_casadi.cli import main
 from robocal_casadi.datasets import load_dataset
 from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
@@ -18,11 +22,6 @@ from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.robot import save_robot
 from robocal_casadi.sphere_fit import fit_sensor
 from robocal_casadi.table import read_table
-
-from planning import design_plan
-from planning.collision import Body, segment_distances
-from planning.order import largest_moves, nearest_turns, open_path
-from planning.ranges import ELBOW_LIMIT, elbows, working_ranges
 
 # ----------------------------------------------------------------------------- geometry
 

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
+from planning import design_plan, engine_identifiability, index_of_jacobian, index_value, write_plan
+from planning.indices import better, canonical, maximise, scale_columns
 from robocal_casadi.cli import main
 from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
@@ -14,10 +16,6 @@ from robocal_casadi.examples import industrial_6r, panda_7dof
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.robot import save_robot
 from robocal_casadi.table import read_table
-
-from planning import (design_plan, engine_identifiability, index_of_jacobian, index_value,
-                      write_plan)
-from planning.indices import better, canonical, maximise, scale_columns
 
 # ----------------------------------------------------------------------------- indices
 

@@ -10,12 +10,11 @@ import numpy as np
 import pytest
 
 from robocal_casadi import examples
-from robocal_casadi.commands.demo import data_folder
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.errors import InputError
 from robocal_casadi.calibration import calibrate, solve
 from robocal_casadi.calibration.prior import Prior, PriorProblem, posterior, tolerance_of
-from robocal_casadi.datasets import dataset_rows
+from robocal_casadi.commands.demo import data_folder
+from robocal_casadi.datasets import dataset_rows, load_dataset
+from robocal_casadi.errors import InputError
 from robocal_casadi.parameters import ParameterRegistry
 from robocal_casadi.results import EffectFinding
 from robocal_casadi.robot import load_robot, robot_to_dict
@@ -93,7 +92,7 @@ def test_ur10_target_offset_along_the_flange_axis_is_flagged_prior_dominated():
     fit = load_dataset(folder / "series_D_fit.yaml")
     held_out = load_dataset(folder / "series_D_validation.yaml")
     strict = calibrate([fit], [held_out], diagnose=False, rule="fraction")
-    result = calibrate([fit], [held_out], diagnose=False)
+    result = calibrate([fit], [held_out], diagnose=False, rule="prior")
     # The old rule holds it at nominal; the prior estimates it but says the prior decided.
     assert "target_z" not in strict.identifiability.identifiable
     assert "target_z" in result.identifiability.identifiable
@@ -125,7 +124,7 @@ def test_result_json_carries_sphere_percentiles_and_noise(tmp_path):
     keep = np.arange(dataset.rows) % 4 != 3
     fit = replace(dataset_rows(dataset, keep), path=dataset.path.with_name("fit.yaml"))
     held = replace(dataset_rows(dataset, ~keep), path=dataset.path.with_name("held.yaml"))
-    result = calibrate([fit], [held], diagnose=False)
+    result = calibrate([fit], [held], diagnose=False, rule="prior")
     content = json.loads(json.dumps(result.to_json()))
     spheres = {s["role"]: s for s in content["spheres"]}
     true_centre = np.asarray(sim.truth.placement["sphere_centre"]) * 1e3  # mm
@@ -164,7 +163,7 @@ def test_repeated_placements_do_not_shrink_standard_errors(tmp_path, capsys):
                    noise=10e-6, geometric_errors=(0.3e-3, math.radians(0.03)), seed=2,
                    progress=False)
     dataset = sim.load()
-    once = calibrate([dataset], diagnose=False)
+    once = calibrate([dataset], diagnose=False, rule="prior")
     assert "notes" not in once.to_json()
     capsys.readouterr()
     # Every placement recorded three times under new placement ids.
@@ -175,7 +174,7 @@ def test_repeated_placements_do_not_shrink_standard_errors(tmp_path, capsys):
         pose=np.concatenate([dataset.pose + k * shift for k in range(copies)]),
         point=dataset.point * copies,
         extras={k: np.tile(v, copies) for k, v in dataset.extras.items()})
-    thrice = calibrate([repeated], diagnose=False)
+    thrice = calibrate([repeated], diagnose=False, rule="prior")
     err = capsys.readouterr().err
     assert err.count("repeat an earlier one exactly") == 1
     assert "80 of 120 units" in err

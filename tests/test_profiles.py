@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from urdf_robots import ur10_urdf, write
 
 from robocal_casadi.cli import main
 from robocal_casadi.profiles import profile_parameters
 from robocal_casadi.robot import load_robot
 from robocal_casadi.simulate import simulate
-from urdf_robots import ur10_urdf, write
 
-UR10_DH = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
+UR10_DH = (Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa"
+           / "robot.yaml")
 # beta3 tilts joint 3's axis: plain DH cannot hold it (joints 2, 3, 4 are parallel)
 ERRORS = {"a2": 4e-4, "d4": -3e-4, "theta5": -6e-4, "beta3": 4e-4}
 
@@ -63,7 +64,8 @@ def test_kuka_fits_only_zero_offsets_base_and_tool(data, tmp_path, capsys):
     assert calibrated.joints[4].theta != 0.0  # theta5 was fitted
     fitted = {p["name"] for p in result["parameters"] if p["identifiable"]}
     assert fitted <= set(profile_parameters("kuka", nominal))
-    assert result["profile"]["fit"]["rms_final"] > result["profile"]["fit"]["rms_final_unrestricted"]
+    fit = result["profile"]["fit"]
+    assert fit["rms_final"] > fit["rms_final_unrestricted"]
 
 
 def test_ur_profile_of_a_urdf_robot_and_refusals(data, tmp_path, capsys):

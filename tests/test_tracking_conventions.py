@@ -111,7 +111,8 @@ def write_job(folder, robot, goals, *, camera: dict, orientation: str, extra: di
     return folder / "job.yaml"
 
 
-@pytest.mark.parametrize("camera_form, orientation", [("rpy", "rvec"), ("quaternion", "quaternion")])
+@pytest.mark.parametrize("camera_form, orientation",
+                         [("rpy", "rvec"), ("quaternion", "quaternion")])
 def test_job_file_with_hand_eye_camera_and_opencv_marker(tmp_path, camera_form, orientation):
     robot, goals = scene()
     if camera_form == "rpy":

@@ -9,6 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import yaml
+from urdf_robots import panda_urdf, ur10_urdf, write
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.cli import main
@@ -17,7 +18,6 @@ from robocal_casadi.errors import InputError
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.robot import load_robot, robot_from_dict, robot_to_dict
 from robocal_casadi.simulate import simulate
-from urdf_robots import panda_urdf, ur10_urdf, write
 
 PACKAGE_DATA = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data"
 UR10_DH = PACKAGE_DATA / "ur10-ipa" / "robot.yaml"

@@ -7,8 +7,13 @@ The public API is re-exported here flat; the submodules hold one concept each.
 
 from .diagnosis import Diagnosis
 from .identifiability import PRACTICAL_TOLERANCE, analyse
-from .identification import (analyse_identifiability, calibrate, evaluate, models_for,
-                             refit_placement)
+from .identification import (
+                             analyse_identifiability,
+                             calibrate,
+                             evaluate,
+                             models_for,
+                             refit_placement,
+)
 from .problem import Problem
 from .selection import Selection, select_by_condition
 from .solver import METHODS, Solution, solve

@@ -11,7 +11,7 @@ residual or Jacobian is not finite where no simpler cause was recognised.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -42,8 +42,9 @@ def check_dataset(dataset) -> None:
                   for j in dataset.robot.joints]
         shown = ", ".join(f"{v / k:.6g}" for v, k in zip(joints[0], scales))
         raise InputError(f"all {len(joints)} readings were taken at the same joints "
-                         f"[{shown}] ({units.angle}, {units.length}): the robot never moved, so the data say nothing "
-                         f"about its geometry; move it between readings", file=where)
+                         f"[{shown}] ({units.angle}, {units.length}): the robot never moved, "
+                         f"so the data say nothing about its geometry; move it between "
+                         f"readings", file=where)
     if isinstance(dataset, ArtifactTouches):
         _check_sockets(dataset, joints, where)
     measured = getattr(dataset, "measured", None)

@@ -57,9 +57,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -69,7 +68,7 @@ from ..progress import Progress
 from ..results import EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
-from .solver import Solution, solve
+from .solver import Loss, Method, Solution, solve
 
 BIC_THRESHOLD = 10.0
 ABSORBED = 1e-3  # relative remaining column norm below which the geometry holds the effect
@@ -460,7 +459,7 @@ class _Step:
 
 
 def run(problem: Problem, geometric: Solution, identifiability: Identifiability | None = None,
-        *, method: str = "lm", loss: str = "linear", folds: int = FOLDS,
+        *, method: Method = "lm", loss: Loss = "linear", folds: int = FOLDS,
         bic_threshold: float = BIC_THRESHOLD, max_rounds: int = MAX_ROUNDS, seed: int = 0,
         progress: bool = True, available_columns=None) -> Diagnosis:
     """Diagnose the residual of ``geometric`` (a solution of ``problem``); see the module.
@@ -537,7 +536,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
                     reason = _implausible(effect_of[s.candidate], values)
                     if reason:
-                        verdict = f"implausible after refit ({reason}): stands in for something else"
+                        verdict = (f"implausible after refit ({reason}): stands in for "
+                                   f"something else")
                 if not verdict:
                     decisions[id(s)] = "added"
                     accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)
@@ -579,7 +579,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
 
 
 def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,
-           steps: list[_Step], extras: dict, method: str, loss: str):
+           steps: list[_Step], extras: dict, method: Method, loss: Loss):
     """The problem with the declared and the added effects only, solved jointly."""
     units: dict[tuple[str, str | None], list[Effect]] = {}
     for step in steps:
@@ -609,7 +609,7 @@ def _groups(steps: list[_Step]) -> dict[tuple[str, str | None], list[_Step]]:
 
 
 def _evidence(final: Problem, solution: Solution, groups: dict, schemes,
-              n_errors: int, method: str, loss: str) -> dict:
+              n_errors: int, method: Method, loss: Loss) -> dict:
     """Per effect type: what it adds to the final model with everything else in it.
 
     With one type added this is its path from the geometric model (the steps' numbers).
@@ -654,7 +654,8 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
         kept = [n for s in group for n in s.kept]
         held = [n for s in group for n in s.held]
         values = {n: float(solution.x[problem.unknowns.index(n)]) for n in kept}
-        errors = {n: float(std[problem.unknowns.index(n)]) for n in kept}
+        errors: dict[str, float | None] = {n: float(std[problem.unknowns.index(n)])
+                                           for n in kept}
         effect = next(e for e in problem.effects if e.name == name
                       and set(kept) <= set(e.parameter_names()))
         text = effect.describe(values, units)

@@ -21,8 +21,8 @@ The last three are *extrapolating* schemes. Residual entries that belong to no u
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

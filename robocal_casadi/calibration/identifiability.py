@@ -27,7 +27,7 @@ columns after projection, each scaled to unit length.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -74,8 +74,8 @@ def pivoted_qr_order(columns: np.ndarray, priority: Sequence[int],
 
     At each step, among the columns whose remaining norm is at least ``PREFERENCE_BAND``
     times the largest, picks the one with the smallest ``priority``: natural parameters
-    win over equivalent ones while every pick stays well conditioned. Returns the chosen column indices and the remaining
-    norms of all columns after the last pick.
+    win over equivalent ones while every pick stays well conditioned. Returns the chosen
+    column indices and the remaining norms of all columns after the last pick.
     """
     A = columns.copy()
     chosen: list[int] = []

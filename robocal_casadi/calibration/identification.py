@@ -15,9 +15,10 @@
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -26,15 +27,34 @@ from ..datasets import DatasetBase
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..measurement import SphereLaserModel, model_for
-from ..results import (CalibrationResult, DatasetResiduals, Identifiability, ParameterEstimate,
-                       PriorSummary, RmsSummary, SphereEstimate)
+from ..results import (
+    DOMINATED_SHARE,
+    CalibrationResult,
+    DatasetResiduals,
+    EffectFinding,
+    Identifiability,
+    ParameterEstimate,
+    PriorSummary,
+    RmsSummary,
+    SphereEstimate,
+)
+from ..robot import Robot
 from . import diagnosis, unexplained
 from .degeneracy import check_dataset, check_finite
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
-from .prior import (DOMINATED_SHARE, SIGMA_ITERATIONS, SIGMA_SETTLED, Posterior, Prior,
-                    PriorProblem, copy_weights, duplicate_rows, posterior, tolerance_of)
+from .prior import (
+    SIGMA_ITERATIONS,
+    SIGMA_SETTLED,
+    Posterior,
+    Prior,
+    PriorProblem,
+    copy_weights,
+    duplicate_rows,
+    posterior,
+    tolerance_of,
+)
 from .problem import Problem
-from .selection import select_by_condition
+from .selection import Selection, select_by_condition
 from .solver import LOSSES, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
@@ -42,7 +62,8 @@ __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_f
 
 def models_for(datasets: Sequence, prefix: str = "") -> list:
     """One measurement model per dataset, labelled by file stem (made unique)."""
-    models, seen = [], {}
+    models = []
+    seen: dict[str, int] = {}
     for dataset in datasets:
         label = prefix + Path(dataset.path).stem
         seen[label] = seen.get(label, 0) + 1
@@ -84,10 +105,10 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
     names = problem.unknowns.names
     if candidates is None:
         mask = problem.mask("robot", "effects", "mounted")
-        candidate_index = list(np.flatnonzero(mask))
+        candidate_index = [int(i) for i in np.flatnonzero(mask)]
     else:
         candidate_index = [problem.unknowns.index(n) for n in candidates]
-    placement = list(np.flatnonzero(problem.mask("placement")))
+    placement = [int(i) for i in np.flatnonzero(problem.mask("placement"))]
     invisible = "; ".join(sorted({getattr(m, "invisible_reason", "no effect on these data")
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
@@ -165,7 +186,7 @@ def _rms(errors: Sequence[np.ndarray]) -> float:
     return float(np.sqrt(np.mean(flat**2))) if flat.size else float("nan")
 
 
-def refit_placement(problem: Problem, x: np.ndarray, *, method: str = "lm") -> np.ndarray:
+def refit_placement(problem: Problem, x: np.ndarray, *, method: Method = "lm") -> np.ndarray:
     """``x`` with only the placement unknowns re-solved (robot, effects, mounted held)."""
     return solve(problem, x, problem.mask("placement"), method=method).x
 
@@ -186,13 +207,66 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
     return {problem.unknowns.names[i]: float(x[i]) for i in np.flatnonzero(keep)}
 
 
-RULES = ("prior", "fraction")
+Rule = Literal["prior", "fraction"]
+RULES: tuple[Rule, ...] = get_args(Rule)
+
+
+@dataclass(frozen=True)
+class NominalFit:
+    """The nominal robot with only the placement unknowns fitted, and what the data identify.
+
+    ``datasets`` are the data the calibration runs on (fewer units than given when
+    ``selection`` dropped some); ``problem`` is built on them.
+    """
+
+    datasets: tuple[DatasetBase, ...]
+    problem: Problem
+    solution: Solution
+    identifiability: Identifiability
+    selection: Selection | None
+    candidates: tuple[str, ...] | None = None  # the unknowns that may be fitted (None: all)
+
+
+@dataclass(frozen=True)
+class GeometricFit:
+    """The geometric calibration: robot and mounted parameters jointly with the placements.
+
+    ``prior`` is the tolerance prior it was weighed against (None under the ``fraction``
+    rule), ``dominated`` the parameters whose estimate owes more to it than to the data,
+    ``distinct`` the mask of residual entries from distinct readings (``duplicate_rows``).
+    """
+
+    identifiability: Identifiability
+    solution: Solution
+    prior: Prior | None
+    dominated: frozenset[str]
+    distinct: np.ndarray
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class DiagnosedFit:
+    """The model after diagnosis: ``problem`` with the effects it added and their solution."""
+
+    problem: Problem
+    solution: Solution
+    added: tuple[EffectFinding, ...]
+    tested: tuple = ()
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Held-out data under each model (see ``_validate``); empty when none were given."""
+
+    summary: RmsSummary | None = None
+    residuals: tuple[DatasetResiduals, ...] = ()
+    spheres: tuple[SphereEstimate, ...] = ()
 
 
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
-              progress: bool = False, rule: str = "prior",
+              progress: bool = False, rule: Rule = "fraction",
               parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
@@ -229,36 +303,79 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         select_growth = positive(select_growth, "select_growth", allow_zero=True)
     datasets = _datasets(datasets, "datasets")
     validation = _datasets(validation, "validation")
-    if not all(isinstance(e, Effect) for e in effects):
-        raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
-                            + ", ".join(sorted({type(e).__name__ for e in effects
-                                                if not isinstance(e, Effect)})),
-                            argument="effects")
+    _check_effects(effects)
     if not datasets:
         raise InputError("no dataset given")
-    _check_same_robot(datasets + list(validation))
-    for dataset in datasets + list(validation):
+    _check_same_robot(datasets + validation)
+    for dataset in datasets + validation:
         check_dataset(dataset)
     robot = datasets[0].robot
-    models = models_for(datasets)
-    problem = Problem(robot, models, effects)
-    x0 = problem.initial()
+
+    nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
+                           loss=loss)
+    problem = nominal.problem
+    identifiability, least_squares = _geometric_fit(nominal, method=method, loss=loss,
+                                                    max_iterations=max_iterations)
+    geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
+                           loss=loss, max_iterations=max_iterations)
+    final = _diagnose(problem, geometric, validation, diagnose, method=method, loss=loss)
+    x_nominal_final = _embed(problem, nominal.solution.x, final.problem)
+    x_geometric_final = _embed(problem, geometric.solution.x, final.problem)
+    residuals = _residuals(final.problem, x_nominal_final, x_geometric_final, final.solution.x)
+    fit = RmsSummary(problem.rms(nominal.solution.x), problem.rms(geometric.solution.x),
+                     final.problem.rms(final.solution.x))
+    held_out = Validation()
+    if validation:
+        held_out = _validate(robot, validation, problem, geometric.solution.x, final.problem,
+                             final.solution.x)
+    std, prior_summary, notes = _standard_errors(final, geometric, rule)
+    recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
+    return CalibrationResult.from_fit(
+        datasets=tuple(d.path.name for d in nominal.datasets), robot=robot,
+        problem=problem, final_problem=final.problem, nominal=nominal.solution,
+        geometric=geometric.solution, final=final.solution, std=std,
+        identifiability=geometric.identifiability,
+        parameters=_estimates(problem, geometric.identifiability, final.solution.x, std),
+        parameters_geometric=_estimates(problem, geometric.identifiability,
+                                        geometric.solution.x, geometric.solution.std),
+        effects=final.added, diagnosis=final.tested, fit=fit, validation=held_out.summary,
+        residuals=residuals, validation_residuals=held_out.residuals,
+        spheres=_spheres(final.problem, final.solution.x, std, "fit") + held_out.spheres,
+        selection=nominal.selection,
+        unexplained=find_unexplained(final.problem, final.solution.x, final.solution.free),
+        recommended=recommended, recommendation=recommendation, prior=prior_summary,
+        notes=geometric.notes + notes, method=method, loss=loss)
+
+
+def _check_effects(effects: Sequence) -> None:
+    wrong = sorted({type(e).__name__ for e in effects if not isinstance(e, Effect)})
+    if wrong:
+        raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
+                            + ", ".join(wrong), argument="effects")
+
+
+def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Effect],
+                 select_growth: float | None, parameters: Sequence[str] | None, *,
+                 method: Method, loss: Loss) -> NominalFit:
+    """Stage 1-2: the nominal fit and identifiability there, after selection if asked."""
+    problem = Problem(robot, models_for(datasets), effects)
     candidates = None
     if parameters is not None:
         allowed = set(parameters)
         robot_names = set(problem.kinematics.registry.names)
         open_ = problem.mask("robot", "effects", "mounted")
-        candidates = [n for i, n in enumerate(problem.unknowns.names)
-                      if open_[i] and (n not in robot_names or n in allowed)]
-
-    nominal = solve(problem, x0, problem.mask("placement"), method=method, loss=loss)
+        candidates = tuple(n for i, n in enumerate(problem.unknowns.names)
+                           if open_[i] and (n not in robot_names or n in allowed))
+    nominal = solve(problem, problem.initial(), problem.mask("placement"), method=method,
+                    loss=loss)
     identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
         selection = select_by_condition(problem, nominal.x, identifiability.identifiable,
                                         growth=select_growth)
         if any(selection.dropped.values()):
-            datasets = [m.subset(selection.kept[m.label]) for m in problem.models]
+            datasets = [m.subset(np.asarray(selection.kept[m.label], dtype=int))
+                        for m in problem.models]
             problem = Problem(robot, models_for(datasets), effects, kinematics=problem.kinematics)
             nominal = solve(problem, problem.initial(), problem.mask("placement"),
                             method=method, loss=loss)
@@ -266,149 +383,119 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     if not identifiability.identifiable:
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
+    return NominalFit(tuple(datasets), problem, nominal, identifiability, selection, candidates)
+
+
+def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
+                   max_iterations: int) -> tuple[Identifiability, Solution]:
+    """Stage 3, by least squares: the parameters with a fair share of their effect their own.
+
+    Refuses (``InputError``, ``SolverError``) data too few for them, estimates the data
+    leave undetermined, and a fit that does not converge.
+    """
+    problem, identifiability = nominal.problem, nominal.identifiability
+    path = nominal.datasets[0].path
     free = _free_mask(problem, identifiability)
     rows_needed = int(free.sum())
     if problem.size <= rows_needed:
         raise InputError(f"{problem.size} residuals cannot identify {rows_needed} unknowns; "
-                         f"add data", file=datasets[0].path)
-    geometric = solve(problem, nominal.x, free, method=method, loss=loss,
+                         f"add data", file=path)
+    geometric = solve(problem, nominal.solution.x, free, method=method, loss=loss,
                       max_iterations=max_iterations)
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
-    revised = analyse_identifiability(problem, geometric.x, candidates)
+    revised = analyse_identifiability(problem, geometric.x, nominal.candidates)
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)
         geometric = solve(problem, geometric.x, free, method=method, loss=loss,
                           max_iterations=max_iterations)
     # A fit wandering along a flat valley neither converges nor means anything: say why.
-    _check_determined(problem, geometric, datasets[0].path)
+    _check_determined(problem, geometric, path)
     if geometric.status != "converged":
         rms = float(np.sqrt(np.mean(geometric.residual**2)))
         raise SolverError(
-            f"{datasets[0].path.name}: the geometric calibration ({method}) did not converge: "
+            f"{path.name}: the geometric calibration ({method}) did not converge: "
             f"{geometric.status} after {geometric.iterations} iterations, residual RMS "
             f"{rms:.4g} m; check the data for outliers (--loss huber) or allow more "
             f"iterations (--max-iterations)",
             stats={"iterations": geometric.iterations, "status": geometric.status})
+    return identifiability, geometric
 
-    # The least-squares fit above, on the parameters with a fair share of their own, also
-    # gives the noise level the prior is weighed against.
+
+def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squares: Solution,
+               rule: Rule, *, method: Method, loss: Loss, max_iterations: int) -> GeometricFit:
+    """Stage 3 under ``rule``: ``"prior"`` refits by maximum a posteriori; both flag
+    repeated readings and the parameters the prior dominates."""
+    # The least-squares fit, on the parameters with a fair share of their own, also gives
+    # the noise level the prior is weighed against.
+    problem = nominal.problem
     distinct, repeated, units_of_data = duplicate_rows(problem)
-    notes = []
-    if repeated:
-        notes.append(_warn_duplicates(repeated, units_of_data))
-    prior = None
+    notes = (_warn_duplicates(repeated, units_of_data),) if repeated else ()
+    geometric, prior = least_squares, None
     if rule == "prior":
         noise = posterior(problem.jacobian(geometric.x, geometric.free),
                           problem.residual(geometric.x), np.flatnonzero(geometric.free), None,
                           rows=distinct).sigma
         determined = identifiability
         identifiability, geometric, prior = _map_geometric(
-            problem, nominal.x, geometric.x, noise, distinct, method=method, loss=loss,
-            max_iterations=max_iterations, candidates=candidates)
+            problem, nominal.solution.x, geometric.x, noise, distinct, method=method, loss=loss,
+            max_iterations=max_iterations, candidates=nominal.candidates)
         # The condition number describes the data: that of the parameters with a fair share
         # of their effect their own (the weak ones lean on the prior, not on the data).
         identifiability = replace(identifiability,
                                   condition_number=determined.condition_number)
-        free = geometric.free
         if geometric.status != "converged":
             raise SolverError(
-                f"{datasets[0].path.name}: the maximum a posteriori calibration ({method}) did "
-                f"not converge: {geometric.status} after {geometric.iterations} iterations",
+                f"{nominal.datasets[0].path.name}: the maximum a posteriori calibration "
+                f"({method}) did not converge: {geometric.status} after "
+                f"{geometric.iterations} iterations",
                 stats={"iterations": geometric.iterations, "status": geometric.status})
-    dominated = _dominated(problem, geometric, prior, distinct)
+    dominated = frozenset(_dominated(problem, geometric, prior, distinct))
+    return GeometricFit(identifiability, geometric, prior, dominated, distinct, notes)
 
-    final_problem, final, findings, tested = problem, geometric, (), ()
-    if diagnose:
-        # An effect must also be usable on the held-out data: columns they all carry.
-        available = None
-        if validation:
-            available = set.intersection(*(set(d.extras) for d in validation))
-        # What the prior dominates stays where the prior put it while effects are sought:
-        # an unweighted refit would let it wander along the direction the data lack.
-        searched = _holding(geometric, problem.unknowns.indices(sorted(dominated)))
-        outcome = diagnosis.run(problem, searched, identifiability, method=method, loss=loss,
-                                available_columns=available)
-        final_problem, final = outcome.problem, outcome.solution
-        if final is searched:
-            final = geometric
-        findings, tested = outcome.added, outcome.tested
 
-    x_nominal_final = _embed(problem, nominal.x, final_problem)
-    x_geometric_final = _embed(problem, geometric.x, final_problem)
-    residuals = _residuals(final_problem, x_nominal_final, x_geometric_final, final.x)
-    fit = RmsSummary(problem.rms(nominal.x), problem.rms(geometric.x),
-                     final_problem.rms(final.x))
-
-    validation_summary, validation_residuals, validation_placement = None, (), None
+def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[DatasetBase],
+              diagnose: bool, *, method: Method, loss: Loss) -> DiagnosedFit:
+    """Stage 4: the effects diagnosis adds to the geometric model (none unless asked)."""
+    if not diagnose:
+        return DiagnosedFit(problem, geometric.solution, ())
+    # An effect must also be usable on the held-out data: columns they all carry.
+    available = None
     if validation:
-        validation_summary, validation_residuals, validation_placement = _validate(
-            robot, list(validation), problem, geometric.x, final_problem, final.x)
+        available = set.intersection(*(set(d.extras) for d in validation))
+    # What the prior dominates stays where the prior put it while effects are sought:
+    # an unweighted refit would let it wander along the direction the data lack.
+    searched = _holding(geometric.solution,
+                        problem.unknowns.indices(sorted(geometric.dominated)))
+    outcome = diagnosis.run(problem, searched, geometric.identifiability, method=method,
+                            loss=loss, available_columns=available)
+    final = geometric.solution if outcome.solution is searched else outcome.solution
+    return DiagnosedFit(outcome.problem, final, outcome.added, outcome.tested)
 
-    # Standard errors at the final estimate, from distinct readings only, with the prior
-    # on every parameter it weighs (held ones included).
-    names = final_problem.unknowns.names
-    free_final = final.free.copy()
-    free_final[final_problem.unknowns.indices(sorted(dominated))] = True
-    final_prior = _prior_in(final_problem, prior)
-    final_distinct, _, _ = duplicate_rows(final_problem)
-    statistics = posterior(final_problem.jacobian(final.x, free_final),
-                           final_problem.residual(final.x), np.flatnonzero(free_final),
-                           final_prior, rows=final_distinct)
-    std = np.full(len(names), np.nan)
-    std[free_final] = statistics.std
+
+def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,
+                     rule: Rule) -> tuple[np.ndarray, PriorSummary, tuple[str, ...]]:
+    """Standard errors [SI] of every unknown at the final estimate (NaN where not estimated).
+
+    From distinct readings only, with the prior on every parameter it weighs (held ones
+    included). Also what the prior did, and a note when no noise level can be estimated.
+    """
+    problem, solution = final.problem, final.solution
+    free = solution.free.copy()
+    free[problem.unknowns.indices(sorted(geometric.dominated))] = True
+    prior = _prior_in(problem, geometric.prior)
+    distinct, _, _ = duplicate_rows(problem)
+    statistics = posterior(problem.jacobian(solution.x, free), problem.residual(solution.x),
+                           np.flatnonzero(free), prior, rows=distinct)
+    std = np.full(len(problem.unknowns), np.nan)
+    std[free] = statistics.std
+    notes: tuple[str, ...] = ()
     if not np.isfinite(statistics.sigma):
-        notes.append("the distinct readings leave no degree of freedom to estimate the noise: "
-                     "no standard errors")
-    prior_summary = _prior_summary(final_problem, final_prior, statistics, rule)
-    parameters = _estimates(problem, identifiability, final.x, std)
-    parameters_geometric = _estimates(problem, identifiability, geometric.x, geometric.std)
-    unexplained = find_unexplained(final_problem, final.x, final.free)
-    recommended, recommendation = recommend(fit, validation_summary, bool(findings))
-    mounted_slice = final_problem.slices["mounted"]
-    mounted = {names[i]: (float(final.x[i]), _finite(std[i]))
-               for i in range(mounted_slice.start, mounted_slice.stop)}
-    placement_slice = final_problem.slices["placement"]
-    placement = {names[i]: float(final.x[i])
-                 for i in range(placement_slice.start, placement_slice.stop)}
-    findings = tuple(replace(f, std={n: _finite(std[final_problem.unknowns.index(n)])
-                                     for n in f.parameters}) for f in findings)
-    spheres = _spheres(final_problem, final.x, std, "fit") + \
-        _spheres_of(validation, validation_residuals, validation_placement)
-    chosen = final.x if recommended == "final" else geometric.x
-    calibrated = robot.with_parameters(chosen[problem.slices["robot"]])
-    return CalibrationResult(
-        datasets=tuple(d.path.name for d in datasets),
-        robot_nominal=robot,
-        robot_calibrated=calibrated,
-        parameters=tuple(parameters),
-        identifiability=identifiability,
-        condition_number=identifiability.condition_number,
-        effects=tuple(findings),
-        fit=fit,
-        validation=validation_summary,
-        residuals=tuple(residuals),
-        validation_residuals=tuple(validation_residuals),
-        mounted=mounted,
-        mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
-        placement=placement,
-        solver={"method": method, "loss": loss, "iterations": final.iterations,
-                "status": final.status, "seconds": geometric.seconds + nominal.seconds,
-                "residuals": problem.size, "free_unknowns": int(free.sum())},
-        effect_models=tuple(final_problem.effects),
-        effect_values=final.x[final_problem.slices["effects"]].copy(),
-        diagnosis=tuple(tested),
-        selection={} if selection is None else {k: v for k, v in selection.dropped.items()},
-        parameters_geometric=tuple(parameters_geometric),
-        unexplained=unexplained,
-        recommended=recommended,
-        recommendation=recommendation,
-        prior=prior_summary,
-        spheres=spheres,
-        notes=tuple(notes),
-    )
+        notes = ("the distinct readings leave no degree of freedom to estimate the noise: "
+                 "no standard errors",)
+    return std, _prior_summary(problem, prior, statistics, rule), notes
 
 
 def _finite(value: float) -> float | None:
@@ -426,14 +513,14 @@ def _warn_duplicates(repeated: int, units: int) -> str:
 def _prior_of(problem: Problem, free: np.ndarray, sigma: float) -> Prior:
     """The prior on the free robot and mounted parameters, centred on their start values."""
     start = problem.initial()
-    index, tolerance = [], []
+    weighed, tolerance = [], []
     for i in np.flatnonzero(free & problem.mask("robot", "mounted")):
         name = problem.unknowns.names[i]
         t = tolerance_of(name, problem.unknowns.quantity(name), problem.robot)
         if t is not None:
-            index.append(i)
+            weighed.append(i)
             tolerance.append(t)
-    index = np.array(index, dtype=int)
+    index = np.array(weighed, dtype=int)
     return Prior(tuple(problem.unknowns.names[i] for i in index), index, start[index],
                  np.array(tolerance, float), sigma)
 
@@ -479,7 +566,7 @@ def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
 
 
 def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,
-               *, method: str, loss: str, max_iterations: int):
+               *, method: Method, loss: Loss, max_iterations: int):
     """MAP estimate over ``x[free]``; the noise level re-estimated until it settles."""
     for _ in range(SIGMA_ITERATIONS):
         solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
@@ -497,7 +584,8 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 
 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
-                   distinct, *, method: str, loss: str, max_iterations: int, candidates=None):
+                   distinct, *, method: Method, loss: Loss, max_iterations: int,
+                   candidates: Sequence[str] | None = None):
     """Identifiability with exact dependencies only, and the MAP fit of the rest
     (``candidates``: the unknowns that may be fitted, default all)."""
     if not np.isfinite(sigma) or sigma <= 0:
@@ -595,7 +683,13 @@ def _embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
     return out
 
 
-def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x_final):
+def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
+              x_geometric: np.ndarray, final_problem: Problem, x_final: np.ndarray) -> Validation:
+    """Stage 5: the held-out data under the nominal, geometric and final models.
+
+    Robot, effects and mounted instrument come from the calibration; the placements are
+    fitted again on the held-out data.
+    """
     stages = []
     for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
         values = {} if x is None else _values(stage_problem, x)
@@ -615,11 +709,9 @@ def _validate(robot, validation, problem: Problem, x_geometric, final_problem, x
             joints=dataset.joints, extras=dict(dataset.extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
             frame=model.component_frame))
-    final_problem, x_val = stages[-1]
-    placement = final_problem.slices["placement"]
-    fitted = {final_problem.unknowns.names[i]: float(x_val[i])
-              for i in range(placement.start, placement.stop)}
-    return summary, residuals, (final_problem, x_val, fitted)
+    validation_problem, x_validation = stages[-1]
+    return Validation(summary, tuple(residuals),
+                      _spheres(validation_problem, x_validation, None, "validation"))
 
 
 def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str) -> tuple:
@@ -630,19 +722,9 @@ def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str)
             continue
         index = problem.placement_indices(model)
         centre_std = None if std is None else [_finite(std[i]) for i in index]
+        x_centre, y_centre, z_centre = (float(x[i]) for i in index)
         out.append(SphereEstimate(label=model.label, role=role,
-                                  centre=tuple(float(x[i]) for i in index),
+                                  centre=(x_centre, y_centre, z_centre),
                                   centre_std=None if centre_std is None else tuple(centre_std),
                                   radius=float(model.dataset.radius)))
     return tuple(out)
-
-
-def _spheres_of(validation, residuals, fitted) -> tuple:
-    """The spheres of the validation datasets, their centres fitted again there."""
-    if not validation or not fitted:
-        return ()
-    problem, x, _ = fitted
-    return _spheres(problem, x, None, "validation")
-
-
-Solution = Solution

@@ -30,8 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..results import DOMINATED_SHARE
-
 DEGREE = math.pi / 180.0
 DEFAULT_TOLERANCE = {
     "dh_length": 1e-3,           # [m] d, a of a joint
@@ -86,7 +84,7 @@ class Prior:
         """``sigma / t_i`` [1 / (SI of the parameter) * m]: the prior rows' weights."""
         return self.sigma / self.tolerance
 
-    def with_sigma(self, sigma: float) -> "Prior":
+    def with_sigma(self, sigma: float) -> Prior:
         return Prior(self.names, self.index, self.centre, self.tolerance, float(sigma))
 
     def __repr__(self) -> str:
@@ -235,7 +233,7 @@ def duplicate_rows(problem) -> tuple[np.ndarray, int, int]:
     first = copies > 0
     units = repeated = 0
     for model, groups in _groups(problem):
-        keys = {}
+        keys: dict[int, int] = {}
         for g, c in zip(groups, copies[_span(problem, model)]):
             if g >= 0:
                 keys.setdefault(int(g), c)

@@ -13,9 +13,9 @@ validation); the residual and Jacobian are built once per problem as CasADi func
 
 from __future__ import annotations
 
-from dataclasses import replace
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -84,6 +84,92 @@ def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(rows, dtype=int), np.asarray(columns, dtype=int)
 
 
+@dataclass(frozen=True)
+class DirectResidual:
+    """Compiled residual ``r = g(x)`` of a model that reads no robot points.
+
+    Such a model carries its own flange poses (pendant poses), so ``residual`` and
+    ``jacobian`` are functions of the unknown vector ``x`` alone.
+    """
+
+    model: MeasurementModel
+    residual: ca.Function  # x -> r
+    jacobian: ca.Function  # x -> dr/dx (sparse)
+
+
+@dataclass(frozen=True)
+class PointResidual:
+    """Compiled residual ``r = g(P, x)`` of a model that reads the world points ``P``.
+
+    ``P`` (3 x N, flattened column by column) [m] holds the robot's point of each data row
+    at the flange-frame ``offsets`` the model asks for. ``derivatives`` returns the
+    nonzeros of ``dg/dP`` and ``dg/dx``, whose (row, column) positions are fixed in
+    ``g_P_rows``/``g_P_columns`` and ``g_x_rows``/``g_x_columns``; ``g_P_order`` sorts the
+    ``dg/dP`` nonzeros by residual row (stable), so that they can be summed per row.
+    """
+
+    model: MeasurementModel
+    offsets: ca.Function  # x -> (offsets 3 x 1 or 3 x N [m], d vec(offsets)/dx)
+    residual: ca.Function  # (P, x) -> r
+    derivatives: ca.Function  # (P, x) -> (nonzeros of dg/dP, nonzeros of dg/dx)
+    g_P_rows: np.ndarray
+    g_P_columns: np.ndarray
+    g_P_order: np.ndarray
+    g_x_rows: np.ndarray
+    g_x_columns: np.ndarray
+
+
+CompiledModel = DirectResidual | PointResidual
+
+
+@dataclass(frozen=True)
+class SeparableResidual:
+    """Row-by-row residual and Jacobian of a separable model, compiled for batches.
+
+    ``jacobian`` gives, per row, the derivatives with respect to the robot, effect,
+    mounted and placement unknowns in that order; ``columns`` are their indices in ``x``.
+    """
+
+    residual: BatchFunction
+    jacobian: BatchFunction
+    columns: np.ndarray
+
+
+def _compile(model: MeasurementModel, x: ca.MX, mounted_indices: np.ndarray,
+             placement_indices: np.ndarray) -> CompiledModel:
+    """The CasADi functions of ``model``'s residual over the unknown vector ``x``."""
+    rows = model.dataset.rows
+    P = ca.MX.sym("P", 3 * rows)
+    recorded: dict[str, ca.MX] = {}
+
+    def points(offsets: ca.MX) -> ca.MX:
+        if "offsets" in recorded:
+            raise RuntimeError("a measurement model may ask for its points once")
+        recorded["offsets"] = offsets
+        return ca.reshape(P, 3, rows)
+
+    mounted = ca.vertcat(*[x[int(i)] for i in mounted_indices])
+    placement = ca.vertcat(*[x[int(i)] for i in placement_indices]) \
+        if len(model.placement) else ca.MX(0, 1)
+    r = model.residual(points, mounted, placement)
+    if "offsets" not in recorded:
+        return DirectResidual(model=model, residual=ca.Function("residual", [x], [r]),
+                              jacobian=ca.Function("jacobian", [x], [ca.jacobian(r, x)]))
+    offsets = recorded["offsets"]
+    # Sparse Jacobians of g: nonzeros as outputs, their (row, column) fixed.
+    g_P, g_x = ca.jacobian(r, P), ca.jacobian(r, x)
+    g_P_rows, g_P_columns = _pattern(g_P.sparsity())
+    g_x_rows, g_x_columns = _pattern(g_x.sparsity())
+    return PointResidual(
+        model=model,
+        offsets=ca.Function("offsets", [x], [offsets, ca.jacobian(ca.vec(offsets), x)]),
+        residual=ca.Function("residual", [P, x], [r]),
+        derivatives=ca.Function("g_derivatives", [P, x], [g_P.nz[:], g_x.nz[:]]),
+        g_P_rows=g_P_rows, g_P_columns=g_P_columns,
+        g_P_order=np.argsort(g_P_rows, kind="stable"),
+        g_x_rows=g_x_rows, g_x_columns=g_x_columns)
+
+
 class Problem:
     """Residuals of ``models`` for ``robot`` with ``effects``; see the module docstring.
 
@@ -124,6 +210,7 @@ class Problem:
                                     | ({"payload"} if self.effects else set())))
         self._row = _row_function(self.kinematics, self.effects, self.columns)
         self._maps: dict[tuple[int, int], ca.Function] = {}
+        self._separable_functions: dict[int, SeparableResidual | None] = {}
         self._x0 = self._initial(start or {})
 
     def __repr__(self) -> str:
@@ -214,42 +301,11 @@ class Problem:
     # where dg/dP M is one forward derivative of g with the columns of M as directions.
 
     @cached_property
-    def _compiled(self) -> list[dict]:
+    def _compiled(self) -> tuple[CompiledModel, ...]:
         nx = len(self.unknowns)
         x = ca.MX.sym("x", nx)
-        out = []
-        for model in self.models:
-            rows = model.dataset.rows
-            P = ca.MX.sym("P", 3 * rows)
-            recorded: dict = {}
-
-            def points(offsets, P=P, rows=rows, recorded=recorded):
-                if "offsets" in recorded:
-                    raise RuntimeError("a measurement model may ask for its points once")
-                recorded["offsets"] = offsets
-                return ca.reshape(P, 3, rows)
-
-            mounted = ca.vertcat(*[x[int(i)] for i in self.mounted_indices(model)])
-            placement = ca.vertcat(*[x[int(i)] for i in self.placement_indices(model)]) \
-                if len(model.placement) else ca.MX(0, 1)
-            r = model.residual(points, mounted, placement)
-            entry = {"model": model, "uses_points": "offsets" in recorded}
-            if not entry["uses_points"]:
-                entry["residual"] = ca.Function("residual", [x], [r])
-                entry["jacobian"] = ca.Function("jacobian", [x], [ca.jacobian(r, x)])
-                out.append(entry)
-                continue
-            offsets = recorded["offsets"]
-            entry["offsets"] = ca.Function("offsets", [x], [offsets,
-                                           ca.jacobian(ca.vec(offsets), x)])
-            entry["residual"] = ca.Function("residual", [P, x], [r])
-            # Sparse Jacobians of g: nonzeros as outputs, their (row, column) fixed.
-            g_P, g_x = ca.jacobian(r, P), ca.jacobian(r, x)
-            entry["g"] = ca.Function("g_derivatives", [P, x], [g_P.nz[:], g_x.nz[:]])
-            entry["g_P_pattern"] = _pattern(g_P.sparsity())
-            entry["g_x_pattern"] = _pattern(g_x.sparsity())
-            out.append(entry)
-        return out
+        return tuple(_compile(model, x, self.mounted_indices(model),
+                              self.placement_indices(model)) for model in self.models)
 
     @cached_property
     def _point_batch(self):
@@ -261,14 +317,16 @@ class Problem:
         return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
                              compile=rows >= COMPILE_ROWS)
 
-    def _separable(self, model: MeasurementModel):
+    def _separable(self, model: MeasurementModel) -> SeparableResidual | None:
         """Compiled row-by-row residual and Jacobian of a separable model, or None."""
-        key = ("separable", id(model))
-        if key in self._maps:
-            return self._maps[key]
-        if not (model.separable and model.per_row):
-            self._maps[key] = None
-            return None
+        key = id(model)
+        if key not in self._separable_functions:
+            separable = model.separable and model.per_row
+            self._separable_functions[key] = \
+                self._compile_separable(model) if separable else None
+        return self._separable_functions[key]
+
+    def _compile_separable(self, model: MeasurementModel) -> SeparableResidual:
         row = self._row[0]
         q, extras, p, theta, _, payload_com, effect_constants = (row.sx_in(i) for i in range(7))
         data = ca.SX.sym("data", model.row_data().shape[1])
@@ -292,63 +350,85 @@ class Problem:
                                   np.arange(self.slices["effects"].start,
                                             self.slices["effects"].stop),
                                   self.mounted_indices(model), self.placement_indices(model)])
-        self._maps[key] = (BatchFunction(residual, per_row, compile=compile),
-                           BatchFunction(jacobian, per_row, compile=compile), columns)
-        return self._maps[key]
+        return SeparableResidual(BatchFunction(residual, per_row, compile=compile),
+                                 BatchFunction(jacobian, per_row, compile=compile), columns)
 
-    def _separable_residual(self, model, functions, x, with_jacobian, columns):
-        residual, jacobian, global_columns = functions
+    def _separable_arguments(self, model: MeasurementModel, x: np.ndarray) -> tuple:
+        """The inputs of a separable model's row functions at ``x``."""
         Q, extras, payload_com = self._data(model)
-        arguments = (Q.T, extras.T, model.row_data(), x[self.slices["robot"]],
-                     x[self.slices["effects"]], x[self.mounted_indices(model)],
-                     x[self.placement_indices(model)], payload_com, model.row_constants(),
-                     self._effect_constants())
-        if not with_jacobian:
-            (r,) = residual(*arguments)
-            return r.ravel(), None
-        r, J_rows = jacobian(*arguments)
+        return (Q.T, extras.T, model.row_data(), x[self.slices["robot"]],
+                x[self.slices["effects"]], x[self.mounted_indices(model)],
+                x[self.placement_indices(model)], payload_com, model.row_constants(),
+                self._effect_constants())
+
+    def _separable_jacobian(self, model: MeasurementModel, functions: SeparableResidual,
+                            x: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual and Jacobian ``columns`` of a separable model, row by row."""
+        r, J_rows = functions.jacobian(*self._separable_arguments(model, x))
         J_rows = J_rows.reshape(r.size, -1)
         position = np.full(len(self.unknowns), -1)
         position[columns] = np.arange(len(columns))
-        keep = position[global_columns] >= 0
+        keep = position[functions.columns] >= 0
         J = np.zeros((r.size, len(columns)))
-        J[:, position[global_columns[keep]]] = J_rows[:, keep]
+        J[:, position[functions.columns[keep]]] = J_rows[:, keep]
         return r.ravel(), J
 
-    def _model_residual(self, entry: dict, x: np.ndarray, with_jacobian: bool,
-                        columns: np.ndarray | None = None):
-        """Residual of one model and, if asked, its Jacobian's ``columns`` (default all)."""
-        model = entry["model"]
-        nx = len(self.unknowns)
-        columns = np.arange(nx) if columns is None else np.asarray(columns)
-        separable = self._separable(model) if entry["uses_points"] else None
+    def _model_values(self, compiled: CompiledModel, x: np.ndarray) -> np.ndarray:
+        """Residual of one model at ``x``."""
+        if isinstance(compiled, DirectResidual):
+            return np.asarray(compiled.residual(x)).ravel()
+        separable = self._separable(compiled.model)
         if separable is not None:
-            return self._separable_residual(model, separable, x, with_jacobian, columns)
-        if not entry["uses_points"]:
-            r = np.asarray(entry["residual"](x)).ravel()
-            J = np.asarray(entry["jacobian"](x).full())[:, columns] if with_jacobian else None
-            return r, J
+            (r,) = separable.residual(*self._separable_arguments(compiled.model, x))
+            return r.ravel()
+        return self._point_residual(compiled, x)
+
+    def _model_jacobian(self, compiled: CompiledModel, x: np.ndarray,
+                        columns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Residual of one model and its Jacobian's ``columns`` (default all)."""
+        columns = np.arange(len(self.unknowns)) if columns is None else np.asarray(columns)
+        if isinstance(compiled, DirectResidual):
+            return (np.asarray(compiled.residual(x)).ravel(),
+                    np.asarray(compiled.jacobian(x).full())[:, columns])
+        separable = self._separable(compiled.model)
+        if separable is not None:
+            return self._separable_jacobian(compiled.model, separable, x, columns)
+        return self._chain_rule(compiled, x, columns)
+
+    def _point_residual(self, compiled: PointResidual, x: np.ndarray) -> np.ndarray:
+        """Residual of a non-separable model that reads world points, at ``x``."""
+        model = compiled.model
         rows = model.dataset.rows
-        offsets, d_offsets = entry["offsets"](x)
+        offsets = np.asarray(compiled.offsets(x)[0])
+        Q, extras, payload_com = self._data(model)
+        p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
+        if rows >= COMPILE_ROWS:
+            per_row_offsets = np.broadcast_to(offsets.T, (rows, 3)) if offsets.shape[1] == 1 \
+                else offsets.T
+            (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
+                                     self._effect_constants())
+            P_flat = P.ravel()
+        else:
+            P_flat = np.asarray(self._mapped(0, rows)(
+                Q, extras, p, theta, offsets, payload_com,
+                self._effect_constants())).T.ravel()
+        return np.asarray(compiled.residual(P_flat, x)).ravel()
+
+    def _chain_rule(self, compiled: PointResidual, x: np.ndarray,
+                    columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual and Jacobian ``columns`` of a non-separable point model, by the chain rule."""
+        model = compiled.model
+        rows = model.dataset.rows
+        offsets, d_offsets = compiled.offsets(x)
         offsets = np.asarray(offsets)
         Q, extras, payload_com = self._data(model)
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
         per_row_offsets = np.broadcast_to(offsets.T, (rows, 3)) if offsets.shape[1] == 1 \
             else offsets.T
-        if not with_jacobian:
-            if rows >= COMPILE_ROWS:
-                (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
-                                         self._effect_constants())
-                P_flat = P.ravel()
-            else:
-                P_flat = np.asarray(self._mapped(0, rows)(
-                    Q, extras, p, theta, offsets, payload_com,
-                    self._effect_constants())).T.ravel()
-            return np.asarray(entry["residual"](P_flat, x)).ravel(), None
         P, J_p, J_theta, J_offset = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets,
                                                     payload_com, self._effect_constants())
         # M = dP/dx for the requested columns only (rows x 3 x k).
-        position = np.full(nx, -1)
+        position = np.full(len(self.unknowns), -1)
         position[columns] = np.arange(len(columns))
         M = np.zeros((rows, 3, len(columns)))
         for key, block in (("robot", J_p), ("effects", J_theta)):
@@ -364,24 +444,24 @@ class Problem:
             M += np.einsum("nij,njk->nik", J_offset, d_offsets.reshape(rows, 3, len(columns)))
         M = M.reshape(3 * rows, len(columns))
         P_flat = P.ravel()
-        r = np.asarray(entry["residual"](P_flat, x)).ravel()
-        g_P, g_x = (np.array(v.nonzeros()) for v in entry["g"](P_flat, x))
+        r = np.asarray(compiled.residual(P_flat, x)).ravel()
+        g_P, g_x = (np.array(v.nonzeros()) for v in compiled.derivatives(P_flat, x))
         J = np.zeros((len(r), len(columns)))
-        rows_x, cols_x = entry["g_x_pattern"]
+        rows_x, cols_x = compiled.g_x_rows, compiled.g_x_columns
         wanted = position[cols_x] >= 0
         np.add.at(J, (rows_x[wanted], position[cols_x[wanted]]), g_x[wanted])
-        rows_P, cols_P = entry["g_P_pattern"]
         if len(g_P):
-            order = entry.setdefault("g_P_order", np.argsort(rows_P, kind="stable"))
-            sorted_rows = rows_P[order]
+            order = compiled.g_P_order
+            sorted_rows = compiled.g_P_rows[order]
             starts = np.flatnonzero(np.r_[True, sorted_rows[1:] != sorted_rows[:-1]])
-            contributions = g_P[order, None] * M[cols_P[order]]
+            contributions = g_P[order, None] * M[compiled.g_P_columns[order]]
             J[sorted_rows[starts]] += np.add.reduceat(contributions, starts, axis=0)
         return r, J
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         """Stacked residual [m] at ``x``."""
-        parts = [self._model_residual(e, np.asarray(x, float), False)[0] for e in self._compiled]
+        x = np.asarray(x, float)
+        parts = [self._model_values(compiled, x) for compiled in self._compiled]
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def jacobian(self, x: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
@@ -391,11 +471,12 @@ class Problem:
         """
         if columns is not None and np.asarray(columns).dtype == bool:
             columns = np.flatnonzero(columns)
-        parts = [self._model_residual(e, np.asarray(x, float), True, columns)[1]
-                 for e in self._compiled]
-        return np.vstack(parts)
+        x = np.asarray(x, float)
+        return np.vstack([self._model_jacobian(compiled, x, columns)[1]
+                          for compiled in self._compiled])
 
-    def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int]):
+    def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int] | np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """How each residual entry moves when a geometric parameter changes in one row only.
 
         For a parameter ``p_c`` (indices into the robot slice of ``x``) that took another
@@ -407,37 +488,40 @@ class Problem:
         carry their own flange poses have no such sensitivity.
         """
         x = np.asarray(x, float)
-        parameters = np.asarray(parameters, dtype=int)
+        chosen = np.asarray(parameters, dtype=int)
         robot_columns = np.arange(self.slices["robot"].start, self.slices["robot"].stop)
         entries, rows, values = [], [], []
         entry_offset = row_offset = 0
-        for entry in self._compiled:
-            model = entry["model"]
+        for compiled in self._compiled:
+            model = compiled.model
             size, n_rows = model.residual_size(), model.dataset.rows
-            if entry["uses_points"] and model.uses_robot:
-                if self._separable(model) is not None:
-                    J = self._model_residual(entry, x, True, robot_columns[parameters])[1]
+            if isinstance(compiled, PointResidual) and model.uses_robot:
+                separable = self._separable(model)
+                if separable is not None:
+                    J = self._separable_jacobian(model, separable, x, robot_columns[chosen])[1]
                     per_row = size // max(n_rows, 1)
                     index = np.arange(per_row * n_rows)
                     entries.append(entry_offset + index)
                     rows.append(row_offset + index // per_row)
                     values.append(J[index])
                 else:
-                    i, k, v = self._point_sensitivities(entry, x, parameters)
+                    i, k, v = self._point_sensitivities(compiled, x, chosen)
                     entries.append(entry_offset + i)
                     rows.append(row_offset + k)
                     values.append(v)
             entry_offset += size
             row_offset += n_rows
         if not entries:
-            return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(parameters)))
+            return np.zeros(0, int), np.zeros(0, int), np.zeros((0, len(chosen)))
         return np.concatenate(entries), np.concatenate(rows), np.vstack(values)
 
-    def _point_sensitivities(self, entry: dict, x: np.ndarray, parameters: np.ndarray):
+    def _point_sensitivities(self, compiled: PointResidual, x: np.ndarray,
+                             parameters: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``row_sensitivities`` of one non-separable model, by the chain rule."""
-        model = entry["model"]
+        model = compiled.model
         n_rows = model.dataset.rows
-        offsets = np.asarray(entry["offsets"](x)[0])
+        offsets = np.asarray(compiled.offsets(x)[0])
         Q, extras, payload_com = self._data(model)
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
         per_row_offsets = np.broadcast_to(offsets.T, (n_rows, 3)) if offsets.shape[1] == 1 \
@@ -445,8 +529,8 @@ class Problem:
         P, J_p, _, _ = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
                                        self._effect_constants())
         J_p = J_p.reshape(n_rows, 3, -1)[:, :, parameters]
-        g_P = np.array(entry["g"](P.ravel(), x)[0].nonzeros())
-        rows_P, cols_P = entry["g_P_pattern"]
+        g_P = np.array(compiled.derivatives(P.ravel(), x)[0].nonzeros())
+        rows_P, cols_P = compiled.g_P_rows, compiled.g_P_columns
         row, axis = cols_P // 3, cols_P % 3
         contributions = g_P[:, None] * J_p[row, axis]
         key = rows_P.astype(np.int64) * n_rows + row
@@ -459,16 +543,16 @@ class Problem:
         """The residual as one CasADi MX expression of ``x`` (for IPOPT)."""
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
         parts = []
-        for entry in self._compiled:
-            model = entry["model"]
-            if not entry["uses_points"]:
-                parts.append(entry["residual"](x))
+        for compiled in self._compiled:
+            model = compiled.model
+            if isinstance(compiled, DirectResidual):
+                parts.append(compiled.residual(x))
                 continue
             Q, extras, payload_com = self._data(model)
-            offsets = entry["offsets"](x)[0]
+            offsets = compiled.offsets(x)[0]
             P = self._mapped(0, model.dataset.rows)(Q, extras, p, theta, offsets, payload_com,
                                                     self._effect_constants())
-            parts.append(entry["residual"](ca.vec(P), x))
+            parts.append(compiled.residual(ca.vec(P), x))
         return ca.vertcat(*parts)
 
     @property

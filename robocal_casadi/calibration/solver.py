@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, Protocol, get_args
 
 import casadi as ca
 import numpy as np
@@ -29,14 +29,29 @@ import numpy as np
 from ..checks import array, choice, count, positive
 from ..errors import ArgumentError, SolverError
 from ..least_squares import DAMPING, Tolerances, levenberg_marquardt
-from .problem import Problem
+from ..parameters import ParameterRegistry
 
 Method = Literal["lm", "ipopt", "linearised", "two_stage"]
 Loss = Literal["linear", "huber"]
-METHODS: tuple[str, ...] = ("lm", "ipopt", "linearised", "two_stage")
-LOSSES: tuple[str, ...] = ("linear", "huber")
+METHODS: tuple[Method, ...] = get_args(Method)
+LOSSES: tuple[Loss, ...] = get_args(Loss)
 TWO_STAGE_TOLERANCE = 1e-6  # relative cost decrease of a round below which two_stage stops
 CONVERGED_DECREASE = 1e-15  # relative cost decrease of a step at rounding level: converged
+
+
+class LeastSquaresProblem(Protocol):
+    """What ``solve`` needs of a problem: ``Problem`` and ``prior.PriorProblem`` offer it."""
+
+    @property
+    def unknowns(self) -> ParameterRegistry: ...
+
+    def mask(self, *keys: str) -> np.ndarray: ...
+
+    def residual(self, x: np.ndarray) -> np.ndarray: ...
+
+    def jacobian(self, x: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray: ...
+
+    def symbolic_residual(self, x: ca.MX) -> ca.MX: ...
 
 
 @dataclass(frozen=True)
@@ -49,7 +64,7 @@ class Solution:
     cost: float
     iterations: int
     status: str
-    method: str
+    method: Method
     seconds: float
     residual: np.ndarray = field(repr=False)
 
@@ -62,8 +77,9 @@ class Solution:
 
     def __repr__(self) -> str:
         rms = float(np.sqrt(np.mean(self.residual**2))) if self.residual.size else 0.0
-        return (f"Solution(method={self.method}, status={self.status!r}, free={int(self.free.sum())},"
-                f" iterations={self.iterations}, rms_residual={rms:.4g}, seconds={self.seconds:.3g})")
+        return (f"Solution(method={self.method}, status={self.status!r}, "
+                f"free={int(self.free.sum())}, iterations={self.iterations}, "
+                f"rms_residual={rms:.4g}, seconds={self.seconds:.3g})")
 
 
 def _huber_weights(r: np.ndarray) -> np.ndarray:
@@ -83,8 +99,8 @@ def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
         return np.full((n, n), np.nan)
 
 
-def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, loss: str,
-                         max_iterations: int, damping: bool, tolerance: float):
+def _levenberg_marquardt(problem: LeastSquaresProblem, x: np.ndarray, free: np.ndarray, *,
+                         loss: Loss, max_iterations: int, damping: bool, tolerance: float):
     """The shared kernel over ``x[free]``: damped (``lm``) or plain Gauss-Newton steps."""
     def evaluate(z: np.ndarray, jacobian: bool):
         full = x.copy()
@@ -102,7 +118,7 @@ def _levenberg_marquardt(problem: Problem, x: np.ndarray, free: np.ndarray, *, l
     return x, r, covariance, fit.cost, fit.iterations, fit.word
 
 
-def _finish(problem: Problem, x: np.ndarray, free: np.ndarray, loss: str):
+def _finish(problem: LeastSquaresProblem, x: np.ndarray, free: np.ndarray, loss: Loss):
     """Residual and covariance of the free unknowns at ``x``."""
     r = problem.residual(x)
     w = np.sqrt(_huber_weights(r)) if loss == "huber" else np.ones_like(r)
@@ -110,14 +126,14 @@ def _finish(problem: Problem, x: np.ndarray, free: np.ndarray, loss: str):
     return r, _covariance(J * w[:, None], r * w)
 
 
-def _ipopt(problem: Problem, x0: np.ndarray, free: np.ndarray, max_iterations: int):
+def _ipopt(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, max_iterations: int):
     index = np.flatnonzero(free)
     z = ca.MX.sym("z", len(index))
     fixed = ca.MX.sym("fixed", len(x0))
     full = ca.vertcat(*[z[int(np.searchsorted(index, i))] if free[i] else fixed[i]
                         for i in range(len(x0))])
-    r = problem.symbolic_residual(full)
-    nlp = {"x": z, "p": fixed, "f": 0.5 * ca.dot(r, r)}
+    r_symbolic = problem.symbolic_residual(full)
+    nlp = {"x": z, "p": fixed, "f": 0.5 * ca.dot(r_symbolic, r_symbolic)}
     solver = ca.nlpsol("calibration", "ipopt", nlp, {
         "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
         "ipopt.max_iter": max_iterations, "ipopt.tol": 1e-14,
@@ -136,7 +152,7 @@ def _ipopt(problem: Problem, x0: np.ndarray, free: np.ndarray, max_iterations: i
     return x, r, _covariance(J, r), 0.5 * float(r @ r), int(stats.get("iter_count", 0)), status
 
 
-def solve(problem: Problem, x0: np.ndarray, free: np.ndarray, *, method: Method = "lm",
+def solve(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, *, method: Method = "lm",
           loss: Loss = "linear", max_iterations: int = 100, tolerance: float = 1e-10) -> Solution:
     """Minimise ``0.5 |r(x)|^2`` over ``x[free]``, the rest held at ``x0``.
 
@@ -179,7 +195,7 @@ def solve(problem: Problem, x0: np.ndarray, free: np.ndarray, *, method: Method 
     return Solution(x, free, cov, cost, it, status, method, seconds, r)
 
 
-def _two_stage(problem: Problem, x0, free, loss, max_iterations, tolerance):
+def _two_stage(problem: LeastSquaresProblem, x0, free, loss, max_iterations, tolerance):
     quantity = np.array([problem.unknowns.quantities[i] for i in range(len(x0))])
     robot = problem.mask("robot")
     others = free & ~robot

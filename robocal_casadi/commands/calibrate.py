@@ -19,15 +19,15 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from ..datasets import load_dataset
-from ..errors import InputError
 from ..calibration import METHODS, calibrate
+from ..datasets import load_dataset
 from ..effect_model import delivered_lines, geometry_only, save_effects
+from ..errors import InputError
 from ..output import atomic_directory
+from ..output import json_safe as _clean
 from ..profiles import PROFILES, ProfileCost, profile_parameters
 from ..results import CalibrationResult
 from ..robot import save_robot
-from ..output import json_safe as _clean
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 

@@ -5,8 +5,8 @@ robot_calibrated.yaml is used). TARGETS.csv has columns x,y,z (tool position) an
 optionally qw,qx,qy,qz (tool orientation), in ROBOT's length unit and world frame; other
 columns are copied through. JOINTS.csv gets those columns, then q1..qn (ROBOT's units),
 status (ok, or unreachable: no solution within the joint limits was found from the
-first start and --restarts random ones; its joint cells are left empty), position_error and, with orientations, orientation_error (the
-residual of the solve, ROBOT's units).
+first start and --restarts random ones; its joint cells are left empty), position_error
+and, with orientations, orientation_error (the residual of the solve, ROBOT's units).
 
 Position-only targets leave the tool orientation free; each solve starts from the
 previous solution, so a path of targets gives a smooth joint path. Only the calibrated

@@ -21,8 +21,8 @@ import sys
 from importlib import resources
 from pathlib import Path
 
-from ..datasets import load_dataset
 from ..calibration import calibrate
+from ..datasets import load_dataset
 from .arguments import add_force, output_folder
 from .calibrate import summary, write_outputs
 

@@ -100,8 +100,8 @@ def run(args: argparse.Namespace) -> int:
     table = read_table(args.joints)
     joint_columns = {f"q{i}" for i in range(1, robot.dof + 1)}
     used: set[str] = set()
-    Q = checked_joint_readings(table, robot, robot.units, used,
-                               Path(args.calibrated) / CALIBRATED_ROBOT if args.calibrated else robot_path)
+    readings_robot = Path(args.calibrated) / CALIBRATED_ROBOT if args.calibrated else robot_path
+    Q = checked_joint_readings(table, robot, robot.units, used, readings_robot)
     extras = [c for c in table.columns if c not in joint_columns]
     clashes = [c for c in extras if c in POSE_COLUMNS]
     if clashes:

@@ -31,8 +31,8 @@ import contextlib
 import json
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from ..calibration import METHODS
 from ..errors import InputError

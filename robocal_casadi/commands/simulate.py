@@ -33,12 +33,12 @@ import argparse
 import math
 from pathlib import Path
 
+from ..effects import EFFECTS
 from ..errors import InputError
-from ..fields import check_magnitude
 from ..examples import ROBOTS
+from ..fields import check_magnitude
 from ..measurement import MODELS, TrackerModel
 from ..robot import Robot, load_robot
-from ..effects import EFFECTS
 from ..simulate import READINGS, simulate
 from ..units import Units, parse_units
 from .arguments import add_force, output_folder, seed

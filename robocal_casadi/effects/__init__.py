@@ -10,18 +10,18 @@ driving joints of a coupling).
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ..errors import InputError
 from ..robot import Robot
 from .backlash import Backlash
-from .base import (Contribution, Effect, Implausible, Plausible, RowContext, TrueWorld,
-                   joint_list)
+from .base import Contribution, Effect, Implausible, Plausible, RowContext, TrueWorld, joint_list
 from .compliance import JointCompliance
 from .coupling import JointCoupling
 from .cyclic import JointCyclic
 from .gravity import GravityModel, gravity_torque
-from .motion import directions_of_motion, direction_column, with_directions
+from .motion import direction_column, directions_of_motion, with_directions
 from .scale import JointScale
 from .thermal import ThermalDrift
 

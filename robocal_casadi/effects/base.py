@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -103,7 +104,7 @@ class Implausible:
     message: str
 
 
-def amplitude_check(effect: "Effect", pairs, values: Mapping[str, float],
+def amplitude_check(effect: Effect, pairs, values: Mapping[str, float],
                     limits: Plausible) -> tuple[Implausible, ...]:
     """``Implausible`` for each (sine, cosine) parameter pair whose amplitude
     ``hypot(sine, cosine)`` exceeds ``limits.maximum``, named ``sine/cosine``."""
@@ -297,12 +298,12 @@ class Effect(ABC):
             e = ca.SX.sym("extras", len(columns))
             p_sym = ca.SX.sym("p", len(registry))
             t = ca.SX.sym("theta", len(self.parameter_names()))
-            com = ca.SX.sym("payload_com", 3)
+            com_sym = ca.SX.sym("payload_com", 3)
             row = RowContext(robot, registry, q, p_sym, {c: e[i] for i, c in enumerate(columns)},
-                             com)
+                             com_sym)
             dq, dp = self.delta(row, t)
             dp = ca.SX.zeros(len(registry)) if dp is None else dp
-            cache[key] = ca.Function(f"{self.name}_contribution", [q, e, p_sym, t, com],
+            cache[key] = ca.Function(f"{self.name}_contribution", [q, e, p_sym, t, com_sym],
                                      [dq, dp])
         function = cache[key]
         values = []
@@ -317,11 +318,12 @@ class Effect(ABC):
         p = robot.parameter_vector() if p is None else np.asarray(p, dtype=float)
         com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
         mapped = function.map(n) if n > 1 else function
-        dq, dp = mapped(Q.T, E, np.tile(p[:, None], (1, n)),
-                        np.tile(np.asarray(theta, dtype=float).reshape(-1, 1), (1, n)),
-                        np.tile(com.reshape(3, 1), (1, n)))
-        return Contribution(np.asarray(dq).T.reshape(n, robot.dof),
-                            np.asarray(dp).T.reshape(n, -1))
+        dq_values, dp_values = mapped(
+            Q.T, E, np.tile(p[:, None], (1, n)),
+            np.tile(np.asarray(theta, dtype=float).reshape(-1, 1), (1, n)),
+            np.tile(com.reshape(3, 1), (1, n)))
+        return Contribution(np.asarray(dq_values).T.reshape(n, robot.dof),
+                            np.asarray(dp_values).T.reshape(n, -1))
 
     # ----------------------------------------------------------------- words and plots
 
@@ -347,22 +349,22 @@ class Effect(ABC):
     # ----------------------------------------------------------------- diagnosis
 
     @classmethod
-    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["Effect", ...]:
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[Effect, ...]:
         """The units diagnosis tests one at a time: by default one effect per joint
         (revolute joints only where ``revolute_only``)."""
         return tuple(cls.create((j,), robot, extras) for j in range(1, robot.dof + 1)
                      if robot.joints[j - 1].revolute or not cls.revolute_only)
 
     @classmethod
-    def merged(cls, units: Sequence["Effect"], robot: Robot,
-               extras: Mapping[str, Any]) -> "Effect":
+    def merged(cls, units: Sequence[Effect], robot: Robot,
+               extras: Mapping[str, Any]) -> Effect:
         """One effect holding the parameters of several ``candidates`` units."""
         joints = tuple(sorted({j for unit in units for j in unit.joints}))
         return cls.create(joints, robot, extras)
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "Effect":
+               extras: Mapping[str, Any] | None = None, **options) -> Effect:
         """The effect on ``joints`` (1-based) set up for ``robot`` and the fit data."""
         return cls(tuple(joints), **options)
 
@@ -378,7 +380,8 @@ class Effect(ABC):
         """
         return np.zeros(np.atleast_2d(Q).shape)
 
-    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray,
+                     extras: Mapping[str, float | None],
                      values: Mapping[str, float]) -> np.ndarray | None:
         """The true ``dp`` [SI] at geometry ``p`` for one row's ``extras``, or None."""
         return None
@@ -403,7 +406,7 @@ class Effect(ABC):
                              where=where)
 
     @classmethod
-    def for_simulation(cls, keys: Sequence) -> "Effect":
+    def for_simulation(cls, keys: Sequence) -> Effect:
         """The effect holding the simulated entries ``keys`` (see ``simulation_key``)."""
         return cls(tuple(int(k) for k in keys))
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import casadi as ca
 
 from ..errors import InputError
@@ -23,6 +25,6 @@ def check_joints(effect, robot: Robot, *, revolute_only: bool = False) -> None:
 
 
 
-def column(entries: dict, size: int):
+def column(entries: Mapping[int, ca.SX | float], size: int) -> ca.SX:
     """A CasADi column of ``size`` with ``entries`` {0-based index: expression}, zero elsewhere."""
     return ca.vertcat(*[entries.get(i, 0) for i in range(size)])

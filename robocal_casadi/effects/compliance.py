@@ -39,9 +39,9 @@ what no arm does).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import lru_cache
-
-from typing import Any, Mapping
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -51,8 +51,12 @@ from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import check_joints, column
-from .gravity import (FIRST_MOMENT_COMPONENTS, first_moment_basis, gravity_torque,
-                      payload_torque_per_kg)
+from .gravity import (
+    FIRST_MOMENT_COMPONENTS,
+    first_moment_basis,
+    gravity_torque,
+    payload_torque_per_kg,
+)
 
 SAMPLES = 96
 INDEPENDENCE = 1e-6
@@ -153,9 +157,8 @@ class JointCompliance(Effect):
         self.lumped = robot is not None and not robot.has_inertia
         self.payload = bool(payload)
         self.terms: dict[int, tuple[int, ...]] = {}
-        if self.lumped:
+        if robot is not None and self.lumped:
             check_joints(self, robot)
-            assert robot is not None  # for the type checker: lumped implies a robot
             self.terms = {j: independent_terms(robot, j) for j in self.joints}
 
     def __repr__(self) -> str:
@@ -164,7 +167,7 @@ class JointCompliance(Effect):
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "JointCompliance":
+               extras: Mapping[str, Any] | None = None, **options) -> JointCompliance:
         """Lumped without link masses; the payload term where the data has ``payload``."""
         return cls(tuple(joints), robot=robot, payload="payload" in (extras or {}))
 
@@ -234,7 +237,7 @@ class JointCompliance(Effect):
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot)
         payload = row.extras.get("payload", 0.0)
-        entries = {}
+        entries: dict[int, ca.SX | float] = {}
         if not self.lumped:
             tau = _torque_function(row.robot)(row.q, row.p, payload, row.payload_com)
             for k, j in enumerate(self.joints):
@@ -245,7 +248,7 @@ class JointCompliance(Effect):
         per_kg = per_kg_function(row.q, row.p, row.payload_com)
         k = 0
         for j in self.joints:
-            deflection = 0
+            deflection: ca.SX | float = 0
             if self.payload:
                 deflection = deflection - theta[k] * payload * per_kg[j - 1]
                 k += 1

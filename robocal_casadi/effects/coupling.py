@@ -16,7 +16,8 @@ of the periodic errors of gear trains.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -105,19 +106,19 @@ class JointCoupling(Effect):
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "JointCoupling":
+               extras: Mapping[str, Any] | None = None, **options) -> JointCoupling:
         """``options['drivers']``: the driving joint of each joint in ``joints``."""
         return cls(tuple(joints), drivers=tuple(options.get("drivers", ())))
 
     @classmethod
-    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["JointCoupling", ...]:
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[JointCoupling, ...]:
         """Every ordered pair of distinct revolute joints: dof (dof - 1) of them, 30 for a
         6-axis arm, each with 2 parameters."""
         revolute = [j for j in range(1, robot.dof + 1) if robot.joints[j - 1].revolute]
         return tuple(cls((j,), (k,)) for j in revolute for k in revolute if j != k)
 
     @classmethod
-    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> "JointCoupling":
+    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> JointCoupling:
         pairs = sorted({p for unit in units for p in unit.pairs})
         return cls(tuple(j for j, _ in pairs), tuple(k for _, k in pairs))
 
@@ -140,7 +141,7 @@ class JointCoupling(Effect):
         return (j, k)
 
     @classmethod
-    def for_simulation(cls, keys) -> "JointCoupling":
+    def for_simulation(cls, keys) -> JointCoupling:
         return cls(tuple(j for j, _ in keys), tuple(k for _, k in keys))
 
     def describe(self, values, units: Units) -> str:

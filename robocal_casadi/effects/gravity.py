@@ -35,14 +35,17 @@ from ..robot import Robot
 FIRST_MOMENT_COMPONENTS = ("x", "y", "z", "m")  # h_x, h_y, h_z [kg m] and m [kg] per link
 
 
-def _require_inertia(robot: Robot) -> None:
-    missing = [i for i, j in enumerate(robot.joints, start=1) if j.mass is None or j.com is None]
+def _require_inertia(robot: Robot) -> list[tuple[float, tuple[float, float, float]]]:
+    """Each joint's link ``(mass [kg], com [m])``; an ``InputError`` where one is missing."""
+    inertia = [(j.mass, j.com) for j in robot.joints]
+    missing = [i for i, (mass, com) in enumerate(inertia, start=1) if mass is None or com is None]
     if missing:
         raise InputError(
             f"robot {robot.name!r} has no mass/com for joint(s) {missing}; the gravity torque "
             "needs both (joint_compliance falls back to lumped first moments without them)",
             where="joints",
         )
+    return [(mass, com) for mass, com in inertia if mass is not None and com is not None]
 
 
 def potential_energy(robot: Robot, registry: ParameterRegistry, q, p, payload=0.0,
@@ -52,14 +55,14 @@ def potential_energy(robot: Robot, registry: ParameterRegistry, q, p, payload=0.
     ``p`` geometric parameters (registry order, SI); ``payload`` [kg]; ``payload_com``
     (3,) [m] in the flange frame. Requires ``mass`` and ``com`` on every joint.
     """
-    _require_inertia(robot)
+    inertia = _require_inertia(robot)
     frames = symbolic_frames(robot, registry, q, p)
     g = ca.DM(robot.gravity)
     weight = 0
-    for k, joint in enumerate(robot.joints, start=1):
+    for k, (mass, com) in enumerate(inertia, start=1):
         T = frames[k]
-        c = T[:3, :3] @ ca.DM(joint.com) + T[:3, 3]
-        weight = weight + joint.mass * c
+        c = T[:3, :3] @ ca.DM(com) + T[:3, 3]
+        weight = weight + mass * c
     flange = frames[robot.dof]
     c_payload = flange[:3, :3] @ ca.vertcat(*[payload_com[i] for i in range(3)]) + flange[:3, 3]
     weight = weight + payload * c_payload

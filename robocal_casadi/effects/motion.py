@@ -20,7 +20,7 @@ data columns of ``extras``.
 
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 

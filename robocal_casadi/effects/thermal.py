@@ -16,10 +16,11 @@ start, so ``|k_t|`` stays below 3e-5/K x 2 K / 60 s = 1e-6/s.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import casadi as ca
 import numpy as np
-
-from typing import Any, Mapping
 
 from ..errors import InputError, RobocalError
 from ..parameters import length_names
@@ -81,7 +82,7 @@ class ThermalDrift(Effect):
 
     @classmethod
     def create(cls, joints=(), robot: Robot | None = None,
-               extras: Mapping[str, Any] | None = None, **options) -> "ThermalDrift":
+               extras: Mapping[str, Any] | None = None, **options) -> ThermalDrift:
         """Against ``temperature`` if ``extras`` has it, else ``time``; its mean the reference."""
         extras = extras or {}
         column = options.get("column") or ("temperature" if "temperature" in extras else "time")
@@ -93,18 +94,18 @@ class ThermalDrift(Effect):
         return effect
 
     @classmethod
-    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple["ThermalDrift", ...]:
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[ThermalDrift, ...]:
         """One per ``temperature`` or ``time`` column the data carry."""
         return tuple(cls.create((), robot, {column: extras[column]}, column=column)
                      for column in COLUMNS if column in extras)
 
     @classmethod
-    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> "ThermalDrift":
+    def merged(cls, units, robot: Robot, extras: Mapping[str, Any]) -> ThermalDrift:
         (unit,) = units  # one column per effect
         return unit
 
     @classmethod
-    def for_simulation(cls, keys=()) -> "ThermalDrift":
+    def for_simulation(cls, keys=()) -> ThermalDrift:
         """Against the ``temperature`` column; its reference is the simulator's ``T_ref``."""
         return cls((), column="temperature")
 
@@ -116,14 +117,16 @@ class ThermalDrift(Effect):
         """The ``temperature`` [C] or ``time`` [s] column."""
         return np.asarray(extras[self.column], dtype=float)
 
-    def simulated_dp(self, world: TrueWorld, p: np.ndarray, extras: Mapping[str, float],
+    def simulated_dp(self, world: TrueWorld, p: np.ndarray,
+                     extras: Mapping[str, float | None],
                      values: Mapping[str, float]) -> np.ndarray | None:
         """Every ``d_i``, ``a_i`` of the true robot times ``k (T - T_ref)``, ``T_ref`` the
         simulator's reference temperature."""
-        if extras.get(self.column) is None:
+        temperature = extras.get(self.column)
+        if temperature is None:
             return None
         registry = world.robot.parameters()
-        factor = values[self.parameter_names()[0]] * (float(extras[self.column])
+        factor = values[self.parameter_names()[0]] * (float(temperature)
                                                       - world.reference_temperature)
         dp = np.zeros(len(registry))
         for name in length_names(world.robot):  # d_i, a_i in DH; x_i, y_i, z_i in URDF

@@ -21,8 +21,8 @@ A joint offset moved since an earlier run when ``|now - before| > LIMIT * sqrt(s
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 

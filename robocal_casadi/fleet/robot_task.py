@@ -24,10 +24,14 @@ import time
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import InputError, RobocalError
 from ..output import atomic_file, written_by_robocal
 from .spec import FleetRobot
+
+if TYPE_CHECKING:
+    from ..calibration.solver import Loss, Method
 
 RECORD = "fleet_robot.json"
 RECORD_VERSION = 1
@@ -39,8 +43,8 @@ class Settings:
     calibrate``), and whether to recompute robots whose result is complete."""
 
     diagnose: bool = True
-    method: str = "lm"
-    loss: str = "linear"
+    method: Method = "lm"
+    loss: Loss = "linear"
     max_iterations: int = 200
     report: bool = True
     allow_outside_data: bool = False

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any
 
-from ..units import ANGLE_SCALE, LENGTH_SCALE, SI, Units
 from ..output import json_safe as _clean
+from ..units import ANGLE_SCALE, LENGTH_SCALE, SI, Units
 from .outliers import FLOOR, LIMIT, MAD_TO_SD, MIN_ROBOTS, Finding, Move, Spread, high_outliers
 from .robot_task import RobotOutcome
 from .spec import Fleet
@@ -159,14 +160,15 @@ class FleetSummary:
 
     def _robot_json(self, outcome: RobotOutcome, flags: list[str]) -> dict:
         robot = next(r for r in self.fleet.robots if r.name == outcome.name)
-        entry = {"name": outcome.name, "status": outcome.status, "error": outcome.error,
-                 "folder": outcome.name + "/",
-                 "datasets": [str(p) for p in robot.datasets],
-                 "validate": [str(p) for p in robot.validate],
-                 "stands_out": flags, "warnings": list(outcome.warnings),
-                 "seconds": outcome.seconds, "cpu_seconds": outcome.cpu_seconds,
-                 "worker": outcome.worker, "memory": outcome.memory,
-                 "peak_memory": outcome.peak_memory, "finished": outcome.finished}
+        entry: dict[str, Any] = {
+            "name": outcome.name, "status": outcome.status, "error": outcome.error,
+            "folder": outcome.name + "/",
+            "datasets": [str(p) for p in robot.datasets],
+            "validate": [str(p) for p in robot.validate],
+            "stands_out": flags, "warnings": list(outcome.warnings),
+            "seconds": outcome.seconds, "cpu_seconds": outcome.cpu_seconds,
+            "worker": outcome.worker, "memory": outcome.memory,
+            "peak_memory": outcome.peak_memory, "finished": outcome.finished}
         summary = outcome.summary
         if summary is None:
             return entry
@@ -257,19 +259,21 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
     with ``previous`` (robot -> ``previous_parameters``), their joint offsets with the
     earlier run's."""
     good = [o for o in outcomes if o.summary is not None]
+    summaries = {o.name: o.summary for o in outcomes if o.summary is not None}
     quantities: list[Quantity] = []
     for block, key, label, judged in RMS_QUANTITIES:
-        values = {o.name: (o.summary[block][key], None) for o in good
-                  if o.summary.get(block) is not None}
+        values = {name: (summary[block][key], None) for name, summary in summaries.items()
+                  if summary.get(block) is not None}
         if values:
             quantities.append(_judged(f"{block}.{key}", label, "length", values, judged))
-    joints = sorted({int(j) for o in good for j in o.summary.get("compliance", {})})
+    joints = sorted({int(j) for summary in summaries.values()
+                     for j in summary.get("compliance", {})})
     for joint in joints:
         values = {}
-        for o in good:
-            entry = o.summary.get("compliance", {}).get(str(joint))
+        for name, summary in summaries.items():
+            entry = summary.get("compliance", {}).get(str(joint))
             # A robot whose diagnosis found no compliance at this joint has none to speak of.
-            values[o.name] = (entry["value"], entry["std"]) if entry else (0.0, None)
+            values[name] = (entry["value"], entry["std"]) if entry else (0.0, None)
         quantities.append(_judged(f"compliance.c{joint}", f"compliance of joint {joint} (c{joint})",
                                   "compliance", values, True))
     moves = offset_moves(good, previous or {})

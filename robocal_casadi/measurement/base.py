@@ -26,7 +26,8 @@ turns a numeric residual into the per-measurement error lengths the RMS values o
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Callable, ClassVar, Mapping
+from collections.abc import Callable, Mapping
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -86,12 +87,13 @@ class MeasurementModel(ABC):
         """Nominal values of ``mounted`` from the dataset file [SI]."""
 
     @abstractmethod
-    def initial_placement(self, points: Callable[[np.ndarray], np.ndarray],
+    def initial_placement(self, points: Callable[[np.ndarray], np.ndarray] | None,
                           mounted: np.ndarray) -> np.ndarray:
         """A starting value of ``placement`` without user help.
 
         ``points(offsets)`` evaluates world positions (3 x N) numerically for the
-        current robot; ``mounted`` are the current mounted values.
+        current robot (None for data that carry their own flange poses); ``mounted`` are
+        the current mounted values.
         """
 
     @abstractmethod
@@ -212,8 +214,8 @@ class MeasurementModel(ABC):
         """``(names, chart)``: minimal coordinates ``delta`` of the mounted unknowns about
         ``nominal``, ``chart(delta)`` the mounted vector (CasADi), ``delta = 0`` at
         ``nominal``. Default: the mounted unknowns themselves."""
-        nominal = ca.DM(np.asarray(nominal, float).reshape(-1, 1))
-        return self.mounted.names, lambda delta: nominal + delta
+        centre = ca.DM(np.asarray(nominal, float).reshape(-1, 1))
+        return self.mounted.names, lambda delta: centre + delta
 
     @classmethod
     def plan_columns(cls, joints: list[str]) -> list[str]:

@@ -13,5 +13,5 @@ from .browser import BrowserError, find_chromium, page_state, print_pdf, screens
 from .html import render_html, write_report
 from .sections import build_document
 
-__all__ = ["BrowserError", "build_document", "find_chromium", "page_state", "print_pdf", "render_html",
-           "screenshot_report", "write_report"]
+__all__ = ["BrowserError", "build_document", "find_chromium", "page_state", "print_pdf",
+           "render_html", "screenshot_report", "write_report"]

@@ -33,7 +33,7 @@ class Accuracy:
     max: float
 
     @staticmethod
-    def of(errors: np.ndarray) -> "Accuracy":
+    def of(errors: np.ndarray) -> Accuracy:
         magnitude = np.abs(np.asarray(errors, dtype=float))
         if magnitude.size == 0:
             nan = float("nan")

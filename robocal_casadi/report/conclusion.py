@@ -33,7 +33,7 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
         return f"{format_number(value_si / scale, 3)} {unit}"
 
     held_out = result.validation is not None
-    summary = result.validation if held_out else result.fit
+    summary = result.validation if result.validation is not None else result.fit
     residuals = result.validation_residuals if held_out else result.residuals
     noun = error_noun(residuals) if residuals else "error"
     where = "on held-out data" if held_out else "on the data used for fitting"
@@ -90,7 +90,7 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
         paragraphs.append(unexplained)
 
     warnings = []
-    if held_out and result.fit.rms_final > 0 and \
+    if result.validation is not None and result.fit.rms_final > 0 and \
             result.validation.rms_final > OVERFIT_RATIO * result.fit.rms_final:
         ratio = result.validation.rms_final / result.fit.rms_final
         warnings.append(f"The held-out error is {format_number(ratio, 2)} times the fitting "

@@ -7,8 +7,8 @@ by two renderers: ``report.html`` (one self-contained page) and ``report.pdf``
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Union
 
 from matplotlib.figure import Figure
 
@@ -70,13 +70,13 @@ class Details:
 
     name: str
     summary: str
-    blocks: tuple[Union[Paragraph, Table, Plot], ...]
+    blocks: tuple[Paragraph | Table | Plot, ...]
 
     def __repr__(self) -> str:
         return f"Details({self.name!r}, {len(self.blocks)} blocks)"
 
 
-Block = Union[Paragraph, Table, Plot, Details]
+Block = Paragraph | Table | Plot | Details
 
 
 @dataclass(frozen=True)

@@ -29,11 +29,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..effects import EFFECTS, effect_title
+from ..effects.base import Effect
 from ..effects.motion import with_directions
 from ..results import CalibrationResult, DatasetResiduals, EffectFinding
 from ..robot import Robot
 from ..units import Units
 from .numbers import errors_of, joint_reading_unit
+
 
 @dataclass(frozen=True)
 class EffectPanel:
@@ -69,7 +71,7 @@ class EffectView:
 
 
 def effect_models_of(result: CalibrationResult,
-                     finding: EffectFinding) -> list[tuple[object, np.ndarray]]:
+                     finding: EffectFinding) -> list[tuple[Effect, np.ndarray]]:
     """``(Effect, theta [SI])`` of every fitted effect model that makes up ``finding``."""
     models = tuple(result.effect_models)
     values = np.asarray(result.effect_values, dtype=float).ravel()
@@ -155,7 +157,6 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
     if not residuals:
         return None
     units = result.units
-    robot = result.robot_calibrated
     models = effect_models_of(result, finding)
     # per-row inputs of the row order (directions of motion) come from the full table
     with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))
@@ -199,9 +200,9 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             com = _payload_com(r)
             if torque:
                 xs.append(gravity_torque_at(robot, Q, extras, com)[:, j])
-            elif variable == "direction":
+            elif variable == "direction" and model is not None:
                 xs.append(model.plot_values(robot, joint, Q, extras, com))
-            elif variable == "driver":
+            elif variable == "driver" and model is not None:
                 xs.append(model.plot_values(robot, joint, Q, extras, com)
                           / joint_reading_unit(robot, _driver(model, joint) - 1, units)[0])
             else:
@@ -209,7 +210,8 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             geo.append(g)
             fin.append(f)
             fits.append(_fitted_dq(robot, models, Q, extras, com, j, angle_scale))
-        fitted = None if any(v is None for v in fits) or not fits else np.concatenate(fits)
+        complete = [v for v in fits if v is not None]
+        fitted = np.concatenate(complete) if fits and len(complete) == len(fits) else None
         fitted_any |= fitted is not None
         if torque:
             unit = "N m" if robot.joints[j].revolute else "N"
@@ -252,7 +254,9 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
         against = {"driver": "against the angle of the driving joint",
                    "direction": "against the joint's direction of motion (from the row order)",
                    }.get(variable, "against the joint angle")
-        fitted_text = (f"the black points (right axis) are the fitted reading error, "
+        # Without the effect object nothing fitted is drawn (fitted_any is False).
+        fitted_text = ("" if model is None else
+                       f"the black points (right axis) are the fitted reading error, "
                        f"{model.formula}")
     caption = f"{title}. {before_after}, {against}"
     caption += f"; {fitted_text}." if fitted_any else "."

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Iterator, Sequence
+from typing import TYPE_CHECKING
 
 import matplotlib
 import matplotlib.ticker as ticker
@@ -25,11 +26,13 @@ from ..units import Units
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
 
 if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
     from .effect_views import EffectView
 
 COLOURS = {"nominal": "#8c8c8c", "geometric": "#d9822b", "final": "#1f6fb2"}
 ALPHA = {"nominal": 0.35, "geometric": 0.45, "final": 0.6}
-STYLE = {
+STYLE: dict[RcKeyType, float | str | bool] = {
     "font.size": 9.0,
     "axes.titlesize": 10.0,
     "axes.labelsize": 9.0,
@@ -268,7 +271,7 @@ def error_over_rows(residuals: tuple[DatasetResiduals, ...], units: Units, title
     return figure
 
 
-def effect_evidence(view: "EffectView", units: Units) -> Figure:
+def effect_evidence(view: EffectView, units: Units) -> Figure:
     """Errors before (geometric) and after (final) an effect against its own variable.
 
     One panel per joint (``view.panels``): scatter of both error sets with their RMS in
@@ -309,11 +312,13 @@ def effect_evidence(view: "EffectView", units: Units) -> Figure:
                 if panel.fitted_is_curve:
                     order = np.argsort(panel.x)
                     handles += right.plot(panel.x[order], panel.fitted[order], color="#222222",
-                                          linestyle="--", linewidth=1.3, label="fitted effect (right axis)")
+                                          linestyle="--", linewidth=1.3,
+                                          label="fitted effect (right axis)")
                 else:
                     handles.append(right.scatter(panel.x[keep], panel.fitted[keep], s=3,
                                                  color="#222222", alpha=0.5, linewidths=0,
-                                                 rasterized=True, label="fitted effect (right axis)"))
+                                                 rasterized=True,
+                                                 label="fitted effect (right axis)"))
                 right.axhline(0.0, color="#222222", linewidth=0.5, alpha=0.4)
                 right.set_ylabel(panel.fitted_label)
                 right.yaxis.set_major_formatter(ticker.ScalarFormatter(useMathText=True))

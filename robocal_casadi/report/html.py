@@ -12,16 +12,16 @@ loaded, so a headless browser can check the page (``report.browser``).
 from __future__ import annotations
 
 import base64
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import jinja2
 from markupsafe import Markup
 
-from ..errors import InputError
+from ..errors import ArgumentError, InputError
 from ..output import atomic_file
 from ..results import CalibrationResult
-from .content import Details, Document, Paragraph, Plot, Section, Table
+from .content import Details, Document, Paragraph, Plot, Table
 from .figures import png_bytes
 from .info import ReportInfo
 from .sections import build_document
@@ -124,7 +124,10 @@ def template_environment(templates: str | Path | None = None) -> jinja2.Environm
 def render_html(document: Document, environment: jinja2.Environment | None = None) -> str:
     """The page for ``document``: a complete HTML5 string with everything inline."""
     environment = environment or template_environment()
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    if environment.loader is None:
+        raise ArgumentError("the template environment has no loader to read report.css from",
+                            argument="environment")
     css = environment.loader.get_source(environment, "report.css")[0]
     sections = [{"anchor": s.anchor, "title": s.title, "appendix": s.appendix,
                  "blocks": [_view(b) for b in s.blocks]} for s in document.sections]

@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import base64
 import datetime as _dt
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from ..errors import InputError
 
@@ -49,7 +50,7 @@ class ReportInfo:
         return tuple((FIELD_TITLES[name], getattr(self, name)) for name in FIELD_TITLES
                      if getattr(self, name))
 
-    def merged(self, other: "ReportInfo") -> "ReportInfo":
+    def merged(self, other: ReportInfo) -> ReportInfo:
         """This info with every field ``other`` sets taking its place."""
         given = {f.name: getattr(other, f.name) for f in fields(other)
                  if getattr(other, f.name) is not None}

@@ -14,7 +14,7 @@ in ``units`` (the report's display units). Every function returns a fresh figure
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -155,7 +155,8 @@ def workspace(residuals: Sequence[DatasetResiduals], positions: Sequence[np.ndar
     ``positions[k]`` are the flange positions [m] (rows x 3, robot base frame) of dataset
     ``k``'s data rows.
     """
-    points, errors = [], {BEFORE: [], AFTER: []}
+    points: list[np.ndarray] = []
+    errors: dict[str, list[np.ndarray]] = {BEFORE: [], AFTER: []}
     for r, p in zip(residuals, positions):
         mapped = np.flatnonzero(np.asarray(r.rows) >= 0)
         points.append(np.asarray(p)[np.asarray(r.rows)[mapped]])

@@ -73,7 +73,7 @@ class ErrorStats:
     max: float
 
     @staticmethod
-    def of(errors: np.ndarray) -> "ErrorStats":
+    def of(errors: np.ndarray) -> ErrorStats:
         errors = np.asarray(errors, dtype=float)
         worst = float(np.max(np.abs(errors))) if errors.size else float("nan")
         return ErrorStats(int(errors.size), rms(errors), percentile_abs(errors, 95),

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import io
 import textwrap
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import matplotlib.image
 from matplotlib.backends.backend_pdf import PdfPages

@@ -10,6 +10,7 @@ the file's unit (``numbers.display_units``), angles in the file's angle unit.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from functools import partial
 
 import numpy as np
@@ -17,19 +18,17 @@ import numpy as np
 from ..measurement import MODELS, SphereLaserModel
 from ..results import CalibrationResult
 from ..units import Units
-from . import figures
-from .content import Details, Document, Paragraph, Plot, Section, Table
-from .conclusion import conclusion_paragraphs
-from .effect_views import effect_models_of, effect_title, effect_view
-from .unexplained import unexplained_blocks
-from . import kind_figures
+from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
+from .conclusion import conclusion_paragraphs
+from .content import Details, Document, Paragraph, Plot, Section, Table
+from .effect_views import effect_models_of, effect_title, effect_view
 from .info import ReportInfo
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
-    error_noun,
     display_units,
+    error_noun,
     errors_of,
     format_fixed,
     format_number,
@@ -38,6 +37,7 @@ from .numbers import (
     quantity_of_placement,
     row_count,
 )
+from .unexplained import unexplained_blocks
 
 SOLVER_TITLES = {"seconds": "time [s]", "residuals": "residual entries",
                  "free_unknowns": "free unknowns"}
@@ -557,7 +557,7 @@ def _error_row(label: str, role: str, errors: list[np.ndarray], units: Units) ->
             format_number(final.max / scale))
 
 
-def _values_table(name: str, caption: str, entries: list[tuple[str, float, float | None]],
+def _values_table(name: str, caption: str, entries: Sequence[tuple[str, float, float | None]],
                   units: Units) -> Table:
     rows = []
     for key, value, std in entries:

@@ -113,7 +113,9 @@ def unexplained_blocks(result: CalibrationResult, units: Units) -> list:
     if not found.variables:
         return blocks
     role, residuals = judged_on(result)
-    values, errors, label = [], [], None
+    values: list[np.ndarray] = []
+    errors: list[np.ndarray] = []
+    label = ""
     for r in residuals:
         picked = variable_values(r, found.variables[0], units)
         if picked is None:

@@ -7,8 +7,15 @@ its real-time and reference solvers, ``tracker`` the ``Tracker`` a control loop 
 ``job`` the tracking job file of the command line.
 """
 
-from .goal import (R_B, facing_pose, goal_pose, level_turn, observation_for, target_in_end,
-                   target_in_world)
+from .goal import (
+                   R_B,
+                   facing_pose,
+                   goal_pose,
+                   level_turn,
+                   observation_for,
+                   target_in_end,
+                   target_in_world,
+)
 from .problem import TrackingProblem
 from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
 from .tracker import STATUSES, Tracker, TrackStep

@@ -23,7 +23,7 @@ camera at ``camera_xyz`` with parallel axes is ``xyz = p_end_target - camera_xyz
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -31,7 +31,7 @@ from ..transforms import pose_from_xyz_rpy, rot_x, rpy_from_matrix
 from .goal import R_B
 
 MarkerConvention = Literal["method", "opencv"]
-MARKER_CONVENTIONS: tuple[str, ...] = ("method", "opencv")
+MARKER_CONVENTIONS: tuple[MarkerConvention, ...] = get_args(MarkerConvention)
 
 #: Method target frame in the OpenCV/ArUco marker frame: ``Rx(180 deg) R_B`` (3x3).
 R_MARKER_TARGET = (rot_x(math.pi) @ R_B)[:3, :3]

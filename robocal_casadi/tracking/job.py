@@ -37,8 +37,18 @@ import numpy as np
 from ..datasets import joint_readings as checked_joint_readings
 from ..datasets import referenced_robot
 from ..errors import InputError
-from ..fields import (check_keys, check_magnitude, cut, load_yaml, mapping, quantities,
-                      quantity, referenced_file, require, vector)
+from ..fields import (
+    check_keys,
+    check_magnitude,
+    cut,
+    load_yaml,
+    mapping,
+    quantities,
+    quantity,
+    referenced_file,
+    require,
+    vector,
+)
 from ..robot import Robot
 from ..table import read_table
 from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy
@@ -115,11 +125,12 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
     camera_xyz = np.array(quantities(require(camera, "xyz", file=path, where="camera"), 3, L,
                                      "length", file=path, where="camera.xyz", unit=units.length))
     camera_rotation = _camera_rotation(camera, units, path)
-    convention = content.get("marker_convention")
-    convention = "method" if convention is None else convention
-    if convention not in MARKER_CONVENTIONS:
+    given = content.get("marker_convention")
+    given = "method" if given is None else given
+    convention = next((c for c in MARKER_CONVENTIONS if c == given), None)
+    if convention is None:
         raise InputError(f"expected one of {', '.join(MARKER_CONVENTIONS)}, got "
-                         f"{str(convention)[:40]!r}", file=path, where="marker_convention")
+                         f"{str(given)[:40]!r}", file=path, where="marker_convention")
     standoff = quantity(require(content, "standoff", file=path), L, "length", file=path,
                         where="standoff", unit=units.length)
     if standoff <= 0:

@@ -14,7 +14,9 @@ which verifies the constraint errors itself.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -93,12 +95,11 @@ class GaussNewtonSolver:
         self.compiled = compiled
         self._function = problem.compiled_step if compiled else problem.step
         self._buffer, self._evaluate = self._function.buffer()
-        for k, array in enumerate((self._q, self._q_previous, self._goal, self._up, self._p,
-                                   self._weights, self._free, self._multipliers_previous)):
-            self._buffer.set_arg(k, memoryview(array))
-        for k, array in enumerate((self._dq, self._multipliers, self._test, self._position_error,
-                                   self._angle_error)):
-            self._buffer.set_res(k, memoryview(array))
+        bind_buffer(self._buffer,
+                    (self._q, self._q_previous, self._goal, self._up, self._p, self._weights,
+                     self._free, self._multipliers_previous),
+                    (self._dq, self._multipliers, self._test, self._position_error,
+                     self._angle_error))
 
     def __repr__(self) -> str:
         return (f"GaussNewtonSolver({self.problem.robot.name!r}, "
@@ -172,8 +173,23 @@ class GaussNewtonSolver:
                             angle_error, message)
 
 
+def bind_buffer(buffer: ca.FunctionBuffer, inputs: Sequence[np.ndarray],
+                outputs: Sequence[np.ndarray]) -> None:
+    """Bind float arrays to the inputs and outputs of a CasADi ``FunctionBuffer``.
+
+    The buffer reads and writes the arrays in place: fill the inputs, evaluate, read the
+    outputs, with no copy per call. The arrays must stay alive as long as the buffer.
+    """
+    # casadi's stubs ask for a byte size that its binding takes from the buffer itself, and
+    # numpy's stubs do not declare ndarray a buffer: both calls are right as written.
+    for k, array in enumerate(inputs):
+        buffer.set_arg(k, memoryview(array))  # type: ignore[call-arg, arg-type]
+    for k, array in enumerate(outputs):
+        buffer.set_res(k, memoryview(array))  # type: ignore[call-arg, arg-type]
+
+
 #: Options that silence CasADi's NLP solvers, by plugin.
-QUIET = {
+QUIET: dict[str, dict[str, Any]] = {
     "ipopt": {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
               "ipopt.tol": 1e-12, "ipopt.constr_viol_tol": 1e-12,
               "ipopt.warm_start_init_point": "yes"},

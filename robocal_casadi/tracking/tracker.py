@@ -14,19 +14,24 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Literal, get_args
 
 import numpy as np
 
+from ..checks import choice, rotation_matrix
 from ..errors import InputError
 from ..ik import inverse_kinematics
 from ..robot import Robot
+from .conventions import (
+    MARKER_CONVENTIONS,
+    MarkerConvention,
+    method_observation,
+    observation_rotation,
+)
 from .problem import TrackingProblem
-from ..checks import choice, rotation_matrix
-from .conventions import (MARKER_CONVENTIONS, MarkerConvention, method_observation,
-                          observation_rotation)
-from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome
+from .solver import GaussNewtonSolver, NlpsolSolver, SolveOutcome, bind_buffer
 
 #: ``step`` answers ``ok`` only below these errors: position [m] and angle [rad].
 POSITION_TOLERANCE = 1e-6
@@ -38,8 +43,8 @@ BOUND_TOLERANCE = 1e-12
 STATUSES = ("ok", "limited", "unreachable", "failed")
 TrackingMethod = Literal["gauss_newton", "sqpmethod", "ipopt"]
 QpSolver = Literal["qrqp", "qpoases"]
-METHODS: tuple[str, ...] = ("gauss_newton", "sqpmethod", "ipopt")
-QPSOLS: tuple[str, ...] = ("qrqp", "qpoases")
+METHODS: tuple[TrackingMethod, ...] = get_args(TrackingMethod)
+QPSOLS: tuple[QpSolver, ...] = get_args(QpSolver)
 
 
 @dataclass(frozen=True)
@@ -83,7 +88,7 @@ def _vector(value, length: int, name: str) -> np.ndarray:
     return array
 
 
-def unit_up(up: Sequence[float], *, file=None, where: str = "up") -> np.ndarray:
+def unit_up(up: Sequence[float] | np.ndarray, *, file=None, where: str = "up") -> np.ndarray:
     """The worktable normal as a unit vector; zero or non-finite is an ``InputError``."""
     vector = np.asarray(up, dtype=float).ravel()
     if vector.shape != (3,) or not np.all(np.isfinite(vector)):
@@ -122,9 +127,9 @@ class Tracker:
     parallel to it); ``marker_convention`` how an observation's orientation reads:
     ``method`` ``(x, y, z [m], roll, pitch, yaw [rad])`` of the target frame, or
     ``opencv`` ``(tvec [m], rvec [rad])`` of an OpenCV/ArUco marker
-    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot solve start again
-    from inverse kinematics of the goal pose (a first capture far from the answer, a
-    target that jumped).
+    (``tracking.conventions``); ``seed_from_ik`` lets a cycle that the warm start cannot
+    solve start again from inverse kinematics of the goal pose (a first capture far from
+    the answer, a target that jumped).
 
     Of the joints that meet the goal, the answer is the one nearest the previous answer
     (weighted): each revolute joint on its nearest whole turn within its limits, and the
@@ -142,8 +147,8 @@ class Tracker:
                 command(step.q)
     """
 
-    def __init__(self, robot: Robot, camera_xyz: Sequence[float], standoff: float,
-                 up: Sequence[float] = (0.0, 0.0, 1.0),
+    def __init__(self, robot: Robot, camera_xyz: Sequence[float] | np.ndarray, standoff: float,
+                 up: Sequence[float] | np.ndarray = (0.0, 0.0, 1.0),
                  max_step: float | Sequence[float] | None = None,
                  p: np.ndarray | None = None, *, weights: Sequence[float] | None = None,
                  method: TrackingMethod = "gauss_newton", qpsol: QpSolver = "qrqp",
@@ -194,6 +199,7 @@ class Tracker:
                              where="weights")
         self.method = method
         self.seed_from_ik = bool(seed_from_ik)
+        self.solver: GaussNewtonSolver | NlpsolSolver
         if method == "gauss_newton":
             self.solver = GaussNewtonSolver(self.problem, self.p, self.up, self.weights,
                                             compiled=compiled)
@@ -213,9 +219,7 @@ class Tracker:
         self._goal_out = np.zeros(12)
         self._goal_function = self.problem.compiled_goal if compiled else self.problem.goal
         self._goal_buffer, self._goal_evaluate = self._goal_function.buffer()
-        for k, array in enumerate(self._goal_in):
-            self._goal_buffer.set_arg(k, memoryview(array))
-        self._goal_buffer.set_res(0, memoryview(self._goal_out))
+        bind_buffer(self._goal_buffer, self._goal_in, (self._goal_out,))
 
     def __repr__(self) -> str:
         steps = None if self.max_step is None else list(self.max_step)
@@ -260,7 +264,8 @@ class Tracker:
         self._goal_evaluate()
         return self._goal_out
 
-    def step(self, q_capture: Sequence[float], observation: Sequence[float]) -> TrackStep:
+    def step(self, q_capture: Sequence[float] | np.ndarray,
+             observation: Sequence[float] | np.ndarray) -> TrackStep:
         """One cycle: joints facing the target from the standoff, level, closest to the
         previous answer.
 
@@ -268,18 +273,18 @@ class Tracker:
         ``(x, y, z [m], roll, pitch, yaw [rad])`` the target in the camera.
         """
         start = time.perf_counter()
-        q_capture = _vector(q_capture, self.robot.dof, "q_capture")
-        observation = _vector(observation, 6, "observation")
-        finite = bool(np.isfinite(q_capture).all() and np.isfinite(observation).all())
+        q_read = _vector(q_capture, self.robot.dof, "q_capture")
+        target = _vector(observation, 6, "observation")
+        finite = bool(np.isfinite(q_read).all() and np.isfinite(target).all())
         if self._previous is None:
-            if not np.isfinite(q_capture).all():
+            if not np.isfinite(q_read).all():
                 raise InputError("the first capture joints must be finite", where="q_capture")
-            self._previous = np.minimum(np.maximum(q_capture, self.lower), self.upper)
+            self._previous = np.minimum(np.maximum(q_read, self.lower), self.upper)
             self._previous.setflags(write=False)
         previous = self._previous
         if not finite:
             return self._refuse("failed", start)
-        goal = self._goal_vector(q_capture, observation)
+        goal = self._goal_vector(q_read, target)
         if math.dist(goal[0:3], self._base_origin) > self.reach:
             return self._refuse("unreachable", start)
         lower, upper = self.lower, self.upper

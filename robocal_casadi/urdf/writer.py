@@ -96,7 +96,8 @@ def dh_in_urdf_frames(calibrated: Robot, nominal: Robot, vendor: Robot, *,
     """The calibrated DH robot as ``vendor`` (a ``urdf`` robot of the same arm) with its
     joint origins and flange replaced (module docstring); the fixed transforms come
     from ``nominal``, the robot the calibration started from."""
-    if vendor.dof != nominal.dof or [j.type for j in vendor.joints] != [j.type for j in nominal.joints]:
+    vendor_types = [j.type for j in vendor.joints]
+    if vendor.dof != nominal.dof or vendor_types != [j.type for j in nominal.joints]:
         raise InputError(f"the URDF chain has joints {[j.type for j in vendor.joints]}, the "
                          f"calibrated robot {[j.type for j in nominal.joints]}", file=file)
     zero = np.zeros(nominal.dof)
