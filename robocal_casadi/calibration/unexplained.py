@@ -131,11 +131,6 @@ def _hats(values: np.ndarray, knots: int) -> np.ndarray | None:
     return basis
 
 
-def _directions(joints: np.ndarray) -> np.ndarray:
-    """Each joint's direction of motion in row order (see ``effects.motion``)."""
-    return directions_of_motion(joints)
-
-
 def _variables(problem) -> list[_Variable]:
     robot = problem.robot
     joints_parts, directions_parts, extras_parts = [], [], []
@@ -145,7 +140,7 @@ def _variables(problem) -> list[_Variable]:
         readings = dataset.joints if model.uses_robot and dataset.joints is not None \
             else np.full((dataset.rows, robot.dof), np.nan)
         joints_parts.append(readings)
-        directions_parts.append(_directions(readings))
+        directions_parts.append(directions_of_motion(readings))
         numeric = {k for k, v in dataset.extras.items()
                    if np.asarray(v).dtype.kind in "fiu"}
         columns = numeric if columns is None else columns & numeric
@@ -377,7 +372,7 @@ def _values_of(problem, name: str) -> np.ndarray:
         dataset = model.dataset
         if name.startswith("direction_q"):
             j = int(name[len("direction_q"):]) - 1
-            parts.append(_directions(dataset.joints)[:, j])
+            parts.append(directions_of_motion(dataset.joints)[:, j])
         elif name.startswith("q") and name[1:].isdigit():
             parts.append(dataset.joints[:, int(name[1:]) - 1])
         else:
