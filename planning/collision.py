@@ -84,6 +84,22 @@ def segment_distances(P0, P1, Q0, Q1) -> np.ndarray:
     return np.linalg.norm(gap, axis=-1)
 
 
+def segment_distance(P0, P1, Q0, Q1):
+    """``segment_distances`` for one pair of segments as a CasADi expression (3-vectors)."""
+    d1, d2, r = P1 - P0, Q1 - Q0, P0 - Q0
+    a, e, b = ca.dot(d1, d1), ca.dot(d2, d2), ca.dot(d1, d2)
+    c, f = ca.dot(d1, r), ca.dot(d2, r)
+    tiny = 1e-300
+    denom = a * e - b * b
+    s = ca.if_else(denom > 1e-14 * ca.fmax(a * e, tiny),
+                   ca.fmin(ca.fmax((b * f - c * e) / ca.fmax(denom, tiny), 0.0), 1.0), 0.0)
+    t = (b * s + f) / ca.fmax(e, tiny)
+    s = ca.if_else(t < 0, ca.fmin(ca.fmax(-c / ca.fmax(a, tiny), 0.0), 1.0),
+                   ca.if_else(t > 1, ca.fmin(ca.fmax((b - c) / ca.fmax(a, tiny), 0.0), 1.0), s))
+    t = ca.fmin(ca.fmax(t, 0.0), 1.0)
+    return ca.norm_2(P0 + s * d1 - (Q0 + t * d2))
+
+
 class Body:
     """Capsules of one robot carrying a measured point ``offset`` [m] (flange frame)."""
 
@@ -112,8 +128,9 @@ class Body:
         T = frames[-1]
         points.append(T[:3, :3] @ self.offset + T[:3, 3])
         lengths.append(float(np.linalg.norm(self.offset)))
-        self._points = ca.Function("capsule_points", [q, p_sym], [ca.horzcat(*points)]
-                                   ).map(CHUNK, "serial")
+        self._points_function = ca.Function("capsule_points", [q, p_sym],
+                                            [ca.horzcat(*points)])
+        self._points = self._points_function.map(CHUNK, "serial")
         kept = [k for k, length in enumerate(lengths) if length > 1e-6]
         self.segments = np.array([(k, k + 1) for k in kept])  # indices into the points
         self.lengths = np.array([lengths[k] for k in kept])
@@ -195,6 +212,29 @@ class Body:
                                      np.broadcast_to(self.instrument, near.shape)[:, None])
             sight = np.all(gaps > self.radii[arm], axis=1)
         return Clearance(table, apart, sight)
+
+    def clearances(self, q) -> ca.SX:
+        """Symbolic gaps [m] at joint reading ``q`` (CasADi, dof): per non-pedestal
+        capsule its height above the table less its radius (the tool capsule's end may
+        touch it, as in ``check``), then per checked pair the distance between the trimmed
+        segments less the two radii. ``check`` passes where all are >= 0 (up to 1e-9)."""
+        X = self._points_symbolic(q)
+        gaps = []
+        for k, (a, b) in enumerate(self.segments):
+            if self.pedestal[k]:
+                continue
+            radius = 0.0 if (self.tool and k == len(self.segments) - 1) else self.radii[k]
+            gaps.append(ca.fmin(X[2, a], X[2, b]) - radius - self.table_height)
+        for (i, j), trim in zip(self.pairs, self.trims):
+            A_i, B_i = X[:, self.segments[i, 0]], X[:, self.segments[i, 1]]
+            A_j, B_j = X[:, self.segments[j, 0]], X[:, self.segments[j, 1]]
+            end = B_i - trim * (B_i - A_i) / self.lengths[i]
+            start = A_j + trim * (B_j - A_j) / self.lengths[j]
+            gaps.append(segment_distance(A_i, end, start, B_j) - self.radii[i] - self.radii[j])
+        return ca.vertcat(*gaps)
+
+    def _points_symbolic(self, q):
+        return self._points_function(q, self.p)
 
     def clear(self, Q: np.ndarray) -> np.ndarray:
         """True where configuration ``Q`` (N x dof) passes every check."""

@@ -56,7 +56,7 @@ from .setup import PlanSetup, setup_from_dataset
 
 DEGREE = 3
 POOL = 150  # feasible laser poses the waypoints are chosen from
-MARGIN = 1e-3  # [m] extra clearance above the table
+MARGIN = 1e-3  # [m] kept between the capsules and the table and each other
 SPEED_SHARE = 0.6  # of the speed limit the start path may use (the rest for acceleration)
 LASER_NAMES = ("laser_x", "laser_y", "laser_z", "laser_n1", "laser_n2")
 MIN_SAMPLES = 20
@@ -65,6 +65,19 @@ RANGE_MARGIN = 0.01  # share of the laser's range kept inside its ends by the so
 CENTRES = 4  # pool poses tried as the centre of the start sweep
 WAYPOINTS = 12  # poses of the start sweep (fewer when the joint speed does not allow)
 CAP = np.radians(35.0)  # [rad] hit normals of the start sweep, from the centre's
+KNOTS_PER_SECOND = 4.0  # spline control points per second of scan (plus 6)
+SAMPLES_PER_SPAN = 3  # laser instants per knot span posed in the OCP
+REPAIRS = 2  # re-solves with the instants that broke a constraint added
+FEASIBLE = 1e-7  # constraint violation (in the solver's units) of a usable iterate
+SOFTNESS = 2e-3  # [m] of the smooth minimum over the capsules' gaps
+CLEARANCE_UNIT = 0.1  # [m] the clearance constraint's unit in the solver
+IPOPT = {"print_level": 0, "sb": "yes", "hessian_approximation": "limited-memory",
+         "tol": 1e-4, "constr_viol_tol": 1e-7, "acceptable_tol": 1e-2,
+         "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-3,
+         "acceptable_constr_viol_tol": 1e-7,
+         # the start is feasible: keep IPOPT from pushing it far into the interior
+         "bound_push": 1e-6, "bound_frac": 1e-6, "slack_bound_push": 1e-6,
+         "slack_bound_frac": 1e-6}
 
 
 @dataclass(frozen=True)
@@ -166,27 +179,36 @@ class ScanRows:
         G, S = row_model.row_jacobians(q, reading)
         row = ca.horzcat(G, S)
         g = ca.vertcat(*[row[0, int(j)] for j in columns])
-        frames = kin.joint_frames(q, p)
-        heights = ca.vertcat(*[frames[i][2, 3] for i in range(1, kin.dof + 1)], o[2])
-        self.function = ca.Function("scan_row", [q], [g, disc, reading, heights])
+        clearance = _soft_minimum(body.clearances(q), SOFTNESS)
+        self.function = ca.Function("scan_row", [q], [g, disc, reading, clearance])
         self.rows = ca.Function("scan_information", [q], [g])
-        self.geometry = ca.Function("scan_geometry", [q], [disc, reading, heights])
+        self.beam = ca.Function("scan_beam", [q], [disc, reading])
+        self.clearance = ca.Function("scan_clearance", [q], [clearance])
         self.size = len(columns)
-        self.clearance = float(setup.table_height) + MARGIN + float(body.radii[0])
 
     def evaluate(self, Q: np.ndarray):
-        """``(rows N x size, disc, readings, heights)`` at joint readings ``Q`` (N x dof)."""
+        """``(rows N x size, disc [m^2], readings [m], clearance [m])`` at joint readings
+        ``Q`` (N x dof); ``clearance`` a smooth lower bound of the capsules' gaps to the
+        table and to each other (``collision.Body.clearances``)."""
         f = self.function.map(len(Q))
-        g, disc, reading, heights = f(np.asarray(Q, float).T)
+        g, disc, reading, clearance = f(np.asarray(Q, float).T)
         return (np.asarray(g).T, np.asarray(disc).ravel(), np.asarray(reading).ravel(),
-                np.asarray(heights).T)
+                np.asarray(clearance).ravel())
+
+
+def _soft_minimum(values, softness: float):
+    """``min - softness log(sum exp(-(v - min) / softness))``: smooth, and never above the
+    smallest of ``values`` (below it by at most ``softness log(len(values))``), so a
+    constraint on it is safe for every value."""
+    smallest = ca.mmin(values)
+    return smallest - softness * ca.log(ca.sum1(ca.exp(-(values - smallest) / softness)))
 
 
 # ---------------------------------------------------------------------------- design
 
 
 def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, seed: int = 0,
-                sensor_only: bool | None = None, max_iterations: int = 150,
+                sensor_only: bool | None = None, max_iterations: int = 100,
                 quiet: bool = False) -> Scan:
     """A scan of ``count`` readings for ``dataset``'s sphere and laser (see the module
     docstring); ``sensor_only`` overrides what the dataset says (pendant poses or not)."""
@@ -313,13 +335,10 @@ def _start_path(setup, workspace, rows, info, pool, times, rng):
     shares = np.concatenate([[0.0], np.cumsum(moves)])
     shares /= shares[-1]
     phase = times / duration
-    path = [Q[0]]
-    for t in phase[1:]:
-        k = min(int(np.searchsorted(shares, t, side="right")) - 1, len(Q) - 2)
-        s = (t - shares[k]) / (shares[k + 1] - shares[k])
-        s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1))  # at rest at every waypoint
-        path.append(_slide(setup, workspace, Q[k], Q[k + 1], s, path[-1]))
-    return np.array(path), len(Q)
+    segment = np.minimum(np.searchsorted(shares, phase, side="right") - 1, len(Q) - 2)
+    s = (phase - shares[segment]) / (shares[segment + 1] - shares[segment])
+    s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1))  # at rest at every waypoint
+    return _slide(setup, workspace, Q, segment, s), len(Q)
 
 
 def _local_waypoints(setup, workspace, q0, budget):
@@ -382,102 +401,252 @@ def _slerp(a, b, s):
     return (math.sin((1 - s) * angle) * a + math.sin(s * angle) * b) / math.sin(angle)
 
 
-def _slide(setup, workspace, qa, qb, s, previous):
-    """Joints a fraction ``s`` of the way from pose ``qa`` to ``qb`` with the beam kept on
-    the sphere (task-space interpolation, inverse kinematics from ``previous``); the joint
-    interpolation where inverse kinematics fails."""
-    da, na, la = _beam(setup, workspace, qa)
-    db, nb, lb = _beam(setup, workspace, qb)
-    d = _slerp(da, db, s)
-    n = _slerp(na, nb, s)
-    reading = (1 - s) * la + s * lb
-    origin = setup.centre + setup.radius * n - reading * d
-    guess = (1 - s) * qa + s * qb
-    for seed in (previous, guess):
-        solved = workspace.solve_beams(origin[None], d[None], setup.offset, setup.axis,
-                                       seed[None], iterations=60)
-        step = np.max(np.abs(solved.joints[0] - previous))
-        if solved.ok[0] and step <= setup.max_joint_speed / setup.laser_rate * 2:
-            return solved.joints[0]
-    return guess
+def _slide(setup, workspace, Q, segment, s):
+    """Joints a fraction ``s`` (N,) of the way along ``segment`` (N,) from waypoint
+    ``Q[segment]`` to the next, with the beam kept on the sphere (hit normal, beam
+    direction and stand-off interpolated; inverse kinematics for all samples at once,
+    seeded by the joint interpolation); the joint interpolation where inverse kinematics
+    fails or would jump."""
+    beams = [_beam(setup, workspace, q) for q in Q]
+    origins, directions = [], []
+    for k, share in zip(segment, s):
+        (da, na, la), (db, nb, lb) = beams[k], beams[k + 1]
+        d = _slerp(da, db, share)
+        origins.append(setup.centre + setup.radius * _slerp(na, nb, share)
+                       - ((1 - share) * la + share * lb) * d)
+        directions.append(d)
+    guess = (1 - s)[:, None] * Q[segment] + s[:, None] * Q[segment + 1]
+    solved = workspace.solve_beams(np.array(origins), np.array(directions), setup.offset,
+                                   setup.axis, guess, iterations=60)
+    step = setup.max_joint_speed / setup.laser_rate * 2
+    path = np.where(solved.ok[:, None], solved.joints, guess)
+    for k in range(1, len(path)):  # again, one by one, where the batch failed or jumped
+        if solved.ok[k] and np.max(np.abs(path[k] - path[k - 1])) <= step:
+            continue
+        path[k] = guess[k]
+        for seed in (path[k - 1], guess[k]):
+            again = workspace.solve_beams(origins[k][None], directions[k][None], setup.offset,
+                                          setup.axis, seed[None], iterations=60)
+            if again.ok[0] and np.max(np.abs(again.joints[0] - path[k - 1])) <= step:
+                path[k] = again.joints[0]
+                break
+    return path
 
 
 # ---------------------------------------------------------------------------- the OCP
 
 
 def _solve(setup, workspace, rows, info, index, times, duration, start, max_iterations):
-    dof = workspace.dof
+    """Control points that optimise ``index`` from the start path ``start`` (N x dof):
+    ``(joints at times, status)``.
+
+    The spline has ``K`` control points, so the information and the constraints need not
+    be posed at every laser instant: the OCP uses every ``stride``-th one
+    (``SAMPLES_PER_SPAN`` per knot span; the information sum is then a quadrature of the
+    full one, and the constraints' margins cover the instants between). Every instant is
+    checked afterwards; instants that break a constraint join the grid and the solve is
+    repeated from the last result (at most ``REPAIRS`` times)."""
     N = len(times)
-    K = int(np.clip(round(duration * 2.0) + 6, 8, max(8, N // 6)))
+    K = int(np.clip(round(duration * KNOTS_PER_SECOND) + 6, 8, max(8, N // 6)))
     B, knots = spline_basis(times, K, duration)
-    D1 = derivative_map(knots, K, DEGREE)
-    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
-    C0, *_ = np.linalg.lstsq(B, start, rcond=None)
     lower = np.where(np.isfinite(workspace.lower), workspace.lower, -1e3)
     upper = np.where(np.isfinite(workspace.upper), workspace.upper, 1e3)
-    C0 = np.clip(C0, lower, upper)
-    C0[1], C0[-2] = C0[0], C0[-1]
+    C = _fit(B, knots, start, lower, upper, setup.max_joint_speed,
+             setup.max_joint_acceleration)
+    stride = max(1, int(N // (SAMPLES_PER_SPAN * (K - DEGREE))))
+    grid = np.unique(np.concatenate([np.arange(0, N, stride), [N - 1]]))
+    status = "not solved"
+    for _ in range(REPAIRS + 1):
+        problem = _ScanProblem(setup, rows, info, index, B, grid, knots, lower, upper,
+                               max_iterations)
+        C, status = problem.solve(C)
+        broken = np.flatnonzero(_broken(setup, rows, B @ C))
+        missing = np.setdiff1d(broken, grid)
+        if not missing.size:
+            break
+        grid = np.union1d(grid, missing)
+    return B @ C, status
 
-    opti = ca.Opti()
-    C = opti.variable(K, dof)
-    # sparse basis: each sample depends on DEGREE + 1 control points only, which keeps the
-    # constraint Jacobian sparse (its cost grows with its colours, not with K x dof)
-    Q = ca.mtimes(ca.DM(sparse.csc_matrix(np.where(np.abs(B) > 1e-14, B, 0.0))), C)
-    g = rows.rows.map(N, "serial")(Q.T)
-    disc, reading, heights = rows.geometry.map(N, "serial")(Q.T)
-    M = ca.mtimes(g, g.T)
-    m, shared = info.m, info.shared
-    Sm = M[:m, :m]
-    if shared:
-        Sm = Sm - M[:m, m:] @ ca.solve(M[m:, m:], M[m:, :m])
-    # a start path may not identify everything yet: a ridge far below any real
-    # information keeps the objective finite there
-    Sm = Sm + 1e-9 * ca.trace(Sm) / m * ca.DM.eye(m)
-    if index == "tool":
-        L = ca.DM(info.tool)
-        objective = ca.trace(L @ ca.solve(Sm, L.T))
-    else:
-        d = ca.DM(info.reference)
-        objective = -ca.log(ca.det(Sm / (d @ d.T)))
-    try:
-        f_start = float(ca.Function("f", [C], [objective])(C0))
-    except RuntimeError:
-        f_start = math.nan
-    scale = abs(f_start) if math.isfinite(f_start) and f_start else 1.0
-    opti.minimize(objective / scale)
-    opti.subject_to(opti.bounded(np.tile(lower, (K, 1)), C, np.tile(upper, (K, 1))))
-    vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
-    opti.subject_to(opti.bounded(-vmax, ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C), vmax))
-    opti.subject_to(opti.bounded(-amax, ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C), amax))
-    opti.subject_to(C[1, :] == C[0, :])
-    opti.subject_to(C[K - 2, :] == C[K - 1, :])
-    # constraints a little inside the limits: an iterate stopped early still passes
-    cos_limit = math.cos(setup.max_incidence - ANGLE_MARGIN)
-    opti.subject_to(disc >= (setup.radius * cos_limit) ** 2)
+
+def _broken(setup, rows, Q) -> np.ndarray:
+    """Where samples ``Q`` break the OCP's beam, range or clearance constraint (N,)."""
+    _, disc, reading, clearance = rows.evaluate(Q)
     lo, hi = setup.laser_range
-    inset = RANGE_MARGIN * (hi - lo)
-    opti.subject_to(opti.bounded(lo + inset, reading, hi - inset))
-    opti.subject_to(ca.vec(heights) >= rows.clearance)
-    opti.set_initial(C, C0)
-    opti.solver("ipopt", {"print_time": False},
-                {"print_level": 0, "sb": "yes", "max_iter": max_iterations,
-                 "hessian_approximation": "limited-memory", "tol": 1e-5,
-                 "constr_viol_tol": 1e-9, "acceptable_tol": 1e-3, "acceptable_iter": 5,
-                 "acceptable_constr_viol_tol": 1e-9})
-    try:
-        solution = opti.solve()
-        values = solution.value(C)
-        status = "solved"
-    except RuntimeError:
-        values = opti.debug.value(C)
-        status = opti.debug.stats().get("return_status", "not solved")
-    values = np.asarray(values, float).reshape(K, dof)
-    return B @ values, status
+    return ((disc < (setup.radius * math.cos(setup.max_incidence)) ** 2)
+            | (reading < lo) | (reading > hi) | (clearance < 0.0))
+
+
+def _fit(B, knots, path, lower, upper, vmax, amax) -> np.ndarray:
+    """Control points (K x dof) whose spline is closest to ``path`` (N x dof) at the samples
+    (least squares) among those within the joint limits, speed ``vmax`` and acceleration
+    ``amax`` everywhere and at rest at both ends: the start path as a point that meets
+    the OCP's linear constraints (a plain fit may overshoot the acceleration where the
+    path eases in and out of its waypoints)."""
+    K, dof = B.shape[1], path.shape[1]
+    D1 = derivative_map(knots, K, DEGREE)
+    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
+    C = ca.SX.sym("C", K, dof)
+    Bs = ca.DM(sparse.csc_matrix(B))
+    residual = ca.vec(ca.mtimes(Bs, C) - ca.DM(path))
+    g = ca.vertcat(ca.vec(ca.mtimes(ca.DM(D1), C)), ca.vec(ca.mtimes(ca.DM(D2), C)),
+                   ca.vec(C[1, :] - C[0, :]), ca.vec(C[K - 2, :] - C[K - 1, :]))
+    n1, n2 = (K - 1) * dof, (K - 2) * dof
+    bound = np.concatenate([np.full(n1, vmax), np.full(n2, amax), np.zeros(2 * dof)])
+    solver = ca.nlpsol("scan_fit", "ipopt", {"x": ca.vec(C), "f": 0.5 * ca.sumsqr(residual),
+                                             "g": g},
+                       {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes",
+                                                       "tol": 1e-10, "max_iter": 100}})
+    first, *_ = np.linalg.lstsq(B, path, rcond=None)
+    result = solver(x0=np.clip(first, lower, upper).T.ravel(), lbg=-bound, ubg=bound,
+                    lbx=np.tile(lower, (K, 1)).T.ravel(), ubx=np.tile(upper, (K, 1)).T.ravel())
+    return np.asarray(result["x"], float).reshape(dof, K).T
+
+
+class _ScanProblem:
+    """The scan OCP over the control points ``C`` (K x dof) as one IPOPT problem.
+
+    Every per-sample quantity is one mapped CasADi function of the samples ``Q = B C``
+    (``B`` sparse: a sample depends on ``DEGREE + 1`` control points, so the constraint
+    Jacobian stays sparse), differentiated exactly by CasADi; the objective is
+    logarithmic (``log`` of ``tool``, ``-log det`` of the reference-scaled information
+    otherwise), so its scale does not depend on the set-up's units or sample count.
+    """
+
+    def __init__(self, setup, rows, info, index, B, grid, knots, lower, upper,
+                 max_iterations):
+        K = B.shape[1]
+        dof = len(lower)
+        N = B.shape[0]
+        self.K, self.dof = K, dof
+        c = ca.MX.sym("C", K * dof)
+        C = ca.reshape(c, K, dof)
+        # the samples are variables of their own, tied to the spline by linear equalities:
+        # every per-sample constraint then depends on one sample only, and its Jacobian
+        # costs dof directional derivatives, not one per colour of the spline's band
+        samples = ca.MX.sym("Q", dof, len(grid))
+        x = ca.vertcat(c, ca.vec(samples))
+        banded = sparse.csc_matrix(np.where(np.abs(B) > 1e-14, B, 0.0))
+        Bs = ca.DM(banded[grid])
+        g = rows.rows.map(len(grid), "serial")(samples)
+        clearance = rows.clearance.map(len(grid), "serial")(samples)
+        # the beam's conditions are cheap: posed at every instant, from the spline itself
+        disc, reading = rows.beam.map(N, "serial")(ca.mtimes(ca.DM(banded), C).T)
+        self.B = B[grid]
+        M = ca.mtimes(g, g.T)
+        m, shared = info.m, info.shared
+        S = M[:m, :m]
+        if shared:
+            S = S - M[:m, m:] @ ca.solve(M[m:, m:], M[m:, :m])
+        # a start path may not identify everything yet: a ridge far below any real
+        # information keeps the objective finite there
+        S = S + 1e-9 * ca.trace(S) / m * ca.DM.eye(m)
+        if index == "tool":
+            # the index's own route: sum 1 / s_i^2 of J L^-T (info.tool = L^-1)
+            T = ca.DM(info.tool)
+            objective = ca.log(ca.trace(ca.solve(T @ S @ T.T, ca.DM.eye(m))))
+        else:
+            d = ca.DM(info.reference)
+            objective = -ca.log(ca.det(S / (d @ d.T)))
+        D1 = derivative_map(knots, K, DEGREE)
+        D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
+        vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
+        cos_limit = math.cos(setup.max_incidence - ANGLE_MARGIN)
+        lo, hi = setup.laser_range
+        parts = [
+            # speed and acceleration on the derivative's control points: everywhere
+            (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C)), -vmax, vmax),
+            (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C)), -amax, amax),
+            # at rest at both ends
+            (ca.vertcat((C[1, :] - C[0, :]).T, (C[K - 2, :] - C[K - 1, :]).T), 0.0, 0.0),
+            (ca.vec(samples - ca.mtimes(Bs, C).T), 0.0, 0.0),
+            # a little inside the limits: an iterate stopped early still passes
+            # each in a unit of its own size: IPOPT's tolerances are absolute
+            (disc.T / setup.radius**2, cos_limit**2, np.inf),
+            ((reading.T - lo) / (hi - lo), RANGE_MARGIN, 1.0 - RANGE_MARGIN),
+            (clearance.T / CLEARANCE_UNIT, MARGIN / CLEARANCE_UNIT, np.inf),
+        ]
+        constraints = ca.vertcat(*[p[0] for p in parts])
+        self.lbg = np.concatenate([np.full(p[0].shape[0], p[1], float) for p in parts])
+        self.ubg = np.concatenate([np.full(p[0].shape[0], p[2], float) for p in parts])
+        self.lbx = np.concatenate([np.tile(lower, (K, 1)).T.ravel(), np.tile(lower, len(grid))])
+        self.ubx = np.concatenate([np.tile(upper, (K, 1)).T.ravel(), np.tile(upper, len(grid))])
+        self.best = _BestFeasible(x.shape[0], constraints.shape[0], self.lbg, self.ubg)
+        self._objective = ca.Function("scan_objective", [x], [objective])
+        self.solver = ca.nlpsol("scan", "ipopt", {"x": x, "f": objective, "g": constraints},
+                                {"print_time": False, "iteration_callback": self.best,
+                                 "ipopt": {**IPOPT, "max_iter": int(max_iterations)}})
+
+    def _point(self, C: np.ndarray) -> np.ndarray:
+        """The solver's variables for control points ``C`` (K x dof)."""
+        C = np.asarray(C, float)
+        return np.concatenate([C.T.ravel(), (self.B @ C).ravel()])
+
+    def objective(self, C: np.ndarray) -> float:
+        """The OCP's objective at control points ``C`` (K x dof)."""
+        return float(self._objective(self._point(C)))
+
+    def solve(self, C0: np.ndarray):
+        """``(C, status)`` from control points ``C0`` (K x dof)."""
+        x0 = self._point(C0)
+        self.best.reset()
+        result = self.solver(x0=x0, lbx=self.lbx, ubx=self.ubx, lbg=self.lbg, ubg=self.ubg)
+        stats = self.solver.stats()
+        status = "solved" if stats.get("success") else stats.get("return_status", "not solved")
+        x = np.asarray(result["x"], float).ravel()
+        if not stats.get("success") and self.best.x is not None:
+            # stopped early: the best iterate that met every constraint, not the last one
+            x, status = self.best.x, f"{status}; best feasible iterate kept"
+        C = x[:self.K * self.dof].reshape(self.dof, self.K).T
+        return C, status
+
+
+class _BestFeasible(ca.Callback):
+    """IPOPT iteration callback that keeps the iterate of lowest objective among those
+    within ``FEASIBLE`` of every constraint (IPOPT's last iterate need not be feasible
+    when it stops at its iteration limit)."""
+
+    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray):
+        ca.Callback.__init__(self)
+        self.nx, self.ng, self.lbg, self.ubg = nx, ng, lbg, ubg
+        self.reset()
+        self.construct("scan_best_feasible", {})
+
+    def reset(self) -> None:
+        self.x, self.value = None, math.inf
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "ret"
+
+    def get_sparsity_in(self, i):
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        x, f, g = (np.asarray(a, float).ravel() for a in arg[:3])
+        violation = max(np.max(self.lbg - g, initial=0.0), np.max(g - self.ubg, initial=0.0))
+        if violation <= FEASIBLE and f[0] < self.value:
+            self.x, self.value = x.copy(), float(f[0])
+        return [0]
 
 
 def _problems(setup, workspace, rows, Q, times) -> str:
     """What makes joint samples ``Q`` unrunnable ('' when nothing)."""
-    _, disc, reading, heights = rows.evaluate(Q)
+    _, disc, reading, _ = rows.evaluate(Q)
     found = []
     if not workspace.within_limits(Q, margin=-1e-9).all():
         found.append("joint limits")

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from planning import design_plan
-from planning.collision import Body, segment_distances
+from planning.collision import Body, segment_distance, segment_distances
 from planning.order import largest_moves, nearest_turns, open_path
 from planning.ranges import ELBOW_LIMIT, elbows, working_ranges
 from robocal_casadi.cli import main
@@ -43,6 +43,29 @@ def test_segment_distance_matches_brute_force_including_parallel_and_points():
         exact = segment_distances(P0, P1, Q0, Q1)
         assert exact == pytest.approx(_brute_distance(P0, P1, Q0, Q1), abs=2e-3)
         assert exact <= _brute_distance(P0, P1, Q0, Q1) + 1e-12
+
+
+def test_symbolic_segment_distance_and_clearances_agree_with_the_numeric_check():
+    import casadi as ca
+
+    rng = np.random.default_rng(3)
+    P = ca.SX.sym("P", 3, 4)
+    f = ca.Function("d", [P], [segment_distance(P[:, 0], P[:, 1], P[:, 2], P[:, 3])])
+    for _ in range(40):
+        X = rng.normal(size=(4, 3))
+        assert float(f(X.T)) == pytest.approx(float(segment_distances(*X)), abs=1e-12)
+    kin = Kinematics(working_ranges(ur_type()))
+    body = Body(kin, [0, 0, 0.1], 0.0)
+    q = ca.SX.sym("q", kin.dof)
+    gaps = ca.Function("g", [q], [body.clearances(q)])
+    Q = np.vstack([kin.robot.lower_limits + rng.uniform(size=(400, kin.dof))
+                   * (kin.robot.upper_limits - kin.robot.lower_limits),
+                   np.radians([[0, -90, 175, -90, -90, 0], [0, 30, 0, 0, 0, 0]])])
+    checked = body.check(Q)
+    smallest = np.array([np.asarray(gaps(x)).min() for x in Q])
+    # clear in both exactly where every gap is non-negative (up to the check's 1e-9)
+    assert np.array_equal(smallest >= -1e-9, checked.table & checked.self)
+    assert (smallest < 0).any() and (smallest > 0).any()
 
 
 def test_working_ranges_limit_the_elbow_and_fill_missing_limits():
@@ -203,7 +226,6 @@ def _beam_hits(setup, poses):
     return d, o, b, disc
 
 
-@pytest.mark.slow
 def test_sensor_only_scan_is_runnable_and_identifies_the_laser(files, tmp_path):
     from planning.trajectory import design_scan
 
@@ -281,3 +303,40 @@ def test_programs_for_a_seven_axis_arm_are_refused_before_anything_is_written(fi
                  str(out), "--urscript", str(tmp_path / "p.script")]) == 2
     assert "--urscript" in capsys.readouterr().err
     assert not out.exists() and not (tmp_path / "p.script").exists()
+
+
+@pytest.mark.parametrize("index", ["tool", "O1"])
+def test_scan_objective_is_the_index_of_the_sampled_readings(files, index):
+    """The OCP minimises the index computed by the planner's own route (information.py):
+    log(tool^2) = log sum 1 / s_i^2 of J L^-T, or -log det of the reference-scaled
+    information = -2 m log O1."""
+    from planning.trajectory import _ScanProblem, design_scan, spline_basis
+
+    dataset = load_dataset(files["sphere_6r"], require_data=False)
+    scan = design_scan(dataset, 60, seed=0, sensor_only=True, quiet=True, max_iterations=1)
+    import planning.trajectory as trajectory
+
+    captured = {}
+    original = trajectory._ScanProblem.__init__
+
+    def keep(self, setup, rows, info, *args, **kwargs):
+        captured.update(rows=rows, info=info, setup=setup)
+        original(self, setup, rows, info, *args, **kwargs)
+
+    trajectory._ScanProblem.__init__ = keep
+    try:
+        design_scan(dataset, 60, seed=0, sensor_only=True, quiet=True, max_iterations=1)
+    finally:
+        trajectory._ScanProblem.__init__ = original
+    rows, info, setup = captured["rows"], captured["info"], captured["setup"]
+    duration = scan.times[-1]
+    K = 12
+    B, knots = spline_basis(scan.times, K, duration)
+    C, *_ = np.linalg.lstsq(B, scan.joints, rcond=None)
+    grid = np.arange(0, len(scan.times), 2)
+    lower, upper = np.full(6, -10.0), np.full(6, 10.0)
+    problem = _ScanProblem(setup, rows, info, index, B, grid, knots, lower, upper, 1)
+    g = rows.evaluate(B[grid] @ C)[0]
+    s = info.spectrum_of([g], "tool" if index == "tool" else "reference")
+    expected = math.log(np.sum(1 / s**2)) if index == "tool" else -2 * np.sum(np.log(s))
+    assert problem.objective(C) == pytest.approx(expected, rel=1e-4)  # a 1e-9 ridge
