@@ -10,8 +10,14 @@ configurations of the workspace (within the joint limits, above the table)::
 
     e^2 = mean_q trace(J_t C J_t^T) = sigma^2 trace(W (J^T J)^-1),   W = mean_q J_t^T J_t
 
-``e`` [m] is the root-mean-square standard error of the tool position over the
-workspace: what the calibration's parameter noise costs where it matters. With
+with the rows of ``J_t`` over the configurations stripped of the infinitesimal rigid
+motions of the points they move (``without_rigid_motion``): no kind of data sees where
+the robot stands against the instrument (tracker frame, bar and artifact placements,
+sphere centre are all unknowns), so a parameter error that moves every point alike is
+neither determined by the data nor an error of the calibrated robot, which the user
+registers to the work frame separately. ``e`` [m] is the root-mean-square standard
+error of the tool position over the workspace after the best rigid motion: what the
+calibration's parameter noise costs where it matters. With
 ``W = L L^T`` (Cholesky), ``e / sigma = sqrt(sum 1 / s_i^2)`` where ``s_i`` are the
 singular values of ``J L^-T``: the index ``tool`` is that number, so the planner's
 search and its report share one route (``information.Information.spectra``).
@@ -63,9 +69,12 @@ def workspace_samples(setup: PlanSetup, workspace: Workspace, rng: np.random.Gen
 
 
 def tool_weights(setup: PlanSetup, workspace: Workspace, parameters: tuple[str, ...],
-                 rng: np.random.Generator, count: int = SAMPLES) -> np.ndarray:
+                 rng: np.random.Generator, count: int = SAMPLES, *,
+                 rigid_motion: bool = False) -> np.ndarray:
     """``W = mean_q J_t^T J_t`` over ``parameters`` (robot names, then mounted ones in the
-    row model's order) [m^2 per unit^2]."""
+    row model's order) [m^2 per unit^2], rigid motions of the workspace's points
+    projected out of ``J_t`` unless ``rigid_motion`` (counted: a laser calibrated on
+    pendant poses, where the robot's place is given and only the sensor is unknown)."""
     kin = workspace.kinematics
     Q = workspace_samples(setup, workspace, rng, count)
     offset, t1, t2 = measured_point(setup)
@@ -82,7 +91,28 @@ def tool_weights(setup: PlanSetup, workspace: Workspace, parameters: tuple[str, 
     if J.shape[2] != len(parameters):
         raise ValueError(f"tool Jacobian has {J.shape[2]} columns for {len(parameters)} "
                          f"parameters")
-    return np.einsum("nki,nkj->ij", J, J) / len(Q)
+    J = J.reshape(-1, J.shape[2])
+    if not rigid_motion:
+        J = without_rigid_motion(J, kin.points(Q, offset, workspace.p))
+    return J.T @ J / len(Q)
+
+
+def without_rigid_motion(J: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Point Jacobian rows ``J`` (3N x n, the 3 rows of each point in turn) with the
+    infinitesimal rigid motions of the ``points`` (N x 3) [m] projected out: what is left
+    of each parameter's effect after the best rigid motion of all points (the placement
+    of the robot against the instrument, which no kind of data observes)."""
+    centred = points - points.mean(axis=0)
+    rigid = np.zeros((len(points), 3, 6))
+    rigid[:, :, :3] = np.eye(3)
+    x, y, z = centred.T
+    # omega x p = -[p]x omega
+    rigid[:, 0, 4], rigid[:, 0, 5] = z, -y
+    rigid[:, 1, 3], rigid[:, 1, 5] = -z, x
+    rigid[:, 2, 3], rigid[:, 2, 4] = y, -x
+    U, s, _ = np.linalg.svd(rigid.reshape(-1, 6), full_matrices=False)
+    U = U[:, s > 1e-12 * s.max()]
+    return J - U @ (U.T @ J)
 
 
 def tool_transform(weights: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ RADIUS_BOUNDS = (0.02, 0.08)  # [m]
 TOOL_RADIUS_SHARE = 0.5
 SIGHT_MARGIN = 0.03  # [m] the line of sight is checked up to this far before the reflector
 JOINT_SKIP = 2.0  # beside a joint, capsules are checked this many radii sums away from it
+SOFTNESS = 2e-3  # [m] of the smooth minimum over the gaps (``Body.clearance_bound``)
 CHUNK = 64
 
 
@@ -82,6 +83,14 @@ def segment_distances(P0, P1, Q0, Q1) -> np.ndarray:
     t = np.where(e <= tiny, 0.0, np.where(a <= tiny, np.clip(f / np.maximum(e, tiny), 0, 1), t))
     gap = (P0 + s[..., None] * d1) - (Q0 + t[..., None] * d2)
     return np.linalg.norm(gap, axis=-1)
+
+
+def soft_minimum(values, softness: float):
+    """``min - softness log(sum exp(-(v - min) / softness))`` of a CasADi vector: smooth,
+    and never above the smallest value (below it by at most ``softness log(len)``), so
+    a constraint on it is safe for every value."""
+    smallest = ca.mmin(values)
+    return smallest - softness * ca.log(ca.sum1(ca.exp(-(values - smallest) / softness)))
 
 
 def segment_distance(P0, P1, Q0, Q1):
@@ -216,8 +225,10 @@ class Body:
     def clearances(self, q) -> ca.SX:
         """Symbolic gaps [m] at joint reading ``q`` (CasADi, dof): per non-pedestal
         capsule its height above the table less its radius (the tool capsule's end may
-        touch it, as in ``check``), then per checked pair the distance between the trimmed
-        segments less the two radii. ``check`` passes where all are >= 0 (up to 1e-9)."""
+        touch it, as in ``check``), per checked pair the distance between the trimmed
+        segments less the two radii, and with an instrument per arm capsule its distance
+        from the line of sight less its radius. ``check`` passes where all are >= 0 (up
+        to 1e-9; the line of sight strictly)."""
         X = self._points_symbolic(q)
         gaps = []
         for k, (a, b) in enumerate(self.segments):
@@ -231,7 +242,21 @@ class Body:
             end = B_i - trim * (B_i - A_i) / self.lengths[i]
             start = A_j + trim * (B_j - A_j) / self.lengths[j]
             gaps.append(segment_distance(A_i, end, start, B_j) - self.radii[i] - self.radii[j])
+        if self.instrument is not None:
+            last = len(self.segments) - 1
+            target = X[:, self.segments[last, 1] if self.tool else self.segments[last, 0]]
+            towards = self.instrument - target
+            near = target + SIGHT_MARGIN * towards / ca.norm_2(towards)
+            for k in range(last if self.tool else last + 1):
+                A, B = X[:, self.segments[k, 0]], X[:, self.segments[k, 1]]
+                gaps.append(segment_distance(A, B, near, ca.DM(self.instrument))
+                            - self.radii[k])
         return ca.vertcat(*gaps)
+
+    def clearance_bound(self, q, softness: float = SOFTNESS):
+        """A smooth lower bound [m] of the smallest of ``clearances(q)``: ``>= 0`` implies
+        every gap is (``soft_minimum``)."""
+        return soft_minimum(self.clearances(q), softness)
 
     def _points_symbolic(self, q):
         return self._points_function(q, self.p)

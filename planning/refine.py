@@ -1,13 +1,15 @@
 """Continuous refinement of a chosen plan in CasADi (IPOPT).
 
 The joint readings of the chosen candidates become the variables; the objective is
-``-log det`` of the plan's scaled information (Schur complement of the shared placement
-unknowns, columns scaled as the index asks), a smooth surrogate of every index; the
-constraints keep each reading runnable:
+``log`` of the index ``tool`` itself (``log sum 1 / s_i^2`` of ``J L^-T``), or for the
+other indices ``-log det`` of the plan's scaled information (Schur complement of the
+shared placement unknowns, columns scaled as the index asks), a smooth surrogate of
+each; the constraints keep each reading runnable:
 
 * every instrument: joint limits, every joint frame origin and the measured point above
-  the worktable, each joint within ``STEP`` [rad or m] of the chosen candidate (the
-  model is trusted locally only);
+  the worktable, the arm's capsules clear of the table, of each other and of the line of
+  sight (``collision.Body.clearance_bound``), each joint within ``STEP`` [rad or m] of
+  the chosen candidate (the model is trusted locally only);
 
 and, by how the measurement model says the robot takes a reading (``reach``):
 
@@ -69,6 +71,10 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
     blocks = []
     keep = info.columns
     heights_fn = workspace.heights
+    body = workspace.body
+    if body is not None:
+        q = ca.SX.sym("q", dof)
+        clearance = ca.Function("clearance", [q], [body.clearance_bound(q)])
     for c, candidate in enumerate(candidates):
         Q0 = candidate.joints
         Q = ca.MX.sym(f"Q{c}", dof, len(Q0))
@@ -82,6 +88,10 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
             constraints.append(heights_fn(Q[:, k], p))
             c_lower.append(np.full(dof, workspace.table_height + MARGIN))
             c_upper.append(np.full(dof, np.inf))
+            if body is not None:  # capsules clear of the table, each other, the sight line
+                constraints.append(clearance(Q[:, k]))
+                c_lower.append([MARGIN])
+                c_upper.append([np.inf])
         reach = setup.model.reach
         if reach == "configuration":
             q = Q[:, 0]
@@ -127,9 +137,13 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
     M = A[:m, :m]
     if shared:
         M = M - A[:m, m:] @ ca.solve(A[m:, m:], A[m:, :m])
-    d = ca.sqrt(ca.diag(M)) if mode == "design" else ca.DM(info.reference)
-    Ms = M / (d @ d.T)
-    objective = -ca.log(ca.det(Ms))
+    if mode == "tool":
+        # the index itself: log sum 1 / s_i^2 of J L^-T (info.tool = L^-1)
+        T = ca.DM(info.tool)
+        objective = ca.log(ca.trace(ca.solve(T @ M @ T.T, ca.DM.eye(m))))
+    else:
+        d = ca.sqrt(ca.diag(M)) if mode == "design" else ca.DM(info.reference)
+        objective = -ca.log(ca.det(M / (d @ d.T)))
     x = ca.vertcat(*variables)
     g = ca.vertcat(*constraints)
     solver = ca.nlpsol("refine", "ipopt", {"x": x, "f": objective, "g": g},

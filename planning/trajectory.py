@@ -68,8 +68,8 @@ CAP = np.radians(35.0)  # [rad] hit normals of the start sweep, from the centre'
 KNOTS_PER_SECOND = 4.0  # spline control points per second of scan (plus 6)
 SAMPLES_PER_SPAN = 3  # laser instants per knot span posed in the OCP
 REPAIRS = 2  # re-solves with the instants that broke a constraint added
-FEASIBLE = 1e-7  # constraint violation (in the solver's units) of a usable iterate
-SOFTNESS = 2e-3  # [m] of the smooth minimum over the capsules' gaps
+FIT_ITERATIONS = 100  # of the start's fit
+FEASIBLE = 1e-4  # violation of a usable iterate, solver units: well inside the margins
 CLEARANCE_UNIT = 0.1  # [m] the clearance constraint's unit in the solver
 IPOPT = {"print_level": 0, "sb": "yes", "hessian_approximation": "limited-memory",
          "tol": 1e-4, "constr_viol_tol": 1e-7, "acceptable_tol": 1e-2,
@@ -179,7 +179,7 @@ class ScanRows:
         G, S = row_model.row_jacobians(q, reading)
         row = ca.horzcat(G, S)
         g = ca.vertcat(*[row[0, int(j)] for j in columns])
-        clearance = _soft_minimum(body.clearances(q), SOFTNESS)
+        clearance = body.clearance_bound(q)
         self.function = ca.Function("scan_row", [q], [g, disc, reading, clearance])
         self.rows = ca.Function("scan_information", [q], [g])
         self.beam = ca.Function("scan_beam", [q], [disc, reading])
@@ -194,14 +194,6 @@ class ScanRows:
         g, disc, reading, clearance = f(np.asarray(Q, float).T)
         return (np.asarray(g).T, np.asarray(disc).ravel(), np.asarray(reading).ravel(),
                 np.asarray(clearance).ravel())
-
-
-def _soft_minimum(values, softness: float):
-    """``min - softness log(sum exp(-(v - min) / softness))``: smooth, and never above the
-    smallest of ``values`` (below it by at most ``softness log(len(values))``), so a
-    constraint on it is safe for every value."""
-    smallest = ca.mmin(values)
-    return smallest - softness * ca.log(ca.sum1(ca.exp(-(values - smallest) / softness)))
 
 
 # ---------------------------------------------------------------------------- design
@@ -268,7 +260,8 @@ def _information(setup, workspace, row_model, pool, rng):
     """Information of the pool over the scan's unknowns, and the row-model columns used."""
     blocks = row_model.blocks(pool)
     n_p = len(row_model.parameters)
-    weights = tool_weights(setup, workspace, row_model.parameters, rng)
+    weights = tool_weights(setup, workspace, row_model.parameters, rng,
+                           rigid_motion=setup.sensor_only)
     if not setup.sensor_only:
         info = Information(blocks, row_model.parameters, row_model.shared, weights)
         return info, info.columns
@@ -451,8 +444,7 @@ def _solve(setup, workspace, rows, info, index, times, duration, start, max_iter
     B, knots = spline_basis(times, K, duration)
     lower = np.where(np.isfinite(workspace.lower), workspace.lower, -1e3)
     upper = np.where(np.isfinite(workspace.upper), workspace.upper, 1e3)
-    C = _fit(B, knots, start, lower, upper, setup.max_joint_speed,
-             setup.max_joint_acceleration)
+    C = _fit(setup, rows, B, knots, start, lower, upper)
     stride = max(1, int(N // (SAMPLES_PER_SPAN * (K - DEGREE))))
     grid = np.unique(np.concatenate([np.arange(0, N, stride), [N - 1]]))
     status = "not solved"
@@ -476,38 +468,65 @@ def _broken(setup, rows, Q) -> np.ndarray:
             | (reading < lo) | (reading > hi) | (clearance < 0.0))
 
 
-def _fit(B, knots, path, lower, upper, vmax, amax) -> np.ndarray:
+def _fit(setup, rows, B, knots, path, lower, upper) -> np.ndarray:
     """Control points (K x dof) whose spline is closest to ``path`` (N x dof) at the samples
-    (least squares) among those within the joint limits, speed ``vmax`` and acceleration
-    ``amax`` everywhere and at rest at both ends: the start path as a point that meets
-    the OCP's linear constraints (a plain fit may overshoot the acceleration where the
-    path eases in and out of its waypoints)."""
+    (least squares) among those within the joint limits, the speed and acceleration
+    limits everywhere, at rest at both ends, and with the beam on the sphere within the
+    incidence limit and the range at every instant (the OCP's margins kept): the start
+    path as a point that meets the OCP's constraints but the capsules' (a plain fit may
+    overshoot the acceleration where the path eases in and out of its waypoints, or
+    lose the sphere between them)."""
     K, dof = B.shape[1], path.shape[1]
-    D1 = derivative_map(knots, K, DEGREE)
-    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
-    C = ca.SX.sym("C", K, dof)
-    Bs = ca.DM(sparse.csc_matrix(B))
-    residual = ca.vec(ca.mtimes(Bs, C) - ca.DM(path))
-    g = ca.vertcat(ca.vec(ca.mtimes(ca.DM(D1), C)), ca.vec(ca.mtimes(ca.DM(D2), C)),
-                   ca.vec(C[1, :] - C[0, :]), ca.vec(C[K - 2, :] - C[K - 1, :]))
-    n1, n2 = (K - 1) * dof, (K - 2) * dof
-    bound = np.concatenate([np.full(n1, vmax), np.full(n2, amax), np.zeros(2 * dof)])
-    solver = ca.nlpsol("scan_fit", "ipopt", {"x": ca.vec(C), "f": 0.5 * ca.sumsqr(residual),
-                                             "g": g},
-                       {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes",
-                                                       "tol": 1e-10, "max_iter": 100}})
+    N = len(path)
+    c = ca.MX.sym("C", K * dof)
+    C = ca.reshape(c, K, dof)
+    banded = ca.DM(sparse.csc_matrix(np.where(np.abs(B) > 1e-14, B, 0.0)))
+    Q = ca.mtimes(banded, C)
+    disc, reading = rows.beam.map(N, "serial")(Q.T)
+    parts = _linear_parts(setup, knots, C) + _beam_parts(setup, disc, reading)
+    solver = ca.nlpsol("scan_fit", "ipopt",
+                       {"x": c, "f": 0.5 * ca.sumsqr(Q - ca.DM(path)),
+                        "g": ca.vertcat(*[p[0] for p in parts])},
+                       {"print_time": False,
+                        "ipopt": {**IPOPT, "tol": 1e-8, "max_iter": FIT_ITERATIONS}})
     first, *_ = np.linalg.lstsq(B, path, rcond=None)
-    result = solver(x0=np.clip(first, lower, upper).T.ravel(), lbg=-bound, ubg=bound,
+    result = solver(x0=np.clip(first, lower, upper).T.ravel(),
+                    lbg=np.concatenate([np.full(p[0].shape[0], p[1], float) for p in parts]),
+                    ubg=np.concatenate([np.full(p[0].shape[0], p[2], float) for p in parts]),
                     lbx=np.tile(lower, (K, 1)).T.ravel(), ubx=np.tile(upper, (K, 1)).T.ravel())
     return np.asarray(result["x"], float).reshape(dof, K).T
+
+
+def _linear_parts(setup, knots, C):
+    """``(expression, lower, upper)`` of the spline's linear constraints: speed and
+    acceleration on the derivative's control points (so everywhere), at rest at both ends."""
+    K = C.shape[0]
+    D1 = derivative_map(knots, K, DEGREE)
+    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
+    vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
+    return [(ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C)), -vmax, vmax),
+            (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C)), -amax, amax),
+            (ca.vertcat((C[1, :] - C[0, :]).T, (C[K - 2, :] - C[K - 1, :]).T), 0.0, 0.0)]
+
+
+def _beam_parts(setup, disc, reading):
+    """``(expression, lower, upper)`` of the beam's conditions at instants with ``disc``
+    [m^2] and ``reading`` [m] (1 x N): a little inside the limits (an iterate stopped
+    early still passes), each in a unit of its own size (IPOPT's tolerances are absolute)."""
+    cos_limit = math.cos(setup.max_incidence - ANGLE_MARGIN)
+    lo, hi = setup.laser_range
+    return [(disc.T / setup.radius**2, cos_limit**2, np.inf),
+            ((reading.T - lo) / (hi - lo), RANGE_MARGIN, 1.0 - RANGE_MARGIN)]
 
 
 class _ScanProblem:
     """The scan OCP over the control points ``C`` (K x dof) as one IPOPT problem.
 
-    Every per-sample quantity is one mapped CasADi function of the samples ``Q = B C``
-    (``B`` sparse: a sample depends on ``DEGREE + 1`` control points, so the constraint
-    Jacobian stays sparse), differentiated exactly by CasADi; the objective is
+    Every per-sample quantity is one mapped CasADi function of a sample (built once in
+    ``ScanRows``), differentiated exactly by CasADi: the beam's conditions at every
+    instant from ``Q = B C`` (``B`` sparse: a sample depends on ``DEGREE + 1`` control
+    points, so the constraint Jacobian stays sparse), the information and the capsules'
+    clearance at the ``grid`` instants as variables of their own; the objective is
     logarithmic (``log`` of ``tool``, ``-log det`` of the reference-scaled information
     otherwise), so its scale does not depend on the set-up's units or sample count.
     """
@@ -547,24 +566,10 @@ class _ScanProblem:
         else:
             d = ca.DM(info.reference)
             objective = -ca.log(ca.det(S / (d @ d.T)))
-        D1 = derivative_map(knots, K, DEGREE)
-        D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
-        vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
-        cos_limit = math.cos(setup.max_incidence - ANGLE_MARGIN)
-        lo, hi = setup.laser_range
-        parts = [
-            # speed and acceleration on the derivative's control points: everywhere
-            (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C)), -vmax, vmax),
-            (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C)), -amax, amax),
-            # at rest at both ends
-            (ca.vertcat((C[1, :] - C[0, :]).T, (C[K - 2, :] - C[K - 1, :]).T), 0.0, 0.0),
-            (ca.vec(samples - ca.mtimes(Bs, C).T), 0.0, 0.0),
-            # a little inside the limits: an iterate stopped early still passes
-            # each in a unit of its own size: IPOPT's tolerances are absolute
-            (disc.T / setup.radius**2, cos_limit**2, np.inf),
-            ((reading.T - lo) / (hi - lo), RANGE_MARGIN, 1.0 - RANGE_MARGIN),
-            (clearance.T / CLEARANCE_UNIT, MARGIN / CLEARANCE_UNIT, np.inf),
-        ]
+        parts = (_linear_parts(setup, knots, C)
+                 + [(ca.vec(samples - ca.mtimes(Bs, C).T), 0.0, 0.0)]
+                 + _beam_parts(setup, disc, reading)
+                 + [(clearance.T / CLEARANCE_UNIT, MARGIN / CLEARANCE_UNIT, np.inf)])
         constraints = ca.vertcat(*[p[0] for p in parts])
         self.lbg = np.concatenate([np.full(p[0].shape[0], p[1], float) for p in parts])
         self.ubg = np.concatenate([np.full(p[0].shape[0], p[2], float) for p in parts])

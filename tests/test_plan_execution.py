@@ -214,6 +214,34 @@ def test_predicted_tool_error_matches_a_monte_carlo_of_the_linear_fit(files):
     assert math.sqrt(np.mean(squares)) == pytest.approx(predicted, rel=0.1)
 
 
+def test_tool_weights_measure_the_point_error_left_after_the_best_rigid_motion(files):
+    """``d^T W d`` against finite parameter steps: the robot's points at the perturbed
+    parameters, registered rigidly (Kabsch) onto the nominal ones, mean squared error."""
+    from planning.accuracy import tool_weights, workspace_samples
+    from planning.reach import Workspace
+    from planning.rows import RowModel
+    from planning.setup import setup_from_dataset
+    from robocal_casadi.measurement.tracker import rigid_registration
+
+    setup = setup_from_dataset(load_dataset(files["bar_ur"], require_data=False))
+    kin = Kinematics(setup.robot)
+    workspace = Workspace(kin)
+    names = RowModel(setup, kin).parameters
+    W = tool_weights(setup, workspace, names, np.random.default_rng(4))
+    Q = workspace_samples(setup, workspace, np.random.default_rng(4))
+    nominal = kin.points(Q, setup.offset, workspace.p)
+    rng = np.random.default_rng(8)
+    n_robot = len(kin.registry)
+    for _ in range(5):
+        step = rng.normal(0, 1e-6, len(names))  # [m, rad]: small, so the model is linear
+        moved = kin.points(Q, setup.offset + step[n_robot:], workspace.p + step[:n_robot])
+        R, t = rigid_registration(moved, nominal)
+        left = np.mean(np.sum((moved @ R.T + t - nominal) ** 2, axis=1))
+        assert step @ W @ step == pytest.approx(left, rel=1e-3)
+        whole = np.mean(np.sum((moved - nominal) ** 2, axis=1))
+        assert left < 0.9 * whole  # the rigid part is not counted
+
+
 # ----------------------------------------------------------------------------- scans
 
 
