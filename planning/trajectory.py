@@ -1,30 +1,41 @@
-"""Laser scans of the sphere as an optimal control problem (CasADi Opti).
+"""Laser scans of the sphere as an optimal control problem (CasADi, IPOPT).
 
 A point laser samples at ``laser_rate`` [Hz] while the robot moves, so a scan is a joint
 trajectory, not a set of poses. The trajectory is a clamped cubic B-spline ``q(t) = sum
-B_k(t) C_k`` over ``[0, T]``, ``T = (count - 1) / laser_rate`` [s]; the control points
-``C`` (K x dof) are the unknowns. Sampled at the laser's instants ``t_i``:
+B_k(t) C_k`` over ``[0, T]``, ``T = (count - 1) / laser_rate`` [s], with
+``KNOTS_PER_SECOND`` control points per second; the control points ``C`` (K x dof) are
+the unknowns. Sampled at the laser's instants ``t_i``:
 
 * constraints: joint limits (on ``C``: a B-spline stays in its control points' hull), joint
   speed and acceleration within ``max_joint_speed``, ``max_joint_acceleration`` (on the
   derivative's control points, so everywhere, not only at samples), at rest at both
-  ends; at every sample the beam meets the sphere within the incidence limit
+  ends; at every instant the beam meets the sphere within the incidence limit
   (``sqrt(disc) >= R cos(max_incidence)``: ``sqrt(disc) / R`` is the cosine of the
-  angle between the beam and the surface normal), the reading within ``laser_range``,
-  and every joint frame and the laser origin a capsule radius above the table;
+  angle between the beam and the surface normal) and the reading lies within
+  ``laser_range``, both a margin inside; the arm's capsules clear of the table and of
+  each other (``collision.Body.clearance_bound``);
 * objective: the chosen index of the sampled readings' information (rows as in
-  ``rows``, the sphere centre projected out): ``tool`` exactly (``trace(W S^-1)``),
-  the others through ``-log det`` of the reference-scaled information.
+  ``rows``, the sphere centre projected out), as a logarithm: ``log`` of ``tool`` squared
+  (``sum 1 / s_i^2`` of ``J L^-T``, the route of ``information``), ``-log det`` of the
+  reference-scaled information for the others.
+
+The information and the clearance are posed at a grid of instants (``SAMPLES_PER_SPAN``
+per knot span, each a variable tied to the spline by a linear equality, so every
+nonlinear constraint depends on one instant and its Jacobian is cheap); the beam's
+conditions at every instant. Afterwards every instant is checked; instants that break a
+constraint join the grid and the solve is repeated (``REPAIRS``).
 
 Unknowns: sensor only (pendant poses: the robot is taken as exact) the 8 of the laser
 and sphere (origin 3, beam 2, centre 3); robot plus laser the robot parameters the pool
 of feasible poses identifies, the laser's 5 and the centre.
 
-Start: informative feasible laser poses (greedy ``log det`` on a pool, as ``design``),
-in a short order (``order``), joined by beams that slide over the sphere (hit normal,
-beam direction and stand-off interpolated, inverse kinematics from the previous sample),
-then fitted by the spline. After the solve every sample is checked again (limits,
-beam, capsules of ``collision``); a scan that fails is refused.
+Start: a sweep of the beam over a cap of the sphere around the most informative of a few
+feasible laser poses (hit normal, beam direction and stand-off interpolated between
+waypoints, inverse kinematics for all instants at once), fitted by the spline under the
+beam and motion constraints, so the solver starts feasible. IPOPT stops at
+``max_iterations``; the best iterate that met every constraint is kept. After the solve
+every sample is checked again (limits, beam, capsules of ``collision``, speed); a scan
+that fails is refused.
 """
 
 from __future__ import annotations
