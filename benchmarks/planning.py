@@ -250,7 +250,13 @@ def main() -> None:
                 continue
             kind = name.split("/")[1]
             sizes = counts[kind][1:3] if args.quick else counts[kind]
+            started = time.perf_counter()
             results.append(case(path, sizes, 3 if args.quick else repeats))
+            results[-1]["seconds"] = time.perf_counter() - started
+            # progress on stderr: a long run shows each set-up as it ends
+            print(json.dumps({name: {r["count"]: r["model_error_margin"] | {
+                "condition_ratio": r["condition_ratio"]} for r in results[-1]["sizes"]}}),
+                file=sys.stderr, flush=True)
     print(json.dumps({"benchmark": "planning", "cases": results}, indent=2))
 
 
