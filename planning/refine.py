@@ -1,10 +1,12 @@
 """Continuous refinement of a chosen plan in CasADi (IPOPT).
 
 The joint readings of the chosen candidates become the variables; the objective is
-``log`` of the index ``tool`` itself (``log sum 1 / s_i^2`` of ``J L^-T``), or for the
-other indices ``-log det`` of the plan's scaled information (Schur complement of the
-shared placement unknowns, columns scaled as the index asks), a smooth surrogate of
-each; the constraints keep each reading runnable:
+``log`` of the index ``tool`` itself (``log sum 1 / s_i^2`` of ``J L^-T``); for the
+condition number ``log sum 1 / s_i^2`` of the plan's columns normalised to unit length
+(the smallest singular values weigh most; a smooth stand-in for ``s_max / s_min``);
+for the other indices ``-log det`` of the information with the reference column
+scales; all after the Schur complement of the shared placement unknowns. The
+constraints keep each reading runnable:
 
 * every instrument: joint limits, every joint frame origin and the measured point above
   the worktable, the arm's capsules clear of the table, of each other and of the line of
@@ -141,8 +143,13 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
         # the index itself: log sum 1 / s_i^2 of J L^-T (info.tool = L^-1)
         T = ca.DM(info.tool)
         objective = ca.log(ca.trace(ca.solve(T @ M @ T.T, ca.DM.eye(m))))
+    elif mode == "design":
+        # columns normalised (unit diagonal): the sum of 1 / eigenvalues weighs the
+        # smallest ones most, a smooth stand-in for the condition number
+        d = ca.sqrt(ca.diag(M))
+        objective = ca.log(ca.trace(ca.solve(M / (d @ d.T), ca.DM.eye(m))))
     else:
-        d = ca.sqrt(ca.diag(M)) if mode == "design" else ca.DM(info.reference)
+        d = ca.DM(info.reference)
         objective = -ca.log(ca.det(M / (d @ d.T)))
     x = ca.vertcat(*variables)
     g = ca.vertcat(*constraints)
