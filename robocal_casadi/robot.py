@@ -269,9 +269,10 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     )
     base = _frame_from_dict(content.get("base"), units, file=file, where="base")
     tool = _frame_from_dict(content.get("tool"), units, file=file, where="tool")
-    gravity = (0.0, 0.0, -9.81)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     if content.get("gravity") is not None:
-        gravity = tuple(vector(content["gravity"], 3, file=file, where="gravity"))
+        gx, gy, gz = vector(content["gravity"], 3, file=file, where="gravity")
+        gravity = (float(gx), float(gy), float(gz))
         if max(abs(g) for g in gravity) > MAX_GRAVITY:
             raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
                              file=file, where="gravity")
@@ -293,7 +294,7 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         joints=joints,
         base=base,
         tool=tool,
-        gravity=gravity,  # type: ignore[arg-type]
+        gravity=gravity,
         units=units,
         has_base=content.get("base") is not None,
         has_tool=content.get("tool") is not None,
