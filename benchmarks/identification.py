@@ -9,8 +9,10 @@ is not exactly undeterminable, weighed against its tolerance). Printed side by s
   joint readings, sphere with pendant poses), three quarters of the units fitted and the
   rest held out, for several seeds; the held-out RMS is compared with the noise floor,
   the held-out RMS of the TRUE model (true robot and instrument from the simulation,
-  placements fitted again), which the estimator never sees. Per seed and the median;
-  a single held-out laser reading at grazing incidence can dominate one seed's RMS;
+  placements fitted again), which the estimator never sees. Per seed and the median,
+  beside what an efficient estimator reaches on average (``expected_over_floor``); a
+  single held-out laser reading far from every fitted one (another branch of the inverse
+  kinematics) can dominate one seed's RMS;
 * the UR10 series D target offset along the flange axis (every fourth pose held out);
 * the Panda placements held out (three pairs), as in ``real_data.py``.
 
