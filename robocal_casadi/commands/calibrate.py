@@ -138,6 +138,10 @@ def summary(result: CalibrationResult) -> str:
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
                      f"library does not name): {', '.join(stand_ins)}")
+    removed = _rejected(result, "removed")
+    if removed:
+        lines.append("added, then taken out again (with the later effects in, it no longer "
+                     f"helps): {', '.join(removed)}")
     confounded = _rejected(result, "confounded")
     if confounded:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
