@@ -115,8 +115,21 @@ def parameters(result: Path) -> dict[str, float]:
     values = {f"p:{p['name']}": p["estimate"] for p in content["parameters"]}
     for effect in content.get("effects", []):
         values.update({f"e:{effect['name']}:{k}": v for k, v in effect["parameters"].items()})
-    values.update({f"fit:{k}": v for k, v in content["fit"].items() if k != "unit"})
+    values.update(flatten("fit", content["fit"]))
     return values
+
+
+def flatten(prefix: str, value) -> dict[str, float]:
+    """Every number inside ``value`` (nested dicts and lists) by its path; text left out."""
+    if isinstance(value, dict):
+        return {k: v for key, item in value.items() for k, v in
+                flatten(f"{prefix}:{key}", item).items()}
+    if isinstance(value, list):
+        return {k: v for i, item in enumerate(value) for k, v in
+                flatten(f"{prefix}:{i}", item).items()}
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return {prefix: float(value)}
+    return {}
 
 
 def largest_relative_difference(a: dict, b: dict) -> float:

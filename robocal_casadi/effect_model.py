@@ -182,17 +182,20 @@ def geometry_only(result, datasets, validation=()) -> dict:
     from .calibration.identification import evaluate
 
     values = {name: value for name, (value, _) in result.mounted.items()}
-    out = {"robot_calibrated.yaml": {}, "with_effects": None}
+    geometry: dict[str, float] = {}
+    out: dict[str, dict[str, float] | None] = {"robot_calibrated.yaml": geometry,
+                                                "with_effects": None}
     for role, data in (("fit", datasets), ("validation", validation)):
         if not data:
             continue
         problem, x = evaluate(result.robot_calibrated, list(data), (), values,
                               label_prefix="validation:" if role == "validation" else "")
-        out["robot_calibrated.yaml"][role] = problem.rms(x)
+        geometry[role] = problem.rms(x)
     if result.recommended == "final" and result.effects:
-        out["with_effects"] = {"fit": result.fit.rms_final}
+        with_effects = {"fit": result.fit.rms_final}
         if result.validation is not None:
-            out["with_effects"]["validation"] = result.validation.rms_final
+            with_effects["validation"] = result.validation.rms_final
+        out["with_effects"] = with_effects
     return out
 
 
@@ -225,8 +228,8 @@ def row_values(model: EffectModel, table, *, payload: float | None = None,
                 raise InputError(f"{name} is given both as a column and as --{name}",
                                  file=table.path, where="line 1")
             out[name] = np.asarray(table.numbers(name), dtype=float)
-        elif options.get(name) is not None:
-            out[name] = np.asarray(float(options[name]))
+        elif (given := options.get(name)) is not None:
+            out[name] = np.asarray(float(given))
         elif name == "payload" and not model.payload:
             out[name] = np.asarray(0.0)  # the calibration saw no payload either
         else:

@@ -269,9 +269,10 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     )
     base = _frame_from_dict(content.get("base"), units, file=file, where="base")
     tool = _frame_from_dict(content.get("tool"), units, file=file, where="tool")
-    gravity = (0.0, 0.0, -9.81)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     if content.get("gravity") is not None:
-        gravity = tuple(vector(content["gravity"], 3, file=file, where="gravity"))
+        gx, gy, gz = vector(content["gravity"], 3, file=file, where="gravity")
+        gravity = (float(gx), float(gy), float(gz))
         if max(abs(g) for g in gravity) > MAX_GRAVITY:
             raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
                              file=file, where="gravity")
@@ -293,7 +294,7 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         joints=joints,
         base=base,
         tool=tool,
-        gravity=gravity,  # type: ignore[arg-type]
+        gravity=gravity,
         units=units,
         has_base=content.get("base") is not None,
         has_tool=content.get("tool") is not None,
@@ -351,7 +352,8 @@ def _joint_tolerance(raw: Any, joint: int, units: Units, *, file, where: str
     return out
 
 
-def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
+def _joint_from_dict(raw: Any, units: Units, *, file, where: str,
+                     urdf: bool = False) -> Joint:
     if not isinstance(raw, dict):
         raise InputError(f"expected a mapping {{type, theta, d, a, alpha, ...}}, got "
                          f"{cut(raw)}", file=file, where=where)
@@ -392,7 +394,8 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str) -> Joint:
         if lo >= hi:
             raise InputError(f"lower limit {lo / scale:g} is not below upper limit "
                              f"{hi / scale:g}", file=file, where=f"{where}.limits")
-        if revolute and units.angle == "rad" and max(abs(lo), abs(hi)) > MAX_LIMIT:
+        # A URDF is in radians by definition: wide limits there are the vendor's, not a unit slip.
+        if revolute and units.angle == "rad" and not urdf and max(abs(lo), abs(hi)) > MAX_LIMIT:
             raise InputError(f"[{lo:g}, {hi:g}] rad allows more than two turns each way; "
                              f"{DEGREES_HINT}", file=file, where=f"{where}.limits")
         limits = (lo, hi)
@@ -440,7 +443,7 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
         dh_like = _joint_from_dict(
             {"type": raw.get("type", "revolute"), "theta": 0, "d": 0, "a": 0, "alpha": 0,
              **{k: raw[k] for k in ("limits", "mass", "com") if k in raw}},
-            units, file=file, where=where)
+            units, file=file, where=where, urdf=True)
         origin = _frame_from_dict({k: raw[k] for k in ("xyz", "rpy") if k in raw}, units,
                                   file=file, where=where)
         axis = np.array(vector(raw.get("axis", [0, 0, 1]), 3, file=file, where=f"{where}.axis"))

@@ -221,7 +221,7 @@ GEOMETRY = [
      [("tracker_points", 80, {}), ("tracker_points", 80, {})], ("tracker_points", 120), NOISE),
     pytest.param("five-axis-bar", five_axis, [("cross_bar", 80, {})], ("cross_bar", 40), NOISE,
                  marks=pytest.mark.slow),
-    pytest.param("metre-radian-bar", metre_radian_6r, [("cross_bar", 80, {})],
+    pytest.param("metre-radian-bar", metre_radian_6r, [("cross_bar", 160, {})],
                  ("cross_bar", 40), NOISE, marks=pytest.mark.slow),
     pytest.param("scara-sockets", prismatic_rrp, [("artifact_touches", 10, {})],
                  ("artifact_touches", 10), NOISE, marks=pytest.mark.slow),

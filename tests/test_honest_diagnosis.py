@@ -236,3 +236,24 @@ def test_coupling_and_backlash_are_named_with_their_joint(tmp_path, effects, nam
     assert found[0].parameters[parameter] == pytest.approx(value, rel=0.1)
     assert result.validation.rms_final <= 1.25 * FLOOR, result
     assert result.recommended == "final" and result.unexplained is None
+
+
+def test_an_effect_that_stood_in_for_a_later_one_is_taken_out(tmp_path):
+    """Compliance of joints 2 and 3 and a gear-ratio error of joint 3: early rounds, with
+    the gear ratio not yet in the model, find a coupling of joints 2 and 3 that takes part
+    of its signal. Once the gear ratio and the compliance are in, the coupling no longer
+    pays its way; it is taken out, and the record says so."""
+    truth = {"joint_compliance": {2: 1.057e-6, 3: 0.879e-6}, "joint_scale": {3: 5.44e-4}}
+    data = simulate(ROBOTS["industrial_6r"](), "tracker_points", out_dir=tmp_path / "t",
+                    rows=500, noise=1e-5, geometric_errors=(0.243e-3, 1.2036e-3),
+                    effects=truth, seed=7, progress=False).load()
+    result = calibrate([data])
+    assert sorted(e.name for e in result.effects) == ["joint_compliance", "joint_scale"]
+    removed = [t for t in result.diagnosis if str(t["decision"]).startswith("removed")]
+    assert [t["effect"] for t in removed] == ["joint_coupling"]
+    assert "with the other effects in" in removed[0]["decision"]
+    assert any(line.startswith("added, then taken out again") and "joint_coupling" in line
+               for line in summary(result).splitlines())
+    scale = next(e for e in result.effects if e.name == "joint_scale")
+    assert scale.parameters["s3"] == pytest.approx(5.44e-4, rel=0.05)
+    assert result.fit.rms_final < 1.02 * 1e-5 * math.sqrt(3)

@@ -112,6 +112,22 @@ def test_broken_urdf_is_one_line(tmp_path):
         load_robot(write(tmp_path, "ur.urdf", ur10_urdf()), tip_link="tool9")
 
 
+def test_wide_urdf_limits_are_the_vendors_not_degrees(tmp_path):
+    """A URDF is in radians by definition: limits of three turns each way load as they
+    are; the same limits in a robot file that declares rad are refused as degrees."""
+    text = ur10_urdf().replace('lower="-6.283185307179586" upper="6.283185307179586"',
+                               'lower="-18.84955592153876" upper="18.84955592153876"', 1)
+    assert text != ur10_urdf()
+    robot = load_robot(write(tmp_path, "wide.urdf", text), tip_link="tool0")
+    assert robot.joints[0].limits == pytest.approx((-6 * np.pi, 6 * np.pi))
+    dh = yaml.safe_load(UR10_DH.read_text())
+    dh["units"] = {"length": "m", "angle": "rad"}
+    for joint in dh["joints"]:
+        joint.update(theta=0.0, alpha=0.0, limits=[-18.85, 18.85])
+    with pytest.raises(InputError, match="looks like degrees"):
+        robot_from_dict(dh)
+
+
 def test_urdf_convention_robot_file_round_trips(ur10):
     robot = load_robot(ur10, tip_link="tool0")
     again = robot_from_dict(yaml.safe_load(yaml.safe_dump(robot_to_dict(robot))))

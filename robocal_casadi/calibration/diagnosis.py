@@ -573,9 +573,55 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
     groups = _groups(steps)
     evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
+    # An effect added early can stand in for one found later (a coupling taking part of a
+    # gear-ratio error before the gear ratio is in): each must still pay its way with the
+    # others in the model, or it goes, the weakest first.
+    while len(groups) > 1:
+        failing = {key: reason for key, numbers in evidence.items()
+                   if (reason := _no_longer_supported(numbers, bic_threshold))}
+        if not failing:
+            break
+        weakest = min(failing, key=lambda key: evidence[key]["bic_drop"])
+        dropped = groups[weakest]
+        tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
+        names = [n for step in dropped for n in step.kept]
+        x = x.copy()
+        x[_mask_of(big, names)] = 0.0
+        free = free & ~_mask_of(big, names)
+        steps = [step for step in steps if step not in dropped]
+        final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
+        groups = _groups(steps)
+        evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
     findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)
+
+
+def _no_longer_supported(numbers: dict, bic_threshold: float) -> str:
+    """Why an added effect no longer pays its way in the final model ('' when it does),
+    from its leave-one-out ``numbers`` (``_evidence``)."""
+    if not numbers["bic_drop"] > bic_threshold:
+        return f"BIC drop {numbers['bic_drop']:.3g} with the other effects in"
+    before, after = numbers["cv_rms_before"], numbers["cv_rms_after"]
+    if np.isfinite(before) and not after <= (1.0 - MIN_GAIN) * before:
+        return (f"held-out RMS {after / before - 1:+.2%} with the other effects in "
+                f"(needs -{MIN_GAIN:.0%})")
+    return ""
+
+
+def _removal(group: list[_Step], numbers: dict, reason: str, round_: int) -> CandidateTest:
+    """The record of an added effect taken out again (``decision`` says why)."""
+    first = group[0].candidate
+    return CandidateTest(
+        round=round_, effect=first.effect,
+        joints=tuple(sorted(j for step in group for j in step.candidate.joints)),
+        parameters=sum(len(step.kept) for step in group),
+        held=tuple(n for step in group for n in step.held), remaining_norm=float("nan"),
+        rss_drop=float(numbers["rms_drop"]), bic_drop=float(numbers["bic_drop"]),
+        cv_rms_before=float(numbers["cv_rms_before"]),
+        cv_rms_after=float(numbers["cv_rms_after"]),
+        decision=f"removed: stood in for effects found later ({reason})",
+        label=", ".join(_label(step.candidate) for step in group))
 
 
 def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,

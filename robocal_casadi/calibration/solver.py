@@ -100,7 +100,8 @@ def _covariance(J: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def _levenberg_marquardt(problem: LeastSquaresProblem, x: np.ndarray, free: np.ndarray, *,
-                         loss: Loss, max_iterations: int, damping: bool, tolerance: float):
+                         loss: Loss, max_iterations: int, damping: bool, tolerance: float,
+                         decrease: float = CONVERGED_DECREASE):
     """The shared kernel over ``x[free]``: damped (``lm``) or plain Gauss-Newton steps."""
     def evaluate(z: np.ndarray, jacobian: bool):
         full = x.copy()
@@ -109,7 +110,7 @@ def _levenberg_marquardt(problem: LeastSquaresProblem, x: np.ndarray, free: np.n
 
     fit = levenberg_marquardt(
         evaluate, x[free].copy(), max_iterations=max_iterations,
-        tolerances=Tolerances(ftol=CONVERGED_DECREASE, xtol=tolerance),
+        tolerances=Tolerances(ftol=decrease, xtol=tolerance),
         damping=DAMPING if damping else None,
         reweight=_huber_weights if loss == "huber" else None)
     x = x.copy()
@@ -153,8 +154,13 @@ def _ipopt(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, max_i
 
 
 def solve(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, *, method: Method = "lm",
-          loss: Loss = "linear", max_iterations: int = 100, tolerance: float = 1e-10) -> Solution:
+          loss: Loss = "linear", max_iterations: int = 100, tolerance: float = 1e-10,
+          decrease: float = CONVERGED_DECREASE) -> Solution:
     """Minimise ``0.5 |r(x)|^2`` over ``x[free]``, the rest held at ``x0``.
+
+    ``tolerance``: a scaled step below this fraction of the scaled state ends the fit;
+    ``decrease``: so does an accepted step lowering the cost by less than this fraction of
+    it (``lm`` and ``linearised``).
 
     ``x0`` (all unknowns, SI) and ``free`` (boolean, same length) are checked at the
     door, as are ``method``, ``loss``, ``max_iterations`` and ``tolerance``
@@ -164,6 +170,7 @@ def solve(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, *, met
     loss = choice(loss, LOSSES, "loss")
     max_iterations = count(max_iterations, "max_iterations")
     tolerance = positive(tolerance, "tolerance")
+    decrease = positive(decrease, "decrease")
     size = len(problem.unknowns)
     x0 = array(x0, (size,), "x0")
     free = np.asarray(free)
@@ -178,11 +185,11 @@ def solve(problem: LeastSquaresProblem, x0: np.ndarray, free: np.ndarray, *, met
     if method == "lm":
         x, r, cov, cost, it, status = _levenberg_marquardt(
             problem, x0, free, loss=loss, max_iterations=max_iterations, damping=True,
-            tolerance=tolerance)
+            tolerance=tolerance, decrease=decrease)
     elif method == "linearised":
         x, r, cov, cost, it, status = _levenberg_marquardt(
             problem, x0, free, loss=loss, max_iterations=max_iterations, damping=False,
-            tolerance=tolerance)
+            tolerance=tolerance, decrease=decrease)
     elif method == "ipopt":
         x, r, cov, cost, it, status = _ipopt(problem, x0, free, max_iterations)
     else:

@@ -51,6 +51,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "condition number by more than the fraction G, e.g. 0.05")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to the geometric fit (default 200)")
+    parser.add_argument("--rule", choices=("prior", "fraction"), default="prior",
+                        help="prior (default): every parameter not exactly undeterminable, "
+                             "weighed against its tolerance (maximum a posteriori); fraction: "
+                             "least squares, parameters with under 1%% of their effect their "
+                             "own held at nominal")
     parser.add_argument("--profile", choices=PROFILES, default=None,
                         help="fit only the robot parameters this controller accepts "
                              "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
@@ -133,6 +138,10 @@ def summary(result: CalibrationResult) -> str:
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
                      f"library does not name): {', '.join(stand_ins)}")
+    removed = _rejected(result, "removed")
+    if removed:
+        lines.append("added, then taken out again (with the later effects in, it no longer "
+                     f"helps): {', '.join(removed)}")
     confounded = _rejected(result, "confounded")
     if confounded:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
@@ -210,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                                     for p in (d.path, d.data_path, d.robot_path)])
     options = dict(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                    select_growth=args.select_growth, max_iterations=args.max_iterations,
-                   progress=sys.stderr.isatty())
+                   rule=args.rule, progress=sys.stderr.isatty())
     if args.profile is None:
         result = calibrate(datasets, validation, **options)
     else:

@@ -86,10 +86,10 @@ def run(args: argparse.Namespace) -> int:
                          f"{missing}", file=table.path, where="line 1")
     columns = POSITION + (QUATERNION if has_orientation else ())
     targets = np.column_stack([table.numbers(c) for c in columns])
-    for row, col in np.argwhere(np.abs(targets[:, :3] * L) > MAX_LENGTH)[:1]:
-        check_magnitude(targets[row, col] * L, "length", file=table.path,
-                        where=f"line {table.line(int(row))}, column {POSITION[col]!r}",
-                        shown=targets[row, col], unit=robot.units.length)
+    for index, col in np.argwhere(np.abs(targets[:, :3] * L) > MAX_LENGTH)[:1]:
+        check_magnitude(targets[index, col] * L, "length", file=table.path,
+                        where=f"line {table.line(int(index))}, column {POSITION[col]!r}",
+                        shown=targets[index, col], unit=robot.units.length)
     targets[:, :3] *= L
     if has_orientation:
         big = np.abs(targets[:, 3:]).max(axis=1)
@@ -97,10 +97,10 @@ def run(args: argparse.Namespace) -> int:
         norms = np.linalg.norm(targets[:, 3:] / big[:, None], axis=1) * big  # no overflow
         bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
         if bad.size:
-            row = int(bad[0])
-            raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 "
+            first = int(bad[0])
+            raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[first]:.9g}, not 1 "
                              f"within {QUATERNION_TOLERANCE:g}", file=table.path,
-                             where=f"line {table.line(row)}")
+                             where=f"line {table.line(first)}")
     joint_names = [f"q{i}" for i in range(1, robot.dof + 1)]
     extras = [c for c in table.columns if c not in columns]
     clashes = [c for c in extras if c in joint_names or c in ("status", "position_error",

@@ -114,8 +114,8 @@ def run(args: argparse.Namespace) -> int:
         from ..effect_model import load_effects, row_values
 
         model = load_effects(Path(args.calibrated), robot)
-        extras = row_values(model, table, payload=args.payload, temperature=args.temperature)
-        poses = pose_rows(model.tool_poses(Q, extras), robot)
+        values = row_values(model, table, payload=args.payload, temperature=args.temperature)
+        poses = pose_rows(model.tool_poses(Q, values), robot)
     else:
         poses = tool_pose_rows(robot, Q)
     copied = [[row[table.columns.index(c)] for c in extras] for row in table.rows]

@@ -177,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
     _check_options(args, robot)
     L, A = robot.units.length_scale, robot.units.angle_scale
-    geometric_errors = None
+    geometric_errors: tuple[float, float] | dict[str, float] | None = None
     mounted_error = None if args.mounted_error is None else args.mounted_error * L
     if args.errors:
         length_std, angle_std = _floats(args.errors, 2, "--errors")
@@ -191,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
         geometric_errors = (length_std * L, angle_std * A)
     elif args.error:
         registry = robot.parameters()
-        geometric_errors = {}
+        per_parameter: dict[str, float] = {}
+        geometric_errors = per_parameter
         for item in args.error:
             name, _, value = item.partition("=")
             name = name.strip()
@@ -204,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
                 check_magnitude(number * robot.units.scale(quantity_name), quantity_name,
                                 file=None, where=f"--error {item}", shown=number,
                                 unit=robot.units.unit_name(quantity_name))
-            geometric_errors[name] = number * robot.units.scale(registry.quantity(name))
+            per_parameter[name] = number * robot.units.scale(registry.quantity(name))
     payload = None
     if args.payload:
         values = _floats(args.payload, None, "--payload")
@@ -224,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
         length, _, angle = args.units.partition(",")
         units = parse_units({"length": length.strip(), "angle": angle.strip()}, file=None,
                             key="--units")
-    options = {}
+    options: dict[str, float] = {}
     for key, default in (("bar_length", 0.4), ("socket_distance", 0.05),
                          ("sphere_radius", 0.025)):
         value = getattr(args, key)
@@ -236,7 +237,8 @@ def run(args: argparse.Namespace) -> int:
         mounted_error=mounted_error, payload=payload, payload_com=payload_com,
         temperature=temperature, reference_temperature=args.reference_temperature,
         readings=args.readings, sockets=args.sockets, touches=args.touches, force=args.force,
-        **options)
+        bar_length=options["bar_length"], socket_distance=options["socket_distance"],
+        sphere_radius=options["sphere_radius"])
     print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
           f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
     return 0

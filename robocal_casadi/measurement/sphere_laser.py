@@ -64,6 +64,12 @@ class SphereLaserModel(MeasurementModel):
             dataset.flange_poses, dataset.distance, dataset.radius)
         self._sensor: SensorFit | None = None
 
+    def _pendant_scan(self) -> Scan:
+        """The flange poses of sensor-only data (pendant readings); joint data have none."""
+        if self._scan is None:
+            raise TypeError(f"{self.label}: joint readings carry no pendant flange poses")
+        return self._scan
+
     # ------------------------------------------------------------------ unknowns
 
     @property
@@ -98,8 +104,8 @@ class SphereLaserModel(MeasurementModel):
             hit = np.asarray(points(offsets), float)
             beam = np.asarray(points(offsets + direction[:, None]), float) - hit
         else:
-            hit = self._scan.points(origin, direction)
-            beam = self._scan.beams(direction)
+            hit = self._pendant_scan().points(origin, direction)
+            beam = self._pendant_scan().beams(direction)
         return sphere_centre(hit.T, self.dataset.radius, beam=beam.T)
 
     def consistent_dataset(self, kinematics, p, mounted, placement):
@@ -139,7 +145,7 @@ class SphereLaserModel(MeasurementModel):
         if self.uses_robot:
             world = points(offsets)
         else:
-            R, t = self._scan.rotations, self._scan.translations
+            R, t = self._pendant_scan().rotations, self._pendant_scan().translations
             world = ca.vertcat(*[
                 sum(ca.DM(R[k, j].reshape(1, -1)) * offsets[j, :] for j in range(3))
                 + ca.DM(t[k].reshape(1, -1)) for k in range(3)])

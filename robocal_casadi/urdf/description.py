@@ -75,7 +75,8 @@ def chain_description(document: UrdfDocument, *, base_link: str | None = None,
             entry["limits"] = [float(v) for v in joint.limits]
         if body:
             total = sum(m for m, _ in body)
-            com = (sum(m * c for m, c in body) / total) if total > 0 else body[0][1]
+            com = np.asarray(sum(m * c for m, c in body) / total if total > 0 else body[0][1],
+                             dtype=float)
             if k == len(moving) - 1:  # the last link's com in the tip link's frame
                 com = to_tip[:3, :3] @ com + to_tip[:3, 3]
             entry["mass"] = float(total)

@@ -66,7 +66,7 @@ class UrdfDocument:
                 raise InputError(f"joint {joint.name!r} is defined twice", file=path)
             self.joints[joint.name] = joint
             self.elements[joint.name] = element
-        self._by_child = {}
+        self._by_child: dict[str, UrdfElementJoint] = {}
         for joint in self.joints.values():
             if joint.child in self._by_child:
                 raise InputError(f"link {joint.child!r} has two parent joints "

@@ -48,6 +48,13 @@ def _axes(robot: Robot) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray]
     return points, directions, frames[-1]
 
 
+def _placed(value: np.ndarray | None) -> np.ndarray:
+    """A frame's axis or origin that the construction has set."""
+    if value is None:
+        raise ValueError("a DH frame was left unplaced")
+    return value
+
+
 def _frame(x: np.ndarray, z: np.ndarray, origin: np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, 0], T[:3, 2] = x, z
@@ -65,7 +72,9 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
     points, z, tip = _axes(robot)
     n = robot.dof
     notes: list[str] = []
-    origins, xs, parallel = [None] * n, [None] * n, [False] * n
+    origins: list[np.ndarray | None] = [None] * n
+    xs: list[np.ndarray | None] = [None] * n
+    parallel = [False] * n
     # frame i (1..n-1): on axis i+1, x along the normal from axis i
     for i in range(1, n):
         za, zb, pa, pb = z[i - 1], z[i], points[i - 1], points[i]
@@ -98,10 +107,13 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
             x = normal / np.linalg.norm(normal)
         origins[i], xs[i] = on_b, x
     # frame 0 on axis 1 with frame 1's x; frame n on axis n under the tip, frame n-1's x
-    x1 = xs[1] if n > 1 else _any_normal(z[0])
-    origin_0 = origins[1] - np.dot(origins[1] - points[0], z[0]) * z[0] if n > 1 else points[0]
+    placed_x = [_placed(v) for v in xs[1:]]  # frames 1..n-1, every one set above
+    placed_origin = [_placed(v) for v in origins[1:]]
+    x1 = placed_x[0] if n > 1 else _any_normal(z[0])
+    origin_0 = (placed_origin[0] - np.dot(placed_origin[0] - points[0], z[0]) * z[0] if n > 1
+                else points[0])
     frames = [_frame(x1, z[0], origin_0)]
-    frames += [_frame(xs[i], z[i], origins[i]) for i in range(1, n)]
+    frames += [_frame(placed_x[i - 1], z[i], placed_origin[i - 1]) for i in range(1, n)]
     last = frames[-1]
     height = np.dot(tip[:3, 3] - last[:3, 3], last[:3, 2])
     frames.append(_frame(last[:3, 0], last[:3, 2], last[:3, 3] + height * last[:3, 2]))

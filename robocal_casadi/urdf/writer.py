@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..robot import Robot
+from ..robot import Robot, UrdfSource
 from ..transforms import invert, rot_x, rot_y, rot_z, rpy_from_matrix, translation
 from .chain import frame_of, robot_from_document
 from .document import UrdfDocument, read_document
@@ -112,7 +112,7 @@ def dh_in_urdf_frames(calibrated: Robot, nominal: Robot, vendor: Robot, *,
                                               _urdf_link_frames(vendor, q), Y)):
             gap = _difference(J @ fixed, L)
             if gap > AGREEMENT:
-                link = vendor.joints[i].child if i < vendor.dof else vendor.urdf.tip_link
+                link = vendor.joints[i].child if i < vendor.dof else _source(vendor).tip_link
                 raise InputError(
                     f"link {link!r} does not follow joint {min(i + 1, nominal.dof)} of the "
                     f"calibrated robot (off by {gap:.3g} m or rad at another joint reading): "
@@ -143,7 +143,8 @@ def urdf_in_urdf_frames(calibrated: Robot, vendor: Robot, *, file: Path | None =
 def own_origins(document: UrdfDocument, chain: Robot) -> dict[str, np.ndarray]:
     """The new ``<origin>`` (4x4, [m]) of each joint of ``document`` that changes, by name,
     so that the file's chain from ``chain.urdf.base_link`` to ``tip_link`` is ``chain``."""
-    _, _, path = document.chain(chain.urdf.base_link, chain.urdf.tip_link)
+    source = _source(chain)
+    _, _, path = document.chain(source.base_link, source.tip_link)
     out, fixed_before, k = {}, np.eye(4), 0
     trailing = []
     for joint in path:
@@ -229,15 +230,19 @@ def ur_calibration(calibrated: Robot, like: Path | None = None, *,
                          f"robot has {calibrated.dof} joints of types "
                          f"{sorted({j.type for j in calibrated.joints})}")
     if calibrated.convention == "urdf" or like is not None:
-        source = like or Path(calibrated.urdf.file)
+        source = like if like is not None else Path(_source(calibrated).file)
         document = read_document(source)
         if calibrated.urdf is not None:
             base_link = base_link or calibrated.urdf.base_link
             tip_link = tip_link or calibrated.urdf.tip_link
         vendor = robot_from_document(document, base_link=base_link, tip_link=tip_link)
-        chain = (urdf_in_urdf_frames(calibrated, vendor, file=source)
-                 if calibrated.convention == "urdf"
-                 else dh_in_urdf_frames(calibrated, nominal, vendor, file=source))
+        if calibrated.convention == "urdf":
+            chain = urdf_in_urdf_frames(calibrated, vendor, file=source)
+        elif nominal is None:
+            raise InputError("a DH robot needs its nominal geometry to be written over a URDF",
+                             file=source)
+        else:
+            chain = dh_in_urdf_frames(calibrated, nominal, vendor, file=source)
         changed = own_origins(document, chain)
         origins = [changed[j.name] for j in chain.joints]
     else:
@@ -251,3 +256,10 @@ def ur_calibration(calibrated: Robot, like: Path | None = None, *,
                           .encode()).hexdigest()[:16]
     block["hash"] = f"calib_robocal_{digest}"
     return {"kinematics": block}
+
+
+def _source(robot: Robot) -> UrdfSource:
+    """Where the ``urdf`` robot ``robot`` came from (a DH robot has no such source)."""
+    if robot.urdf is None:
+        raise InputError(f"robot {robot.name!r} was not read from a URDF: it names no links")
+    return robot.urdf
