@@ -584,10 +584,10 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         weakest = min(failing, key=lambda key: evidence[key]["bic_drop"])
         dropped = groups[weakest]
         tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
-        names = [n for step in dropped for n in step.kept]
+        taken_out = _mask_of(big, [n for step in dropped for n in step.kept])
         x = x.copy()
-        x[_mask_of(big, names)] = 0.0
-        free = free & ~_mask_of(big, names)
+        x[taken_out] = 0.0
+        free = free & ~taken_out
         steps = [step for step in steps if step not in dropped]
         final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
         groups = _groups(steps)
