@@ -104,8 +104,9 @@ class SphereLaserModel(MeasurementModel):
             hit = np.asarray(points(offsets), float)
             beam = np.asarray(points(offsets + direction[:, None]), float) - hit
         else:
-            hit = self._pendant_scan().points(origin, direction)
-            beam = self._pendant_scan().beams(direction)
+            scan = self._pendant_scan()
+            hit = scan.points(origin, direction)
+            beam = scan.beams(direction)
         return sphere_centre(hit.T, self.dataset.radius, beam=beam.T)
 
     def consistent_dataset(self, kinematics, p, mounted, placement):
@@ -145,7 +146,8 @@ class SphereLaserModel(MeasurementModel):
         if self.uses_robot:
             world = points(offsets)
         else:
-            R, t = self._pendant_scan().rotations, self._pendant_scan().translations
+            scan = self._pendant_scan()
+            R, t = scan.rotations, scan.translations
             world = ca.vertcat(*[
                 sum(ca.DM(R[k, j].reshape(1, -1)) * offsets[j, :] for j in range(3))
                 + ca.DM(t[k].reshape(1, -1)) for k in range(3)])

@@ -190,20 +190,26 @@ def urdf_over(calibrated: Robot, like: Path, *, nominal: Robot | None = None,
     calibrated chain. A DH robot needs ``nominal`` (module docstring); ``base_link`` and
     ``tip_link`` choose the chain (default: the calibrated robot's own, else root to leaf)."""
     document = read_document(like)
+    chain = _chain_over(calibrated, document, like, nominal, base_link, tip_link)
+    set_origins(document, own_origins(document, chain))
+    body = ET.tostring(document.root, encoding="unicode")
+    return '<?xml version="1.0"?>\n' + body + "\n"
+
+
+def _chain_over(calibrated: Robot, document: UrdfDocument, source: Path,
+                nominal: Robot | None, base_link: str | None, tip_link: str | None) -> Robot:
+    """The calibrated chain in the link frames of ``document`` (read from ``source``), the
+    chain's ends defaulting to the calibrated robot's own. A DH robot needs ``nominal``."""
     if calibrated.urdf is not None:
         base_link = base_link or calibrated.urdf.base_link
         tip_link = tip_link or calibrated.urdf.tip_link
     vendor = robot_from_document(document, base_link=base_link, tip_link=tip_link)
     if calibrated.convention == "urdf":
-        chain = urdf_in_urdf_frames(calibrated, vendor, file=like)
-    else:
-        if nominal is None:
-            raise InputError("a DH robot needs its nominal geometry to be written over a URDF",
-                             file=like)
-        chain = dh_in_urdf_frames(calibrated, nominal, vendor, file=like)
-    set_origins(document, own_origins(document, chain))
-    body = ET.tostring(document.root, encoding="unicode")
-    return '<?xml version="1.0"?>\n' + body + "\n"
+        return urdf_in_urdf_frames(calibrated, vendor, file=source)
+    if nominal is None:
+        raise InputError("a DH robot needs its nominal geometry to be written over a URDF",
+                         file=source)
+    return dh_in_urdf_frames(calibrated, nominal, vendor, file=source)
 
 
 def dh_ur_origins(robot: Robot) -> list[np.ndarray]:
@@ -232,17 +238,7 @@ def ur_calibration(calibrated: Robot, like: Path | None = None, *,
     if calibrated.convention == "urdf" or like is not None:
         source = like if like is not None else Path(_source(calibrated).file)
         document = read_document(source)
-        if calibrated.urdf is not None:
-            base_link = base_link or calibrated.urdf.base_link
-            tip_link = tip_link or calibrated.urdf.tip_link
-        vendor = robot_from_document(document, base_link=base_link, tip_link=tip_link)
-        if calibrated.convention == "urdf":
-            chain = urdf_in_urdf_frames(calibrated, vendor, file=source)
-        elif nominal is None:
-            raise InputError("a DH robot needs its nominal geometry to be written over a URDF",
-                             file=source)
-        else:
-            chain = dh_in_urdf_frames(calibrated, nominal, vendor, file=source)
+        chain = _chain_over(calibrated, document, source, nominal, base_link, tip_link)
         changed = own_origins(document, chain)
         origins = [changed[j.name] for j in chain.joints]
     else:
