@@ -12,7 +12,10 @@ one over 500 random configurations, after the best rigid motion: the parameter e
 where it matters), per-parameter errors when the engine kept the planned parameter set,
 validation RMS; designed plan against the median of random ones; the ratio of
 condition numbers (goal <= 0.3); and the fewest poses that reach the target model
-error. Prints JSON.
+error. Beside the simulated margin over random plans (goal >= 30%) it prints the
+planner's predicted margin and the attainable one: the margin of the optimal approximate
+design over the candidate pool (``planning.approximate``), which no choice of poses from
+the pool can exceed. Prints JSON.
 
     python benchmarks/planning.py [--quick]
 """
@@ -205,7 +208,16 @@ def case(path: Path, counts, repeats: int, seed: int = 0) -> dict:
             designed = median_of([evaluate(simulator, plan.candidates, validation, identifiable,
                                            p_true, Q_test) for _ in range(repeats)])
             designed.update(index_value=plan.value, random_median_index_value=plan.random_median,
-                            refined=plan.refined, design_seconds=seconds)
+                            refined=plan.refined, design_seconds=seconds,
+                            # the planner's own prediction at the benchmark's noise: the
+                            # plan, random plans from its pool, and the least any choice
+                            # from that pool could reach (planning.approximate)
+                            predicted_tool_error_mm=1e3 * plan.tool_error / plan.setup.noise
+                            * NOISE,
+                            predicted_random_median_mm=1e3 * plan.random_tool_median
+                            / plan.setup.noise * NOISE,
+                            predicted_bound_mm=1e3 * plan.tool_error_bound / plan.setup.noise
+                            * NOISE)
             row[f"designed_{index}"] = designed
         random = []
         for _ in range(repeats):
@@ -219,6 +231,12 @@ def case(path: Path, counts, repeats: int, seed: int = 0) -> dict:
         row["model_error_margin"] = {
             index: 1.0 - row[f"designed_{index}"]["model_error_mm"]
             / row["random_median"]["model_error_mm"] for index in INDICES}
+        # the same margin predicted, and the largest any choice from the pool could have
+        tool = row["designed_tool"]
+        row["predicted_margin"] = 1.0 - (tool["predicted_tool_error_mm"]
+                                         / tool["predicted_random_median_mm"])
+        row["attainable_margin"] = 1.0 - (tool["predicted_bound_mm"]
+                                          / tool["predicted_random_median_mm"])
         rows.append(row)
     target = TARGET[kind]
 
@@ -255,7 +273,8 @@ def main() -> None:
             results[-1]["seconds"] = time.perf_counter() - started
             # progress on stderr: a long run shows each set-up as it ends
             print(json.dumps({name: {r["count"]: r["model_error_margin"] | {
-                "condition_ratio": r["condition_ratio"]} for r in results[-1]["sizes"]}}),
+                "condition_ratio": r["condition_ratio"], "predicted": r["predicted_margin"],
+                "attainable": r["attainable_margin"]} for r in results[-1]["sizes"]}}),
                 file=sys.stderr, flush=True)
     print(json.dumps({"benchmark": "planning", "cases": results}, indent=2))
 

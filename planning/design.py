@@ -25,6 +25,7 @@ from robocal_casadi.measurement import model_class
 from robocal_casadi.progress import Progress
 
 from .accuracy import tool_error, tool_weights
+from .approximate import optimal_approximate
 from .candidates import Candidate, generate
 from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
@@ -57,7 +58,9 @@ class Plan:
     predicted standard error of the tool position over the workspace at the set-up's
     reading noise (``accuracy``), ``random_tool_errors`` the same for the random plans;
     ``condition_all`` the condition number over every parameter not exactly
-    unidentifiable; ``travel`` the joint moves between consecutive poses in run order.
+    unidentifiable; ``travel`` the joint moves between consecutive poses in run order;
+    ``tool_error_bound`` [m] the least predicted tool error any plan of the same size
+    chosen from the candidates could have (``approximate``; refinement may go below it).
     """
 
     setup: PlanSetup
@@ -74,6 +77,7 @@ class Plan:
     random_tool_errors: np.ndarray = field(default_factory=lambda: np.zeros(0))
     condition_all: float = float("nan")
     travel: Travel | None = None
+    tool_error_bound: float = float("nan")
 
     @property
     def random_tool_median(self) -> float:
@@ -118,7 +122,8 @@ class Plan:
                 f"predicted tool-position error over the workspace at "
                 f"{1e3 * self.setup.noise:.3g} mm reading noise: plan "
                 f"{1e3 * self.tool_error:.4g} mm, random median "
-                f"{1e3 * self.random_tool_median:.4g} mm\n"
+                f"{1e3 * self.random_tool_median:.4g} mm, no choice among the candidates "
+                f"below {1e3 * self.tool_error_bound:.4g} mm\n"
                 f"condition number over every parameter not exactly unidentifiable: "
                 f"{self.condition_all:.4g}"
                 + (f"\n{self.travel.summary()}" if self.travel is not None else ""))
@@ -203,8 +208,9 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     blocks = row_model.blocks(list(chosen_candidates))
     predicted = tool_error(info.spectrum_of([info.restrict(b) for b in blocks], "tool"),
                            setup.noise)
+    bound = optimal_approximate(info).tool_error_bound(count, setup.noise)
     ordered, travel = order_candidates(chosen_candidates, workspace)
     return Plan(setup, ordered, index, value, random_values, spectrum,
                 info.identifiable_names, len(candidates), swaps, refined, predicted,
                 random_tool, exact_condition(blocks, row_model.parameters, row_model.shared),
-                travel)
+                travel, bound)

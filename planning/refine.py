@@ -32,6 +32,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .best_iterate import BestFeasible
 from .candidates import Candidate, visible
 from .indices import better, index_value, scaling
 from .information import Information
@@ -41,10 +42,11 @@ from .rows import RowModel
 STEP = 0.35  # [rad] largest change of a joint during refinement
 MARGIN = 1e-3  # [m] clearance kept above the worktable
 ANGLE_MARGIN = 1e-4  # [rad] kept inside the visibility cone and incidence limit
+FEASIBLE = 1e-7  # violation of a usable iterate [m or cosine]: far inside the margins
 
 
 def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Information,
-                candidates: tuple[Candidate, ...], index: str, max_iterations: int = 60):
+                candidates: tuple[Candidate, ...], index: str, max_iterations: int = 100):
     """``(refined candidates, spectrum)`` or None when refinement does not help."""
     mode = scaling(index)
     rows = [info.restrict(b) for b in row_model.blocks(list(candidates))]
@@ -153,16 +155,22 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
         objective = -ca.log(ca.det(M / (d @ d.T)))
     x = ca.vertcat(*variables)
     g = ca.vertcat(*constraints)
+    lbg = np.concatenate([np.ravel(v) for v in c_lower])
+    ubg = np.concatenate([np.ravel(v) for v in c_upper])
+    best = BestFeasible(x.shape[0], g.shape[0], lbg, ubg, FEASIBLE, "refine_best_feasible")
     solver = ca.nlpsol("refine", "ipopt", {"x": x, "f": objective, "g": g},
-                       {"print_time": False,
+                       {"print_time": False, "iteration_callback": best,
                         "ipopt": {"print_level": 0, "sb": "yes", "max_iter": max_iterations,
                                   "hessian_approximation": "limited-memory",
                                   "tol": 1e-6, "constr_viol_tol": 1e-9,
                                   "bound_relax_factor": 0.0}})
     x0 = np.concatenate(starts)
     result = solver(x0=x0, lbx=np.concatenate(lower), ubx=np.concatenate(upper),
-                    lbg=np.concatenate([np.ravel(v) for v in c_lower]),
-                    ubg=np.concatenate([np.ravel(v) for v in c_upper]))
+                    lbg=lbg, ubg=ubg)
+    if not solver.stats().get("success") and best.x is not None:
+        # stopped at the iteration limit: its last iterate may break a constraint, the
+        # best one that met them all is a plan
+        result = {"x": best.x}
     values = np.asarray(result["x"]).ravel()
     out, start = [], 0
     for candidate in candidates:
@@ -173,40 +181,56 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
 
 
 def _rebuild(setup, workspace, candidates, Q_new):
-    """Feasible candidates at the refined joints (polished), or None."""
-    kin = workspace.kinematics
-    rebuilt = []
+    """Feasible candidates at the refined joints (polished), or None when none moved.
+
+    A candidate whose refined joints break a check is tried half-way from its start,
+    else kept as it was: one reading the solver left infeasible does not cost the others
+    their improvement (the caller keeps the result only if the index improves)."""
+    rebuilt, moved = [], False
     for candidate, Q in zip(candidates, Q_new):
-        Q = np.clip(Q, workspace.lower, workspace.upper)
-        reach = setup.model.reach
-        if reach == "sockets":
-            targets = np.array([candidate.sockets[n] for n in candidate.points])
-            solved = workspace.solve_points(targets, setup.offset, Q)
-            if not solved.ok.all():
-                return None
-            Q = solved.joints
-            points = targets
-        elif reach == "beam":
-            pose = kin.flange_poses(Q, workspace.p)[0]
-            o = pose[:3, :3] @ setup.offset + pose[:3, 3]
-            d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
-            v = o - setup.centre
-            b = d @ v
-            disc = b * b - (v @ v - setup.radius**2)
-            if disc <= 0:
-                return None
-            reading = -b - np.sqrt(disc)
-            lo, hi = setup.laser_range
-            normal = (o + reading * d - setup.centre) / setup.radius
-            if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
-                return None
-            candidate = Candidate(Q, distance=np.array([reading]))
-            points = o[None]
-        else:
-            points = kin.points(Q, setup.offset, workspace.p)
-            if not visible(setup, kin.flange_poses(Q, workspace.p)).all():
-                return None
-        if not (workspace.within_limits(Q).all() and workspace.clear_of_table(Q, points).all()):
+        found = None
+        for share in (1.0, 0.5):
+            found = _feasible(setup, workspace, candidate,
+                              candidate.joints + share * (Q - candidate.joints))
+            if found is not None:
+                break
+        moved = moved or found is not None
+        rebuilt.append(candidate if found is None else found)
+    return rebuilt if moved else None
+
+
+def _feasible(setup, workspace, candidate, Q):
+    """``candidate`` at joints ``Q`` (polished) when it passes every check, else None."""
+    kin = workspace.kinematics
+    Q = np.clip(Q, workspace.lower, workspace.upper)
+    reach = setup.model.reach
+    if reach == "sockets":
+        targets = np.array([candidate.sockets[n] for n in candidate.points])
+        solved = workspace.solve_points(targets, setup.offset, Q)
+        if not solved.ok.all():
             return None
-        rebuilt.append(Candidate(Q, candidate.points, candidate.sockets, candidate.distance))
-    return rebuilt
+        Q = solved.joints
+        points = targets
+    elif reach == "beam":
+        pose = kin.flange_poses(Q, workspace.p)[0]
+        o = pose[:3, :3] @ setup.offset + pose[:3, 3]
+        d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
+        v = o - setup.centre
+        b = d @ v
+        disc = b * b - (v @ v - setup.radius**2)
+        if disc <= 0:
+            return None
+        reading = -b - np.sqrt(disc)
+        lo, hi = setup.laser_range
+        normal = (o + reading * d - setup.centre) / setup.radius
+        if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
+            return None
+        candidate = Candidate(Q, distance=np.array([reading]))
+        points = o[None]
+    else:
+        points = kin.points(Q, setup.offset, workspace.p)
+        if not visible(setup, kin.flange_poses(Q, workspace.p)).all():
+            return None
+    if not (workspace.within_limits(Q).all() and workspace.clear_of_table(Q, points).all()):
+        return None
+    return Candidate(Q, candidate.points, candidate.sockets, candidate.distance)

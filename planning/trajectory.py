@@ -56,6 +56,7 @@ from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.progress import Progress
 
 from .accuracy import tool_error, tool_weights
+from .best_iterate import BestFeasible
 from .candidates import generate
 from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling
@@ -586,7 +587,8 @@ class _ScanProblem:
         self.ubg = np.concatenate([np.full(p[0].shape[0], p[2], float) for p in parts])
         self.lbx = np.concatenate([np.tile(lower, (K, 1)).T.ravel(), np.tile(lower, len(grid))])
         self.ubx = np.concatenate([np.tile(upper, (K, 1)).T.ravel(), np.tile(upper, len(grid))])
-        self.best = _BestFeasible(x.shape[0], constraints.shape[0], self.lbg, self.ubg)
+        self.best = BestFeasible(x.shape[0], constraints.shape[0], self.lbg, self.ubg,
+                                  FEASIBLE)
         self._objective = ca.Function("scan_objective", [x], [objective])
         self.solver = ca.nlpsol("scan", "ipopt", {"x": x, "f": objective, "g": constraints},
                                 {"print_time": False, "iteration_callback": self.best,
@@ -614,50 +616,6 @@ class _ScanProblem:
             x, status = self.best.x, f"{status}; best feasible iterate kept"
         C = x[:self.K * self.dof].reshape(self.dof, self.K).T
         return C, status
-
-
-class _BestFeasible(ca.Callback):
-    """IPOPT iteration callback that keeps the iterate of lowest objective among those
-    within ``FEASIBLE`` of every constraint (IPOPT's last iterate need not be feasible
-    when it stops at its iteration limit)."""
-
-    def __init__(self, nx: int, ng: int, lbg: np.ndarray, ubg: np.ndarray):
-        ca.Callback.__init__(self)
-        self.nx, self.ng, self.lbg, self.ubg = nx, ng, lbg, ubg
-        self.reset()
-        self.construct("scan_best_feasible", {})
-
-    def reset(self) -> None:
-        self.x, self.value = None, math.inf
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "ret"
-
-    def get_sparsity_in(self, i):
-        name = ca.nlpsol_out(i)
-        if name == "f":
-            return ca.Sparsity.scalar()
-        if name in ("x", "lam_x"):
-            return ca.Sparsity.dense(self.nx)
-        if name in ("g", "lam_g"):
-            return ca.Sparsity.dense(self.ng)
-        return ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        x, f, g = (np.asarray(a, float).ravel() for a in arg[:3])
-        violation = max(np.max(self.lbg - g, initial=0.0), np.max(g - self.ubg, initial=0.0))
-        if violation <= FEASIBLE and f[0] < self.value:
-            self.x, self.value = x.copy(), float(f[0])
-        return [0]
 
 
 def _problems(setup, workspace, rows, Q, times) -> str:

@@ -1,0 +1,81 @@
+"""The optimal approximate design against a closed form, and as a bound on exact plans;
+refinement of a tracker plan that keeps every reading visible."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from planning import design_plan
+from planning.approximate import optimal_approximate
+from planning.candidates import Candidate, visible
+from planning.collision import Body
+from planning.information import Information
+from planning.ranges import working_ranges
+from planning.reach import Workspace
+from planning.refine import _rebuild
+from planning.rows import Block
+from planning.setup import setup_from_dataset
+from robocal_casadi.datasets import load_dataset
+from robocal_casadi.examples import industrial_6r
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.robot import save_robot
+
+
+def test_quadratic_regression_gets_the_known_a_optimal_design():
+    # y = a + b x + c x^2 on [-1, 1], every coefficient weighed alike (W = I): the
+    # A-optimal design puts 1/4 at each end and 1/2 at the centre, trace(M^-1) = 8
+    x = np.linspace(-1.0, 1.0, 41)
+    blocks = [Block(np.array([[1.0, v, v * v]])) for v in x]
+    info = Information(blocks, ("a", "b", "c"), 0, np.eye(3))
+    design = optimal_approximate(info, iterations=20000, settled=1.0001)
+    w = design.weights
+    # the multiplicative algorithm moves weight off the centre's neighbours slowly
+    assert w[0] == pytest.approx(0.25, abs=2e-3) and w[-1] == pytest.approx(0.25, abs=2e-3)
+    assert w[np.abs(x) < 0.2].sum() == pytest.approx(0.5, abs=2e-3)
+    assert w[(np.abs(x) >= 0.2) & (np.abs(x) < 1.0)].sum() < 1e-3
+    assert design.lower <= 8.0 <= design.value
+    assert design.value == pytest.approx(8.0, rel=1e-3)
+
+
+@pytest.fixture(scope="module")
+def tracker(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("approximate")
+    save_robot(industrial_6r(), folder / "r6.yaml")
+    content = dict(kind="tracker_points", robot="r6.yaml", units=dict(length="mm", angle="deg"),
+                   target=dict(xyz=[0, 0, 100]), instrument=dict(xyz=[2500, 0, 800]),
+                   data="none.csv")
+    (folder / "tracker.yaml").write_text(yaml.safe_dump(content))
+    return load_dataset(folder / "tracker.yaml", require_data=False)
+
+
+def test_no_plan_from_the_pool_predicts_below_the_bound(tracker):
+    plan = design_plan(tracker, 20, seed=4, pool=120, refine=False, quiet=True)
+    assert np.isfinite(plan.tool_error_bound) and plan.tool_error_bound > 0
+    assert plan.tool_error >= plan.tool_error_bound
+    assert np.all(plan.random_tool_errors >= plan.tool_error_bound)
+    # an exchange search from a greedy start ends close to the bound (within 15%)
+    assert plan.tool_error <= 1.15 * plan.tool_error_bound
+
+
+def test_a_reading_the_solver_left_unrunnable_keeps_its_start(tracker):
+    setup = setup_from_dataset(tracker)
+    setup = setup.__class__(**{**setup.__dict__, "robot": working_ranges(setup.robot)})
+    kin = Kinematics(setup.robot)
+    workspace = Workspace(kin, table_height=setup.table_height, body=Body.of(setup, kin))
+    plan = design_plan(tracker, 12, seed=5, pool=60, refine=False, quiet=True)
+    candidates = list(plan.candidates)[:3]
+    moved = [c.joints + 0.01 for c in candidates]
+    # the third reading turned so the reflector faces away from the tracker
+    moved[2] = candidates[2].joints.copy()
+    moved[2][0, 0] += np.pi
+    rebuilt = _rebuild(setup, workspace, candidates, moved)
+    assert rebuilt is not None
+    poses = kin.flange_poses(np.vstack([c.joints for c in rebuilt]), workspace.p)
+    assert visible(setup, poses).all()
+    assert rebuilt[2] is candidates[2]
+    for k in (0, 1):
+        if rebuilt[k] is not candidates[k]:
+            assert np.allclose(rebuilt[k].joints, moved[k])
+    assert isinstance(rebuilt[0], Candidate)
