@@ -122,8 +122,9 @@ class Plan:
                 f"predicted tool-position error over the workspace at "
                 f"{1e3 * self.setup.noise:.3g} mm reading noise: plan "
                 f"{1e3 * self.tool_error:.4g} mm, random median "
-                f"{1e3 * self.random_tool_median:.4g} mm, no choice among the candidates "
-                f"below {1e3 * self.tool_error_bound:.4g} mm\n"
+                f"{1e3 * self.random_tool_median:.4g} mm; no choice among the candidates "
+                f"can go below {1e3 * self.tool_error_bound:.4g} mm (refinement, which "
+                f"leaves them, may)\n"
                 f"condition number over every parameter not exactly unidentifiable: "
                 f"{self.condition_all:.4g}"
                 + (f"\n{self.travel.summary()}" if self.travel is not None else ""))
