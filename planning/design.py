@@ -127,7 +127,21 @@ class Plan:
                 f"leaves them, may)\n"
                 f"condition number over every parameter not exactly unidentifiable: "
                 f"{self.condition_all:.4g}"
-                + (f"\n{self.travel.summary()}" if self.travel is not None else ""))
+                + (f"\n{self.travel.summary()}" if self.travel is not None else "")
+                + (f"\n{self.warning}" if self.warning else ""))
+
+    @property
+    def warning(self) -> str:
+        """A line when the plan is predicted to calibrate less accurately than the median
+        random plan of its size ('' otherwise): an index other than ``tool`` can reward
+        balance between parameters over information (a well-conditioned plan of poses
+        that barely move the measured point)."""
+        random = self.random_tool_median
+        if not (np.isfinite(self.tool_error) and random > 0 and self.tool_error > random):
+            return ""
+        return (f"warning: this plan is predicted to place the tool "
+                f"{self.tool_error / random:.3g} times less accurately than the median random "
+                f"plan of its size; the index 'tool' plans for accuracy")
 
 
 def pool_size_for(count: int, kind: str) -> int:

@@ -3,6 +3,8 @@ refinement of a tracker plan that keeps every reading visible."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
@@ -79,3 +81,11 @@ def test_a_reading_the_solver_left_unrunnable_keeps_its_start(tracker):
         if rebuilt[k] is not candidates[k]:
             assert np.allclose(rebuilt[k].joints, moved[k])
     assert isinstance(rebuilt[0], Candidate)
+
+
+def test_a_plan_predicted_worse_than_random_says_so(tracker):
+    plan = design_plan(tracker, 16, seed=6, pool=80, refine=False, quiet=True)
+    assert plan.tool_error < plan.random_tool_median
+    assert plan.warning == "" and "warning" not in plan.summary()
+    worse = replace(plan, tool_error=3.0 * plan.random_tool_median)
+    assert "3 times less accurately than the median random plan" in worse.summary()
