@@ -17,7 +17,7 @@ planner's predicted margin and the attainable one: the margin of the optimal app
 design over the candidate pool (``planning.approximate``), which no choice of poses from
 the pool can exceed. Prints JSON.
 
-    python benchmarks/planning.py [--quick]
+    python benchmarks/planning.py [--quick] [--set-up industrial_6r/cross_bar ...]
 """
 
 from __future__ import annotations
@@ -257,6 +257,8 @@ def case(path: Path, counts, repeats: int, seed: int = 0) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="6R only, fewer sizes")
+    parser.add_argument("--set-up", action="append", dest="set_ups", metavar="NAME",
+                        help="only this set-up, e.g. industrial_6r/cross_bar (repeatable)")
     args = parser.parse_args()
     counts = {"tracker_points": [12, 16, 24, 36], "cross_bar": [10, 14, 20, 28]}
     repeats = 5
@@ -265,6 +267,8 @@ def main() -> None:
         results = []
         for name, path in paths.items():
             if args.quick and not name.startswith("industrial_6r"):
+                continue
+            if args.set_ups and name not in args.set_ups:
                 continue
             kind = name.split("/")[1]
             sizes = counts[kind][1:3] if args.quick else counts[kind]
