@@ -19,7 +19,6 @@ import json
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,18 +28,15 @@ import numpy as np
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).parent.resolve()]
 
 from planning.accuracy import tool_weights  # noqa: E402
-from planning.approximate import _value_and_descent, optimal_approximate  # noqa: E402
+from planning.approximate import design_value, optimal_approximate  # noqa: E402
 from planning.candidates import generate  # noqa: E402
-from planning.collision import Body  # noqa: E402
 from planning.indices import index_value  # noqa: E402
 from planning.information import Information  # noqa: E402
-from planning.ranges import working_ranges  # noqa: E402
-from planning.reach import Workspace  # noqa: E402
 from planning.rows import RowModel  # noqa: E402
+from planning.runnable import runnable_setup  # noqa: E402
 from planning.selection import random_designs  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.kinematics import Kinematics  # noqa: E402
 
 COUNTS = {"tracker_points": [12, 16, 24, 36], "cross_bar": [10, 14, 20, 28]}
 POOLS = {"tracker_points": (360, 6000), "cross_bar": (120, 1200)}
@@ -57,11 +53,7 @@ def _setups(folder: Path) -> dict[str, Path]:
 
 def case(path: Path, pools, seed: int = 0) -> dict:
     dataset = load_dataset(path, require_data=False)
-    setup = setup_from_dataset(dataset)
-    setup = replace(setup, robot=working_ranges(setup.robot))
-    kinematics = Kinematics(setup.robot)
-    workspace = Workspace(kinematics, table_height=setup.table_height,
-                          body=Body.of(setup, kinematics))
+    setup, kinematics, workspace = runnable_setup(setup_from_dataset(dataset))
     rng = np.random.default_rng(seed)
     rows = RowModel(setup, kinematics)
     weights = tool_weights(setup, workspace, rows.parameters, np.random.default_rng(seed))
@@ -71,10 +63,7 @@ def case(path: Path, pools, seed: int = 0) -> dict:
         candidates = generate(setup, workspace, size, rng)
         info = Information(rows.blocks(candidates), rows.parameters, rows.shared, weights)
         design = optimal_approximate(info, iterations=20000, settled=1.001)
-        T_inverse = np.linalg.inv(info.tool)
-        uniform, _ = _value_and_descent(info.matrices, np.full(len(candidates),
-                                                               1.0 / len(candidates)),
-                                        info.m, T_inverse @ T_inverse.T)
+        uniform = design_value(info, np.full(len(candidates), 1.0 / len(candidates)))
         ratios = {}
         for count in COUNTS[dataset.kind]:
             random = np.median([index_value("tool", info.spectrum(d, "tool"))

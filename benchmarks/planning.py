@@ -38,11 +38,10 @@ import yaml
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).parent.resolve()]
 
 from planning.candidates import generate  # noqa: E402
-from planning.collision import Body  # noqa: E402
 from planning.design import design_plan  # noqa: E402
 from planning.planned import engine_identifiability, planned_dataset  # noqa: E402
-from planning.ranges import working_ranges  # noqa: E402
 from planning.reach import Workspace  # noqa: E402
+from planning.runnable import runnable_setup  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
@@ -174,13 +173,9 @@ def case(path: Path, counts, repeats: int, seed: int = 0) -> dict:
     dataset = load_dataset(path, require_data=False)
     kind = dataset.kind
     rng = np.random.default_rng(seed)
-    setup = setup_from_dataset(dataset)
     # random plans are drawn from what the planner may use: its joint ranges, clear of
     # the table, of the arm itself and of the line of sight
-    setup = replace(setup, robot=working_ranges(setup.robot))
-    kinematics = Kinematics(setup.robot)
-    workspace = Workspace(kinematics, table_height=setup.table_height,
-                          body=Body.of(setup, kinematics))
+    setup, kinematics, workspace = runnable_setup(setup_from_dataset(dataset))
     big = 60 if kind == "cross_bar" else 400
     pool = generate(setup, workspace, big + 40 * repeats, rng)
     first = design_plan(dataset, counts[-1], seed=seed, refine=False, quiet=True)

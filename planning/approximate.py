@@ -62,10 +62,10 @@ def optimal_approximate(info: Information, iterations: int = ITERATIONS,
                         settled: float = SETTLED) -> ApproximateDesign:
     """The ``tool``-optimal approximate design over ``info``'s candidates (see the module
     docstring); ``info`` must carry tool weights."""
-    A = info.matrices
-    m = info.m
-    T_inverse = np.linalg.inv(info._tool_transform())
-    W = T_inverse @ T_inverse.T  # the tool weights on the identifiable columns (L L^T)
+    if info.tool_weights is None:
+        raise ValueError("the approximate design needs tool weights (Information(..., "
+                         "tool_weights=...))")
+    A, m, W = info.matrices, info.m, info.tool_weights
     w = np.full(len(A), 1.0 / len(A))
     value, d = _value_and_descent(A, w, m, W)
     done = 0
@@ -75,6 +75,12 @@ def optimal_approximate(info: Information, iterations: int = ITERATIONS,
         value, d = _value_and_descent(A, w, m, W)
         done += 1
     return ApproximateDesign(w, float(value), float(2.0 * value - d.max()), done)
+
+
+def design_value(info: Information, weights: np.ndarray) -> float:
+    """``f(w)`` of the approximate design with ``weights`` (one per candidate, sum 1)."""
+    return _value_and_descent(info.matrices, np.asarray(weights, float), info.m,
+                              info.tool_weights)[0]
 
 
 def _value_and_descent(A: np.ndarray, w: np.ndarray, m: int, W: np.ndarray):

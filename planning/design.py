@@ -14,27 +14,24 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from robocal_casadi.datasets import Dataset
 from robocal_casadi.errors import ArgumentError, InputError
-from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.measurement import model_class
 from robocal_casadi.progress import Progress
 
 from .accuracy import tool_error, tool_weights
 from .approximate import optimal_approximate
 from .candidates import Candidate, generate
-from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
 from .information import Information, exact_condition
 from .order import Travel, order_candidates
-from .ranges import working_ranges
-from .reach import Workspace
 from .refine import refine_plan
 from .rows import RowModel
+from .runnable import runnable_setup
 from .selection import exchange, greedy, random_designs
 from .setup import PlanSetup, setup_from_dataset
 
@@ -165,11 +162,7 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     index = canonical(index)
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
-    setup = setup_from_dataset(dataset)
-    setup = replace(setup, robot=working_ranges(setup.robot))
-    kinematics = Kinematics(setup.robot)
-    workspace = Workspace(kinematics, table_height=setup.table_height,
-                          body=Body.of(setup, kinematics))
+    setup, kinematics, workspace = runnable_setup(setup_from_dataset(dataset))
     rng = np.random.default_rng(seed)
     size = pool or pool_size_for(count, setup.kind)
     stream = io.StringIO() if quiet else None  # Progress stays silent on a non-terminal

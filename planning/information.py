@@ -53,10 +53,13 @@ class Information:
         pool = _schur(self.matrices.sum(axis=0)[None], self.m, shared)[0]
         self.reference = np.sqrt(np.clip(np.diag(pool), 1e-300, None) / len(blocks))
         """Fixed column scales: RMS column norm per candidate over the pool."""
+        self.tool_weights = None
+        """The tool weights ``W`` on the identifiable columns (``accuracy``), or None."""
         self.tool = None
-        """``L^-1`` of the tool weights on the identifiable columns (``accuracy``), or None."""
+        """``L^-1`` with ``L L^T = W`` (``accuracy.tool_transform``), or None."""
         if tool_weights is not None:
             W = np.asarray(tool_weights, float)[np.ix_(self.identifiable, self.identifiable)]
+            self.tool_weights = W
             self.tool = tool_transform(W)
 
     def __repr__(self) -> str:

@@ -61,9 +61,8 @@ from .candidates import generate
 from .collision import Body
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling
 from .information import Information
-from .ranges import working_ranges
-from .reach import Workspace
 from .rows import Block, RowModel
+from .runnable import runnable_setup
 from .setup import PlanSetup, setup_from_dataset
 
 DEGREE = 3
@@ -226,11 +225,9 @@ def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     if count < MIN_SAMPLES:
         raise InputError(f"--count {count} is too few readings for a scan; ask for at least "
                          f"{MIN_SAMPLES}", file=setup.path)
-    setup = replace(setup, robot=working_ranges(setup.robot),
+    setup = replace(setup,
                     sensor_only=setup.sensor_only if sensor_only is None else sensor_only)
-    kinematics = Kinematics(setup.robot)
-    body = Body.of(setup, kinematics)
-    workspace = Workspace(kinematics, table_height=setup.table_height, body=body)
+    setup, kinematics, workspace = runnable_setup(setup)
     setup = replace(setup, table_height=workspace.table_height)
     rng = np.random.default_rng(seed)
     stream = io.StringIO() if quiet else None
@@ -240,7 +237,7 @@ def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     info, columns = _information(setup, workspace, row_model, pool, rng)
     duration = (count - 1) / setup.laser_rate
     times = np.arange(count) / setup.laser_rate
-    rows = ScanRows(setup, kinematics, row_model, columns, body)
+    rows = ScanRows(setup, kinematics, row_model, columns, workspace.body)
     start_path, waypoints = _start_path(setup, workspace, rows, info, pool, times, rng)
     started = time.perf_counter()
     with Progress("plan: scan", total=None, stream=stream):

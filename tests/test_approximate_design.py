@@ -12,16 +12,13 @@ import yaml
 from planning import design_plan
 from planning.approximate import optimal_approximate
 from planning.candidates import Candidate, visible
-from planning.collision import Body
 from planning.information import Information
-from planning.ranges import working_ranges
-from planning.reach import Workspace
 from planning.refine import _rebuild
 from planning.rows import Block
+from planning.runnable import runnable_setup
 from planning.setup import setup_from_dataset
 from robocal_casadi.datasets import load_dataset
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.robot import save_robot
 
 
@@ -62,10 +59,7 @@ def test_no_plan_from_the_pool_predicts_below_the_bound(tracker):
 
 
 def test_a_reading_the_solver_left_unrunnable_keeps_its_start(tracker):
-    setup = setup_from_dataset(tracker)
-    setup = setup.__class__(**{**setup.__dict__, "robot": working_ranges(setup.robot)})
-    kin = Kinematics(setup.robot)
-    workspace = Workspace(kin, table_height=setup.table_height, body=Body.of(setup, kin))
+    setup, kin, workspace = runnable_setup(setup_from_dataset(tracker))
     plan = design_plan(tracker, 12, seed=5, pool=60, refine=False, quiet=True)
     candidates = list(plan.candidates)[:3]
     moved = [c.joints + 0.01 for c in candidates]
