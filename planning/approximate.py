@@ -79,6 +79,9 @@ def optimal_approximate(info: Information, iterations: int = ITERATIONS,
 
 def design_value(info: Information, weights: np.ndarray) -> float:
     """``f(w)`` of the approximate design with ``weights`` (one per candidate, sum 1)."""
+    if info.tool_weights is None:
+        raise ValueError("a design value needs tool weights (Information(..., "
+                         "tool_weights=...))")
     return _value_and_descent(info.matrices, np.asarray(weights, float), info.m,
                               info.tool_weights)[0]
 
