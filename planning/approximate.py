@@ -62,10 +62,7 @@ def optimal_approximate(info: Information, iterations: int = ITERATIONS,
                         settled: float = SETTLED) -> ApproximateDesign:
     """The ``tool``-optimal approximate design over ``info``'s candidates (see the module
     docstring); ``info`` must carry tool weights."""
-    if info.tool_weights is None:
-        raise ValueError("the approximate design needs tool weights (Information(..., "
-                         "tool_weights=...))")
-    A, m, W = info.matrices, info.m, info.tool_weights
+    A, m, W = info.matrices, info.m, _tool_weights(info)
     w = np.full(len(A), 1.0 / len(A))
     value, d = _value_and_descent(A, w, m, W)
     done = 0
@@ -79,11 +76,15 @@ def optimal_approximate(info: Information, iterations: int = ITERATIONS,
 
 def design_value(info: Information, weights: np.ndarray) -> float:
     """``f(w)`` of the approximate design with ``weights`` (one per candidate, sum 1)."""
-    if info.tool_weights is None:
-        raise ValueError("a design value needs tool weights (Information(..., "
-                         "tool_weights=...))")
     return _value_and_descent(info.matrices, np.asarray(weights, float), info.m,
-                              info.tool_weights)[0]
+                              _tool_weights(info))[0]
+
+
+def _tool_weights(info: Information) -> np.ndarray:
+    if info.tool_weights is None:
+        raise ValueError("an approximate design needs tool weights (Information(..., "
+                         "tool_weights=...))")
+    return info.tool_weights
 
 
 def _value_and_descent(A: np.ndarray, w: np.ndarray, m: int, W: np.ndarray):
