@@ -57,8 +57,12 @@ def effects_to_dict(result) -> dict | None:
             entry["drivers"] = [int(d) for d in effect.drivers]
         entries.append(entry)
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
+    # The geometry fitted together with the effects belongs with them: robot_calibrated.yaml
+    # may hold another (the best geometry-only model, ``delivery``).
+    geometry = {p.name: float(p.estimate) for p in result.parameters}
     return {"units": {"length": "m", "angle": "rad"}, "effects": entries,
-            "payload_com": [0.0, 0.0, 0.0] if com is None else [float(v) for v in com]}
+            "payload_com": [0.0, 0.0, 0.0] if com is None else [float(v) for v in com],
+            "geometry": geometry}
 
 
 def save_effects(result, folder: Path) -> bool:
@@ -140,6 +144,7 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
     if not path.is_file():
         return EffectModel(robot, (), np.zeros(0))
     content = load_yaml(path, what="effects file")
+    robot = _with_geometry(robot, content.get("geometry"), path)
     effects, values, payload = [], [], False
     for k, entry in enumerate(content.get("effects") or []):
         where = f"effects[{k}]"
@@ -174,29 +179,22 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
     return EffectModel(robot, tuple(effects), np.array(values, dtype=float), com, payload)  # type: ignore[arg-type]
 
 
-def geometry_only(result, datasets, validation=()) -> dict:
-    """What each output delivers (result.json's ``delivered``, RMS [m]): the calibrated
-    robot file used alone (fit and, with held-out data, validation RMS of its geometry with
-    the placements fitted again and no effect applied) and, when the recommended model has
-    effects, the same geometry with them (the final model's RMS)."""
-    from .calibration.identification import evaluate
-
-    values = {name: value for name, (value, _) in result.mounted.items()}
-    geometry: dict[str, float] = {}
-    out: dict[str, dict[str, float] | None] = {"robot_calibrated.yaml": geometry,
-                                                "with_effects": None}
-    for role, data in (("fit", datasets), ("validation", validation)):
-        if not data:
-            continue
-        problem, x = evaluate(result.robot_calibrated, list(data), (), values,
-                              label_prefix="validation:" if role == "validation" else "")
-        geometry[role] = problem.rms(x)
-    if result.recommended == "final" and result.effects:
-        with_effects = {"fit": result.fit.rms_final}
-        if result.validation is not None:
-            with_effects["validation"] = result.validation.rms_final
-        out["with_effects"] = with_effects
-    return out
+def _with_geometry(robot: Robot, geometry, path: Path) -> Robot:
+    """``robot`` with the geometry an effects file carries (SI by parameter name); files
+    written before the geometry was kept there use the robot file's."""
+    if geometry is None:
+        return robot
+    registry = robot.parameters()
+    if not isinstance(geometry, dict) or set(geometry) != set(registry.names):
+        raise InputError(f"geometry: expected a value for each of the robot's "
+                         f"{len(registry.names)} parameters", file=path, where="geometry")
+    try:
+        vector = np.array([float(geometry[name]) for name in registry.names])
+    except (TypeError, ValueError):
+        raise InputError("geometry: expected numbers", file=path, where="geometry") from None
+    if not np.all(np.isfinite(vector)):
+        raise InputError("geometry: expected finite numbers", file=path, where="geometry")
+    return robot.with_parameters(vector)
 
 
 def delivered_lines(delivered: dict, length_scale: float, unit: str) -> list[str]:
@@ -205,7 +203,8 @@ def delivered_lines(delivered: dict, length_scale: float, unit: str) -> list[str
         return ", ".join(f"{role} RMS {value / length_scale:.4g} {unit}"
                          for role, value in block.items())
 
-    lines = ["delivered: robot_calibrated.yaml alone (geometry only): "
+    model = str(delivered.get("model", "geometric")).replace("_", " ")
+    lines = [f"delivered: robot_calibrated.yaml ({model} model, geometry only): "
              + text(delivered["robot_calibrated.yaml"])]
     if delivered.get("with_effects"):
         lines.append(f"delivered: with {EFFECTS_FILE} (fk/compensate --with-effects): "

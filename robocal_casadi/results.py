@@ -66,6 +66,9 @@ class Identifiability:
     singular_values: np.ndarray
     condition_number: float
     combinations: tuple[str, ...] = ()
+    # Held at nominal because the data barely see them (not an exact dependency): their
+    # errors stay as large as their tolerances.
+    practical: tuple[str, ...] = ()
 
     def __repr__(self) -> str:
         return (f"Identifiability({len(self.identifiable)} of {len(self.candidates)} identifiable, "
@@ -266,7 +269,15 @@ class CalibrationResult:
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
-    delivered: Any = None  # ``effect_model.geometry_only``: RMS [m] each output delivers
+    delivered: Any = None  # ``calibration.job.measured``: RMS [m] each output delivers
+    # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
+    # its free robot parameters (``covariance_names``, in that order): what the delivery
+    # and its predicted work-cell accuracy start from (``delivery``).
+    mounted_geometric: dict[str, float] = field(default_factory=dict)
+    covariance_names: tuple[str, ...] = ()
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    predicted_accuracy: Any = None  # ``delivery.accuracy.PredictedAccuracy``
+    delivery: Any = None  # ``delivery.choice.Delivery``: what robot_calibrated.yaml holds
 
     @classmethod
     def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
@@ -303,6 +314,16 @@ class CalibrationResult:
         effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
                                         for n in f.parameters}) for f in effects)
         chosen = final.x if recommended == "final" else geometric.x
+        robot_free = [i for i in np.flatnonzero(geometric.free)
+                      if problem.slices["robot"].start <= i < problem.slices["robot"].stop]
+        position = {int(i): k for k, i in enumerate(np.flatnonzero(geometric.free))}
+        kept = [position[i] for i in robot_free]
+        covariance = (np.asarray(geometric.covariance)[np.ix_(kept, kept)]
+                      if np.size(geometric.covariance) else np.zeros((0, 0)))
+        geometric_names = problem.unknowns.names
+        mounted_geometric = {geometric_names[i]: float(geometric.x[i])
+                             for i in range(problem.slices["mounted"].start,
+                                            problem.slices["mounted"].stop)}
         return cls(
             datasets=datasets,
             robot_nominal=robot,
@@ -332,6 +353,9 @@ class CalibrationResult:
             prior=prior,
             spheres=tuple(spheres),
             notes=tuple(notes),
+            mounted_geometric=mounted_geometric,
+            covariance_names=tuple(geometric_names[i] for i in robot_free),
+            covariance=covariance,
         )
 
     @property
@@ -402,6 +426,15 @@ class CalibrationResult:
             out["profile"] = self.profile.to_json(units, self.fit, self.validation)
         if self.delivered is not None:
             out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
+            # The instrument values that go with the delivered geometry, in the file's units.
+            out["delivered"]["robot_calibrated.yaml"]["mounted"] = {
+                name: value / units.scale(self.mounted_quantities.get(name, "length"))
+                for name, value in self.delivered.get("mounted", {}).items()}
+        if self.delivery is not None:
+            out["recommendation"] = self.recommendation
+        out["predicted_accuracy"] = (None if self.predicted_accuracy is None else
+                                     self.predicted_accuracy.to_json(units.length_scale,
+                                                                     units.length))
         return out
 
     def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
@@ -440,7 +473,17 @@ def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
 
     out = {"robot_calibrated.yaml": {"applies": "the calibrated geometry only (robocal fk, "
                                                 "robocal compensate, a controller's DH table)",
+                                     "model": delivered.get("model", "geometric"),
                                      **scaled(delivered["robot_calibrated.yaml"])}}
+    if "basis" in delivered:
+        out["chosen_by"] = delivered["basis"]
+        out["reason"] = delivered.get("reason", "")
+    if delivered.get("candidates"):
+        out["candidates"] = {
+            name: {"fit": c["fit"] / length_scale,
+                   "held_out": None if c["held_out"] is None else c["held_out"] / length_scale,
+                   "unit": unit}
+            for name, c in delivered["candidates"].items()}
     if delivered.get("with_effects"):
         out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified "
                                                      "effects (robocal fk and robocal compensate "

@@ -124,6 +124,7 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
     projected_norms = np.linalg.norm(projected, axis=0)
 
     unidentifiable: dict[str, str] = {}
+    practical: list[str] = []  # held because the data barely see them, not exactly
     usable = []
     for k, index in enumerate(candidates):
         name = names[index]
@@ -139,6 +140,7 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
             share = projected_norms[k] / raw_norms[k]
             unidentifiable[name] = (f"{absorbed_reason}, all but {100 * share:.2g}% of its effect:"
                                     f" too little for these data to determine it")
+            practical.append(name)
         else:
             usable.append(k)
     # Own part of each column as a fraction of its full effect.
@@ -175,6 +177,7 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
                     f"nearly a combination of parameters already identified ({name} acts "
                     f"like {relation}; only {100 * remaining[j]:.2g}% of its effect is its "
                     f"own): too little for these data to determine it")
+                practical.append(name)
             combinations.append(f"{name} ~ {relation}")
 
     if identifiable_local:
@@ -190,4 +193,5 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
         singular_values=s,
         condition_number=condition,
         combinations=tuple(combinations),
+        practical=tuple(practical),
     )

@@ -12,22 +12,17 @@ again on them.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import shutil
 import sys
-from dataclasses import replace
 from pathlib import Path
 
-from ..calibration import METHODS, calibrate
+from ..calibration import METHODS
+from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..datasets import load_dataset
-from ..effect_model import delivered_lines, geometry_only, save_effects
+from ..effect_model import delivered_lines
 from ..errors import InputError
-from ..output import atomic_directory
-from ..output import json_safe as _clean
-from ..profiles import PROFILES, ProfileCost, profile_parameters
+from ..profiles import PROFILES
 from ..results import CalibrationResult
-from ..robot import save_robot
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 
 
@@ -81,27 +76,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
-def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
-                  pdf: bool = False, keep: tuple[str, ...] = (), info=None,
-                  templates: Path | None = None) -> None:
-    """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out``
-    atomically (``info``: the report's customer fields, ``templates``: a folder of report
-    templates); the files named in ``keep`` that ``out`` already holds are carried over
-    into the new folder."""
-    with atomic_directory(out) as staging:
-        for name in keep:
-            if (out / name).is_file() and not (out / name).is_symlink():
-                shutil.copy2(out / name, staging / name)
-        (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
-        save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
-        save_effects(result, staging)
-        if report:
-            from ..report import write_report
-
-            write_report(result, staging / "report.html", pdf=pdf, info=info,
-                         templates=templates)
-
-
 def summary(result: CalibrationResult) -> str:
     """A few lines for the terminal: what was identified and the error before and after."""
     units = result.units
@@ -109,6 +83,9 @@ def summary(result: CalibrationResult) -> str:
     ident = result.identifiability
     rows = sum(len(r.errors_final) for r in result.residuals)
     lines = [f"WARNING: {result.warning}"] if result.warning else []
+    delivery = result.delivery
+    if delivery is not None and delivery.refused:
+        lines.insert(0, f"NOT BETTER THAN DOING NOTHING: {delivery.reason}")
     lines += [f"{rows} measurements from {', '.join(result.datasets)}; "
              f"{len(ident.identifiable)} of {len(ident.candidates)} parameters identifiable "
              f"(condition number {result.condition_number:.4g})"]
@@ -134,6 +111,8 @@ def summary(result: CalibrationResult) -> str:
         lines.append(result.profile.sentence(units, result.fit, result.validation))
     if result.delivered is not None:
         lines += delivered_lines(result.delivered, s, units.length)
+    if result.predicted_accuracy is not None:
+        lines.append(result.predicted_accuracy.sentence(s, units.length))
     stand_ins = _rejected(result, "implausible")
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
@@ -150,18 +129,6 @@ def summary(result: CalibrationResult) -> str:
     else:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
-
-
-def profiled(datasets, validation, profile: str, options: dict) -> CalibrationResult:
-    """The calibration restricted to ``profile``'s parameters, carrying what the
-    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
-    allowed = profile_parameters(profile, datasets[0].robot)
-    free = calibrate(datasets, validation, **options)
-    restricted = calibrate(datasets, validation, parameters=allowed, **options)
-    held = tuple(n for n in free.identifiability.identifiable
-                 if n in free.robot_nominal.parameters() and n not in allowed)
-    cost = ProfileCost(profile, allowed, held, free.fit, free.validation)
-    return replace(restricted, profile=cost)
 
 
 def _rejected(result: CalibrationResult, word: str) -> list[str]:
@@ -217,18 +184,12 @@ def run(args: argparse.Namespace) -> int:
     info = report_info(args, datasets + validation)
     not_replacing_inputs(args.out, [p for d in datasets + validation
                                     for p in (d.path, d.data_path, d.robot_path)])
-    options = dict(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
-                   select_growth=args.select_growth, max_iterations=args.max_iterations,
-                   rule=args.rule, progress=sys.stderr.isatty())
-    if args.profile is None:
-        result = calibrate(datasets, validation, **options)
-    else:
-        result = profiled(datasets, validation, args.profile, options)
-    result = replace(result, delivered=geometry_only(result, datasets, validation))
-    write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
-                  templates=args.report_templates)
-    print(summary(result))
-    print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
-          + (", effects_calibrated.yaml" if (args.out / "effects_calibrated.yaml").is_file()
-             else "") + ("" if args.no_report else ", report.html"))
-    return 0
+    options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
+                         select_growth=args.select_growth, max_iterations=args.max_iterations,
+                         rule=args.rule, profile=args.profile, progress=sys.stderr.isatty())
+    report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
+                           templates=args.report_templates)
+    outcome = run_job(datasets, validation, options, args.out, report)
+    print(summary(outcome.result))
+    print(f"wrote {args.out}: {', '.join(outcome.written)}")
+    return outcome.exit_status

@@ -21,10 +21,10 @@ import sys
 from importlib import resources
 from pathlib import Path
 
-from ..calibration import calibrate
+from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..datasets import load_dataset
 from .arguments import add_force, output_folder
-from .calibrate import summary, write_outputs
+from .calibrate import summary
 
 PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
              "mid_left")
@@ -67,16 +67,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"== {name}")
         fit = [load_dataset(p) for p in fit_files]
         validation = [load_dataset(p) for p in validation_files]
-        result = calibrate(fit, validation, diagnose=not args.no_diagnose,
-                           progress=sys.stderr.isatty())
         out = args.out / name
         render = False
         if not args.no_screenshot:
             from ..report import find_chromium
 
             render = find_chromium() is not None
-        write_outputs(result, out, keep=() if render else (SCREENSHOT,))
-        print(summary(result))
+        outcome = run_job(fit, validation,
+                          JobOptions(diagnose=not args.no_diagnose, progress=sys.stderr.isatty()),
+                          out, ReportOptions(keep=() if render else (SCREENSHOT,)))
+        print(summary(outcome.result))
         if render:
             from ..report import screenshot_report
 

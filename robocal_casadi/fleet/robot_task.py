@@ -244,18 +244,17 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
 
 def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, validation,
                files: list[tuple[str, Path]], digest: str) -> dict:
-    from ..calibration import calibrate
+    from ..calibration.job import JobOptions, ReportOptions, calibrate_job, write
     from ..commands.arguments import not_replacing_inputs
-    from ..commands.calibrate import write_outputs
 
     if folder.exists() and not written_by_robocal(folder):
         if not folder.is_dir() or any(folder.iterdir()):
             raise InputError(f"{folder} exists and robocal did not write it; move it away so "
                              "the robot's result can be written there", where=robot.name)
     not_replacing_inputs(folder, [path for _, path in files], option=robot.name)
-    result = calibrate(datasets, validation, diagnose=settings.diagnose,
-                       method=settings.method, loss=settings.loss,
-                       max_iterations=settings.max_iterations, progress=False)
+    result = calibrate_job(datasets, validation,
+                           JobOptions(diagnose=settings.diagnose, method=settings.method,
+                                      loss=settings.loss, max_iterations=settings.max_iterations))
     if input_hash(files, settings) != digest:
         raise InputError("its input files changed while it was being calibrated; run again",
                          where=robot.name)
@@ -268,10 +267,10 @@ def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, va
         info = ReportInfo()
         for dataset in [*datasets, *validation]:
             info = info.merged(info_from_dataset_file(dataset.path))
-    write_outputs(result, folder, report=settings.report, info=info)
-    summary = robot_summary(result)
-    written = ["result.json", "robot_calibrated.yaml"] + (["report.html"] if settings.report
-                                                          else [])
+    outcome = write(result, datasets, validation, folder,
+                    ReportOptions(report=settings.report, info=info))
+    summary = robot_summary(outcome.result)
+    written = list(outcome.written)
     record = {"version": RECORD_VERSION, "input_hash": digest, "files": written,
               "summary": summary}
     with atomic_file(folder / RECORD) as staging:

@@ -1,0 +1,227 @@
+"""The whole calibration job: calibrate, diagnose, choose what is delivered, write.
+
+``robocal calibrate``, ``robocal demo``, a fleet's robot task and the Python API all run
+this one job, so their results are the same, key by key:
+
+1. ``calibrate`` (geometry, then the effects diagnosis adds), restricted to a
+   controller's parameter set when a ``profile`` is given;
+2. ``delivery.choose``: the best geometry-only model for ``robot_calibrated.yaml``, or
+   doing nothing when the calibration is not better (``recommended`` ``nominal`` or
+   ``instrument_only``, exit status 3);
+3. ``write``: the files staged in a new folder; every accuracy figure stated about a
+   delivered file is computed by reading that file back and running the forward
+   kinematics ``robocal fk`` runs; the predicted accuracy over the work cell; then
+   ``result.json`` and the report; the folder moved into place as a whole.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..delivery.accuracy import predict
+from ..delivery.choice import Delivery, choose
+from ..effect_model import EFFECTS_FILE, load_effects, save_effects
+from ..output import atomic_directory
+from ..output import json_safe as _clean
+from ..profiles import ProfileCost, profile_parameters
+from ..results import CalibrationResult
+from ..robot import load_robot, save_robot
+from .identification import calibrate as _calibrate
+from .identification import evaluate
+
+ROBOT_FILE = "robot_calibrated.yaml"
+REFUSED = 3  # exit status: the calibration is not better than doing nothing
+
+
+@dataclass(frozen=True)
+class JobOptions:
+    """How to calibrate (the options of ``calibration.calibrate``) and, with
+    ``profile``, the controller whose parameter set alone is fitted."""
+
+    diagnose: bool = True
+    method: str = "lm"
+    loss: str = "linear"
+    select_growth: float | None = None
+    max_iterations: int = 200
+    rule: str = "prior"
+    profile: str | None = None
+    progress: bool = False
+
+    def calibrate_options(self) -> dict:
+        return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
+                    select_growth=self.select_growth, max_iterations=self.max_iterations,
+                    rule=self.rule, progress=self.progress)
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    """What is written beside the result: the report (``pdf`` too), its customer fields
+    ``info``, a folder of report ``templates``, and files of an earlier result to ``keep``."""
+
+    report: bool = True
+    pdf: bool = False
+    info: object | None = None
+    templates: Path | None = None
+    keep: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class JobOutcome:
+    """A finished job: the ``result`` as written into ``out`` and the ``written`` files."""
+
+    result: CalibrationResult
+    out: Path | None
+    written: tuple[str, ...] = ()
+
+    @property
+    def exit_status(self) -> int:
+        """0, or 3 when the calibration is not better than doing nothing."""
+        delivery = self.result.delivery
+        return REFUSED if delivery is not None and delivery.refused else 0
+
+    def __repr__(self) -> str:
+        return (f"JobOutcome(out={str(self.out)!r}, recommended={self.result.recommended!r}, "
+                f"written={list(self.written)})")
+
+
+def calibrate_job(datasets: Sequence, validation: Sequence = (),
+                  options: JobOptions = JobOptions()) -> CalibrationResult:
+    """Steps 1 and 2: the calibration with its delivery chosen (nothing written)."""
+    datasets, validation = list(datasets), list(validation)
+    if options.profile is None:
+        result = _calibrate(datasets, validation, **options.calibrate_options())
+    else:
+        result = _profiled(datasets, validation, options)
+    return deliver(result, datasets, validation)
+
+
+def deliver(result: CalibrationResult, datasets: Sequence,
+            validation: Sequence = ()) -> CalibrationResult:
+    """``result`` with its ``delivery`` chosen: ``robot_calibrated`` the delivered geometry,
+    ``recommended`` and its reason updated when doing nothing is better."""
+    delivery = choose(result, datasets, validation)
+    recommendation = result.recommendation
+    if delivery.refused:
+        recommendation = delivery.reason
+    return replace(result, delivery=delivery, robot_calibrated=delivery.robot,
+                   recommended=delivery.recommended, recommendation=recommendation)
+
+
+def run_job(datasets: Sequence, validation: Sequence = (), options: JobOptions = JobOptions(),
+            out: Path | None = None, report: ReportOptions = ReportOptions()) -> JobOutcome:
+    """The whole job; with ``out``, the files written there (see the module docstring)."""
+    result = calibrate_job(datasets, validation, options)
+    if out is None:
+        return JobOutcome(measured(result, datasets, validation), None)
+    return write(result, datasets, validation, Path(out), report)
+
+
+def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence = (),
+             robot_file: Path | None = None, effects_folder: Path | None = None
+             ) -> CalibrationResult:
+    """``result`` with ``delivered`` (RMS [m] each output gives on the fit and held-out
+    data) and ``predicted_accuracy``, computed from the files as written when given
+    (``robot_file``; ``effects_folder`` holding ``effects_calibrated.yaml``), else from
+    the models in memory."""
+    robot = load_robot(robot_file) if robot_file is not None else result.robot_calibrated
+    delivery: Delivery = result.delivery
+    mounted = delivery.candidate(delivery.delivered).mounted
+    figures: dict[str, dict[str, float]] = {ROBOT_FILE: {}}
+    for role, data in (("fit", datasets), ("validation", validation)):
+        if data:
+            problem, x = evaluate(robot, list(data), (), mounted,
+                                  label_prefix="validation:" if role == "validation" else "")
+            figures[ROBOT_FILE][role] = problem.rms(x)
+    with_effects = _with_effects(result, robot, datasets, validation, effects_folder)
+    structured = _effects_left_out(result, robot)
+    predicted = predict(result, robot, structured)
+    delivered = {ROBOT_FILE: figures[ROBOT_FILE], "with_effects": with_effects,
+                 "model": delivery.delivered, "mounted": dict(mounted), "basis": delivery.basis,
+                 "reason": delivery.reason,
+                 "candidates": {c.name: {"fit": c.fit_rms, "held_out": c.held_out_rms}
+                                for c in delivery.candidates}}
+    return replace(result, delivered=delivered, predicted_accuracy=predicted)
+
+
+def _with_effects(result: CalibrationResult, robot, datasets, validation,
+                  folder: Path | None) -> dict[str, float] | None:
+    """RMS [m] of the model with effects, read back from ``folder`` when given."""
+    if result.recommended != "final" or not result.effects:
+        return None
+    if folder is None or not (folder / EFFECTS_FILE).is_file():
+        out = {"fit": result.fit.rms_final}
+        if result.validation is not None:
+            out["validation"] = result.validation.rms_final
+        return out
+    model = load_effects(folder, robot)
+    values = {name: value for name, (value, _) in result.mounted.items()}
+    start = 0
+    for effect in model.effects:
+        names = effect.parameter_names()
+        values.update(zip(names, map(float, model.values[start:start + len(names)])))
+        start += len(names)
+    out = {}
+    for role, data in (("fit", datasets), ("validation", validation)):
+        if data:
+            problem, x = evaluate(model.robot, list(data), model.effects, values,
+                                  label_prefix="validation:" if role == "validation" else "")
+            out[role] = problem.rms(x)
+    return out
+
+
+def _effects_left_out(result: CalibrationResult, robot) -> float:
+    """RMS distance [m] between the delivered geometry and the model with effects at the
+    fit readings, when effects are recommended but a controller runs geometry alone."""
+    if result.recommended != "final" or not result.effects:
+        return 0.0
+    from ..delivery.projection import _targets
+    from ..kinematics import Kinematics
+
+    final_robot = result.robot_nominal.with_parameters(
+        np.array([p.estimate for p in result.parameters], dtype=float))
+    targets = _targets(result, final_robot)
+    if targets is None:
+        return 0.0
+    Q, T_target = targets
+    T = Kinematics(robot).tool_poses(Q)
+    return float(np.sqrt(np.mean(np.sum((T[:, :3, 3] - T_target[:, :3, 3]) ** 2, axis=1))))
+
+
+def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, out: Path,
+          report: ReportOptions = ReportOptions()) -> JobOutcome:
+    """Step 3: stage every file, measure the delivered ones as written, move into place."""
+    with atomic_directory(out) as staging:
+        for name in report.keep:
+            if (out / name).is_file() and not (out / name).is_symlink():
+                shutil.copy2(out / name, staging / name)
+        save_robot(result.robot_calibrated, staging / ROBOT_FILE)
+        save_effects(result, staging)
+        result = measured(result, datasets, validation, staging / ROBOT_FILE, staging)
+        (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2)
+                                             + "\n")
+        if report.report:
+            from ..report import write_report
+
+            write_report(result, staging / "report.html", pdf=report.pdf, info=report.info,
+                         templates=report.templates)
+        written = tuple(sorted(p.name for p in staging.iterdir()))
+    return JobOutcome(result, out, written)
+
+
+def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
+    """The calibration restricted to ``options.profile``'s parameters, carrying what the
+    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    allowed = profile_parameters(options.profile, datasets[0].robot)
+    free = _calibrate(datasets, validation, **options.calibrate_options())
+    restricted = _calibrate(datasets, validation, parameters=allowed,
+                            **options.calibrate_options())
+    held = tuple(n for n in free.identifiability.identifiable
+                 if n in free.robot_nominal.parameters() and n not in allowed)
+    cost = ProfileCost(options.profile, allowed, held, free.fit, free.validation)
+    return replace(restricted, profile=cost)

@@ -1,0 +1,107 @@
+"""The geometry that best reproduces a model with effects, for controllers that run
+geometry alone.
+
+At the fit data's joint readings (with each row's payload, temperature and direction of
+motion, as the effects read them) the model with effects puts the tool frame at
+``T_target``. The projected geometry ``p`` minimises, over the robot parameters the
+geometric calibration fitted,
+
+    sum_k  sum_m | T_world_tool(q_k, p) m - T_target_k m |^2                 [m^2]
+
+for the tool frame's origin and the points ``LEVER`` [m] along its three axes, so that
+position and orientation both count, in lengths. Gauss-Newton from the geometric fit;
+CasADi gives the exact Jacobian.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..effect_model import EffectModel
+from ..effects.motion import is_direction_column
+from ..kinematics import Kinematics
+from ..robot import Robot
+
+LEVER = 0.1  # [m] points on the tool axes: an orientation error of 1 mrad counts 0.1 mm
+MAX_ROWS = 400  # readings the projection is fitted on (spread evenly over the data)
+ITERATIONS = 20
+STEP_TOLERANCE = 1e-12  # [SI] a Gauss-Newton step below this ends the fit
+
+
+def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot | None:
+    """The geometry-only robot closest to ``result``'s model with effects (geometry
+    ``final_robot``) over the fit readings, started from ``start_robot``; None when the
+    data carry no joint readings (sensor-only scans) or no robot parameter was fitted."""
+    targets = _targets(result, final_robot)
+    if targets is None or not result.covariance_names:
+        return None
+    Q, T_target = targets
+    kinematics = Kinematics(start_robot)
+    registry = kinematics.registry
+    free = np.array(registry.indices(list(result.covariance_names)), dtype=int)
+    p = np.array(kinematics.nominal, dtype=float)
+    residual, jacobian = _functions(kinematics, Q, T_target, free)
+    for _ in range(ITERATIONS):
+        r = np.asarray(residual(p)).ravel()
+        J = np.asarray(jacobian(p))
+        step = np.linalg.lstsq(J, -r, rcond=1e-12)[0]
+        p[free] += step
+        if np.max(np.abs(step)) < STEP_TOLERANCE:
+            break
+    return start_robot.with_parameters(p)
+
+
+def _targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] | None:
+    """Fit readings (N x dof) and the tool poses (N x 4 x 4) [m] the model with effects
+    gives there, at most ``MAX_ROWS`` rows evenly spread."""
+    com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
+    payload = any("payload" in r.extras for r in result.residuals)
+    model = EffectModel(final_robot, tuple(result.effect_models),
+                        np.asarray(result.effect_values, dtype=float),
+                        (0.0, 0.0, 0.0) if com is None else tuple(float(v) for v in com),
+                        payload)
+    readings, poses = [], []
+    for residuals in result.residuals:
+        if residuals.joints is None or not len(residuals.joints):
+            continue
+        Q = np.asarray(residuals.joints, dtype=float)
+        extras = {}
+        for name in model.columns():
+            if is_direction_column(name):
+                continue  # from the order of the rows
+            if name in residuals.extras:
+                extras[name] = np.asarray(residuals.extras[name], dtype=float)
+            elif name == "payload":
+                extras[name] = np.zeros(len(Q))
+            else:
+                return None  # a value the effects need that the data do not give
+        readings.append(Q)
+        poses.append(model.tool_poses(Q, extras))
+    if not readings:
+        return None
+    Q_all, T_all = np.vstack(readings), np.concatenate(poses)
+    keep = np.unique(np.linspace(0, len(Q_all) - 1, min(MAX_ROWS, len(Q_all))).astype(int))
+    return Q_all[keep], T_all[keep]
+
+
+def _functions(kinematics: Kinematics, Q: np.ndarray, T_target: np.ndarray,
+               free: np.ndarray) -> tuple[ca.Function, ca.Function]:
+    """``p -> residual`` and ``p -> d residual / d p[free]`` over the rows of ``Q``."""
+    p = ca.MX.sym("p", len(kinematics.nominal))
+    count = len(Q)
+    poses = kinematics.tool_pose.map(count)(ca.DM(Q.T), ca.repmat(p, 1, count))  # 4 x 4N
+    points = np.array([[0, 0, 0, 1], [LEVER, 0, 0, 1], [0, LEVER, 0, 1], [0, 0, LEVER, 1]],
+                      dtype=float).T  # 4 x 4, one point a column
+    pieces = []
+    for k in range(count):
+        T = poses[:, 4 * k:4 * k + 4]
+        target = T_target[k] @ points
+        pieces.append(ca.vec((T @ ca.DM(points))[:3, :] - ca.DM(target[:3, :])))
+    r = ca.vertcat(*pieces)
+    selector = ca.DM.zeros(len(kinematics.nominal), len(free))
+    for column, index in enumerate(free):
+        selector[int(index), column] = 1.0
+    J = ca.mtimes(ca.jacobian(r, p), selector)
+    return ca.Function("projection_residual", [p], [r]), ca.Function("projection_jacobian",
+                                                                     [p], [J])
