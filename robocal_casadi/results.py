@@ -271,8 +271,8 @@ class CalibrationResult:
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
     delivered: Any = None  # ``calibration.job.measured``: RMS [m] each output delivers
     # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
-    # its free robot parameters (``covariance_names``, in that order): what the delivery
-    # and its predicted work-cell accuracy start from (``delivery``).
+    # its free robot and mounted parameters (``covariance_names``, in that order): what
+    # the delivery and its predicted work-cell accuracy start from (``delivery``).
     mounted_geometric: dict[str, float] = field(default_factory=dict)
     covariance_names: tuple[str, ...] = ()
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
@@ -314,10 +314,11 @@ class CalibrationResult:
         effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
                                         for n in f.parameters}) for f in effects)
         chosen = final.x if recommended == "final" else geometric.x
+        kept_slices = (problem.slices["robot"], problem.slices["mounted"])
         robot_free = [i for i in np.flatnonzero(geometric.free)
-                      if problem.slices["robot"].start <= i < problem.slices["robot"].stop]
+                      if any(part.start <= i < part.stop for part in kept_slices)]
         position = {int(i): k for k, i in enumerate(np.flatnonzero(geometric.free))}
-        kept = [position[i] for i in robot_free]
+        kept = [position[int(i)] for i in robot_free]
         covariance = (np.asarray(geometric.covariance)[np.ix_(kept, kept)]
                       if np.size(geometric.covariance) else np.zeros((0, 0)))
         geometric_names = problem.unknowns.names

@@ -123,26 +123,38 @@ def test_predicted_parameter_error_matches_monte_carlo(tmp_path):
                    geometric_errors=ERRORS, seed=7, progress=False)
     result = calibrate_job([load_dataset(sim.dataset_path)], (), JobOptions(diagnose=False))
     robot = result.robot_calibrated
-    prediction = predict(result, robot, structured=0.0)
+    assert not robot.has_tool  # the tool pose is the flange pose: the reference below
+    names = ("target_x", "target_y", "target_z")
+    point = np.array([result.mounted_geometric[n] for n in names])
+    prediction = predict(result, robot, point, names, structured=0.0)
     unexplained = 0.0 if result.unexplained is None else result.unexplained.rms
     parameter_part = np.sqrt(max(prediction.rms**2 - unexplained**2, 0.0))
-    # Independent: sample the parameter errors from the posterior, move the numpy
-    # reference kinematics, remove the best rigid motion (closed form), average.
+    # Independent: sample the robot and reflector errors from the posterior, move the
+    # numpy reference kinematics, remove the best rigid motion (closed form), average.
     low, high = np.array(region_of(result)).T
-    Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))[::8]
+    Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))[::16]
     registry = robot.parameters()
-    index = registry.indices(list(result.covariance_names))
+    in_robot = [k for k, n in enumerate(result.covariance_names) if n in registry]
+    in_point = [k for k, n in enumerate(result.covariance_names) if n in names]
+    index = registry.indices([result.covariance_names[k] for k in in_robot])
+    point_index = [names.index(result.covariance_names[k]) for k in in_point]
     base = robot.parameter_vector()
-    reference = np.array([nominal_pose(robot, q)[:3, 3] for q in Q])
+
+    def located(geometry, offset):
+        poses = [nominal_pose(geometry, q) for q in Q]
+        return np.array([T[:3, :3] @ offset + T[:3, 3] for T in poses])
+
+    reference = located(robot, point)
     rng = np.random.default_rng(11)
-    draws = 800
+    draws = 400
     squares = []
-    for delta in rng.multivariate_normal(np.zeros(len(index)), result.covariance, draws):
-        moved = base.copy()
-        moved[index] += delta
-        other = robot.with_parameters(moved)
-        points = np.array([nominal_pose(other, q)[:3, 3] for q in Q])
-        squares.append(_kabsch_rms(points, reference) ** 2)
+    for delta in rng.multivariate_normal(np.zeros(len(result.covariance_names)),
+                                         result.covariance, draws):
+        moved, offset = base.copy(), point.copy()
+        moved[index] += delta[in_robot]
+        offset[point_index] += delta[in_point]
+        squares.append(_kabsch_rms(located(robot.with_parameters(moved), offset),
+                                   reference) ** 2)
     estimate = np.sqrt(np.mean(squares))
     # A mean of `draws` squared norms of a Gaussian field: relative spread of the mean
     # square at most sqrt(2/draws) (one degree of freedom), 3 sigma on the RMS.

@@ -30,6 +30,7 @@ from ..effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import ProfileCost, profile_parameters
+from ..report.info import ReportInfo
 from ..results import CalibrationResult
 from ..robot import load_robot, save_robot
 from .identification import calibrate as _calibrate
@@ -66,7 +67,7 @@ class ReportOptions:
 
     report: bool = True
     pdf: bool = False
-    info: object | None = None
+    info: ReportInfo | None = None
     templates: Path | None = None
     keep: tuple[str, ...] = ()
 
@@ -133,16 +134,24 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     delivery: Delivery = result.delivery
     mounted = delivery.candidate(delivery.delivered).mounted
     figures: dict[str, dict[str, float]] = {ROBOT_FILE: {}}
+    errors: dict[str, np.ndarray] = {}
     for role, data in (("fit", datasets), ("validation", validation)):
         if data:
             problem, x = evaluate(robot, list(data), (), mounted,
                                   label_prefix="validation:" if role == "validation" else "")
             figures[ROBOT_FILE][role] = problem.rms(x)
+            errors[role] = np.concatenate(problem.errors(x))
     with_effects = _with_effects(result, robot, datasets, validation, effects_folder)
     structured = _effects_left_out(result, robot)
-    predicted = predict(result, robot, structured)
+    names = list(mounted)[:3]  # the instrument's point on the flange comes first
+    point = [mounted[n] for n in names] if len(names) == 3 else [0.0, 0.0, 0.0]
+    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured)
+    if delivery.refused:
+        structured = 0.0  # nothing calibrated: no posterior to propagate
+        predicted = None
     delivered = {ROBOT_FILE: figures[ROBOT_FILE], "with_effects": with_effects,
-                 "model": delivery.delivered, "mounted": dict(mounted), "basis": delivery.basis,
+                 "model": delivery.delivered, "mounted": dict(mounted), "errors": errors,
+                 "basis": delivery.basis,
                  "reason": delivery.reason,
                  "candidates": {c.name: {"fit": c.fit_rms, "held_out": c.held_out_rms}
                                 for c in delivery.candidates}}
@@ -217,11 +226,12 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
 def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
     """The calibration restricted to ``options.profile``'s parameters, carrying what the
     unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
-    allowed = profile_parameters(options.profile, datasets[0].robot)
+    profile = str(options.profile)
+    allowed = profile_parameters(profile, datasets[0].robot)
     free = _calibrate(datasets, validation, **options.calibrate_options())
     restricted = _calibrate(datasets, validation, parameters=allowed,
                             **options.calibrate_options())
     held = tuple(n for n in free.identifiability.identifiable
                  if n in free.robot_nominal.parameters() and n not in allowed)
-    cost = ProfileCost(options.profile, allowed, held, free.fit, free.validation)
+    cost = ProfileCost(profile, allowed, held, free.fit, free.validation)
     return replace(restricted, profile=cost)

@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fleet import Settings, load_fleet, summarise
     from ..fleet.engine import run_fleet
     from ..fleet.page import render
-    from .calibrate import _clean
+    from ..output import json_safe as _clean
 
     if args.workers is not None:
         positive_count(args.workers, "--workers")

@@ -1,13 +1,16 @@
 """The tool-position error the delivered model is predicted to have over the work cell.
 
 The work cell is the box of joint ranges the fit data cover (``region``), sampled
-uniformly at ``SAMPLES`` poses with a fixed seed. At each pose ``k`` the tool-frame
-origin moves with the robot parameters as ``G_k = d p_tool / d theta`` (3 x n, CasADi's
-exact Jacobian of the delivered geometry). The parameter error after calibration has
-covariance ``Sigma``:
+uniformly at ``SAMPLES`` poses with a fixed seed. The error is predicted at the point the
+instrument located on the flange (probe tip, tracker reflector, laser origin: the first
+three mounted unknowns), which is what the data can vouch for: a tool frame offset the
+instrument cannot tell from its own offset is the user's declaration, not calibrated. At
+each pose ``k`` that point moves with the robot and mounted parameters as
+``G_k = d p_world / d theta`` (3 x n, CasADi's exact Jacobian of the delivered geometry).
+The parameter error after calibration has covariance ``Sigma``:
 
-* for the parameters the calibration fitted, the posterior covariance of the geometric
-  fit (data and tolerance prior together);
+* for the parameters the calibration fitted (robot and instrument point), the posterior
+  covariance of the geometric fit (data and tolerance prior together);
 * for those it held at nominal because the data barely see them (the 1% rule), their
   tolerance squared (``calibration.prior``), counted only for the part of their effect
   that the fitted parameters cannot take up over the region; those held by an exact
@@ -28,7 +31,8 @@ model with effects at the fit readings. ``rms``, ``p95`` and ``max`` are over th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -53,6 +57,7 @@ class PredictedAccuracy:
     structured: float
     region: tuple[tuple[float, float], ...]
     samples: int = SAMPLES
+    errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
         return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
@@ -84,41 +89,48 @@ def region_of(result) -> tuple[tuple[float, float], ...] | None:
     return tuple((float(lo), float(hi)) for lo, hi in zip(Q.min(axis=0), Q.max(axis=0)))
 
 
-def predict(result, delivered: Robot, structured: float = 0.0,
+def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
+            structured: float = 0.0,
             region: tuple[tuple[float, float], ...] | None = None) -> PredictedAccuracy | None:
-    """The ``PredictedAccuracy`` of the ``delivered`` geometry of a ``CalibrationResult``;
-    ``structured`` [m] the model error beyond the unexplained residual (see the module
-    docstring). None when the data give no joint readings to define the region."""
+    """The ``PredictedAccuracy`` of the ``delivered`` geometry of a ``CalibrationResult`` at
+    the instrument's ``point`` [m] (flange frame; its unknowns ``point_names``, x, y, z);
+    ``structured`` [m] the model error beyond the unexplained residual (module docstring).
+    None when the data give no joint readings to define the region."""
     region = region if region is not None else region_of(result)
     if region is None:
         return None
     low, high = np.array(region).T
     Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))
     kinematics = Kinematics(delivered)
-    G, positions = _tool_jacobians(kinematics, Q)
+    G, positions = _point_jacobians(kinematics, Q, np.asarray(point, dtype=float))
+    names = tuple(kinematics.registry.names) + tuple(point_names)
     P = _without_rigid_motion(positions)
-    per_pose = _parameter_error(result, kinematics, G, P)
+    per_pose = _parameter_error(result, kinematics, names, G[:, :len(names)], P)
     unexplained = 0.0 if result.unexplained is None else float(result.unexplained.rms)
     s2 = unexplained**2 + structured**2
     errors = np.sqrt(np.clip(per_pose, 0.0, None) + s2)
     return PredictedAccuracy(float(np.sqrt(np.mean(errors**2))),
                              float(np.percentile(errors, 95)), float(errors.max()),
-                             float(np.sqrt(s2)), region)
+                             float(np.sqrt(s2)), region, SAMPLES, errors)
 
 
-def _tool_jacobians(kinematics: Kinematics, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``G`` (3N x n) and the tool positions (N x 3) [m] at the rows of ``Q``."""
+def _point_jacobians(kinematics: Kinematics, Q: np.ndarray,
+                     point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``G`` (3N x (n + 3)): d p_world / d [robot parameters, point], and the world
+    positions (N x 3) [m] of the flange-frame ``point`` at the rows of ``Q``."""
     q = ca.SX.sym("q", kinematics.dof)
     p = ca.SX.sym("p", len(kinematics.nominal))
-    position = kinematics.tool_pose(q, p)[:3, 3]
-    function = ca.Function("tool_position_jacobian", [q, p],
-                           [position, ca.jacobian(position, p)])
-    mapped = function.map(len(Q))
-    positions, jacobians = mapped(Q.T, ca.repmat(ca.DM(kinematics.nominal), 1, len(Q)))
-    positions = np.asarray(positions).T
-    n = len(kinematics.nominal)
-    G = np.asarray(jacobians).reshape(3, len(Q), n).transpose(1, 0, 2)  # block k: 3 x n
-    return G.reshape(3 * len(Q), n), positions
+    offset = ca.SX.sym("offset", 3)
+    position = kinematics.point(q, p, offset)
+    function = ca.Function("point_jacobian", [q, p, offset],
+                           [position, ca.jacobian(position, ca.vertcat(p, offset))])
+    count = len(Q)
+    mapped = function.map(count)
+    positions, jacobians = mapped(Q.T, ca.repmat(ca.DM(kinematics.nominal), 1, count),
+                                  ca.repmat(ca.DM(point), 1, count))
+    width = len(kinematics.nominal) + 3
+    G = np.asarray(jacobians).reshape(3, count, width).transpose(1, 0, 2)  # block k: 3 x width
+    return G.reshape(3 * count, width), np.asarray(positions).T
 
 
 def _without_rigid_motion(positions: np.ndarray) -> np.ndarray:
@@ -134,26 +146,28 @@ def _without_rigid_motion(positions: np.ndarray) -> np.ndarray:
     return np.eye(len(R)) - Qr @ Qr.T
 
 
-def _parameter_error(result, kinematics: Kinematics, G: np.ndarray,
+def _parameter_error(result, kinematics: Kinematics, names: Sequence[str], G: np.ndarray,
                      P: np.ndarray) -> np.ndarray:
-    """Expected squared tool-position error [m^2] per pose from the parameters' errors
-    (module docstring), the rigid motion removed by ``P``."""
+    """Expected squared error [m^2] per pose from the parameters' errors (module
+    docstring); ``G``'s columns are ``names``; the rigid motion removed by ``P``."""
     registry = kinematics.registry
     count = len(G) // 3
-    fitted = np.array(registry.indices(list(result.covariance_names)), dtype=int)
+    column = {name: k for k, name in enumerate(names)}
+    kept = [k for k, n in enumerate(result.covariance_names) if n in column]
+    fitted = [column[result.covariance_names[k]] for k in kept]
     PG = P @ G
     per_pose = np.zeros(count)
-    if len(fitted) and result.covariance.shape == (len(fitted), len(fitted)):
+    if fitted:
         block = PG[:, fitted]
-        per_pose += np.einsum("ij,jk,ik->i", block, result.covariance, block).reshape(
+        covariance = np.asarray(result.covariance)[np.ix_(kept, kept)]
+        per_pose += np.einsum("ij,jk,ik->i", block, covariance, block).reshape(
             count, 3).sum(axis=1)
     # Parameters held at nominal by an exact dependency moved nothing the fit could not
     # take up; those held because the data barely see them keep their tolerance.
     held = [n for n in result.identifiability.practical if n in registry]
-    basis = np.linalg.qr(PG[:, fitted])[0] if len(fitted) else np.zeros((len(G), 0))
+    basis = np.linalg.qr(PG[:, fitted])[0] if fitted else np.zeros((len(G), 0))
     for name in held:
-        column = PG[:, registry.index(name)]
-        left = column - basis @ (basis.T @ column)
+        left = PG[:, column[name]] - basis @ (basis.T @ PG[:, column[name]])
         tolerance = tolerance_of(name, registry.quantity(name), result.robot_nominal)
         if tolerance is not None:
             per_pose += tolerance**2 * (left.reshape(count, 3) ** 2).sum(axis=1)

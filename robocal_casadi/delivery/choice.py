@@ -117,10 +117,11 @@ def choose(result, datasets: Sequence, validation: Sequence = ()) -> Delivery:
         name, rms = min(scores.items(), key=lambda item: item[1])
         if rms <= calibrated * (1.0 - MARGIN):
             reason = (f"the {basis} show the calibrated robot no better than the "
-                      f"{name.replace('_', ' ')} one ({calibrated:.4g} m against {rms:.4g} m "
-                      f"RMS): robot_calibrated.yaml holds the nominal geometry")
+                      f"{name.replace('_', ' ')} one ({_length(result, calibrated)} against "
+                      f"{_length(result, rms)} RMS): robot_calibrated.yaml holds the nominal "
+                      f"geometry")
             return Delivery(name, name, basis, candidates, reason, calibrated, scores)
-    reason = _geometry_reason(best, geometry, bool(validation))
+    reason = _geometry_reason(result, best, geometry, bool(validation))
     return Delivery(result.recommended, best.name, basis, candidates, reason, calibrated, scores)
 
 
@@ -202,14 +203,22 @@ def _calibrated_rms(result, best: Candidate, datasets: Sequence,
                       ("robot", "mounted", "placement"), free_robot=result.covariance_names)
 
 
-def _geometry_reason(best: Candidate, geometry: list[Candidate], held_out: bool) -> str:
+def _length(result, value: float | None) -> str:
+    """``value`` [m] in the robot file's length unit, with the unit."""
+    if value is None:
+        return "not measured"
+    units = result.units
+    return f"{value / units.length_scale:.4g} {units.length}"
+
+
+def _geometry_reason(result, best: Candidate, geometry: list[Candidate], held_out: bool) -> str:
     if not held_out:
         return ("no held-out data: robot_calibrated.yaml holds the geometric calibration, the "
                 "best geometry-only model on the fit data")
-    others = ", ".join(f"{c.name.replace('_', ' ')} {c.held_out_rms:.4g} m" for c in geometry
-                       if c is not best)
+    others = ", ".join(f"{c.name.replace('_', ' ')} {_length(result, c.held_out_rms)}"
+                       for c in geometry if c is not best and c.held_out_rms is not None)
     return (f"robot_calibrated.yaml holds the {best.name.replace('_', ' ')} model, the best "
-            f"geometry-only model on the held-out data ({best.held_out_rms:.4g} m RMS"
+            f"geometry-only model on the held-out data ({_length(result, best.held_out_rms)} RMS"
             + (f"; {others}" if others else "") + ")")
 
 

@@ -34,12 +34,13 @@ def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot 
     ``final_robot``) over the fit readings, started from ``start_robot``; None when the
     data carry no joint readings (sensor-only scans) or no robot parameter was fitted."""
     targets = _targets(result, final_robot)
-    if targets is None or not result.covariance_names:
-        return None
-    Q, T_target = targets
     kinematics = Kinematics(start_robot)
     registry = kinematics.registry
-    free = np.array(registry.indices(list(result.covariance_names)), dtype=int)
+    fitted = [n for n in result.covariance_names if n in registry]
+    if targets is None or not fitted:
+        return None
+    Q, T_target = targets
+    free = np.array(registry.indices(fitted), dtype=int)
     p = np.array(kinematics.nominal, dtype=float)
     residual, jacobian = _functions(kinematics, Q, T_target, free)
     for _ in range(ITERATIONS):
@@ -57,10 +58,9 @@ def _targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] | None
     gives there, at most ``MAX_ROWS`` rows evenly spread."""
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
     payload = any("payload" in r.extras for r in result.residuals)
+    x, y, z = (0.0, 0.0, 0.0) if com is None else (float(v) for v in com)
     model = EffectModel(final_robot, tuple(result.effect_models),
-                        np.asarray(result.effect_values, dtype=float),
-                        (0.0, 0.0, 0.0) if com is None else tuple(float(v) for v in com),
-                        payload)
+                        np.asarray(result.effect_values, dtype=float), (x, y, z), payload)
     readings, poses = [], []
     for residuals in result.residuals:
         if residuals.joints is None or not len(residuals.joints):

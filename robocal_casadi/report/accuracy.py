@@ -93,12 +93,21 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
     """The accuracy each output delivers, on held-out data when there is some."""
     _, residuals = judged_on(result)
     stats = {m: Accuracy.of(pooled(residuals, m)) for m in MODELS}
+    written = _written_errors(result)
+    model = (result.delivered or {}).get("model", "geometric")
+    contents = ("calibrated geometry only: joint offsets, link lengths and twists, base and "
+                "tool; load it into the controller or the offline programming system")
+    if model in ("nominal", "instrument_only"):
+        contents = ("the nominal geometry: calibrating did not do better than "
+                    + ("leaving the robot as designed" if model == "nominal" else
+                       "calibrating the mounted instrument alone"))
+    elif model != "geometric":
+        contents += (f" ({model.replace('_', ' ')} model, the best geometry-only model on "
+                     f"held-out data)")
     out = [Delivered("the robot's nominal model (no calibration)",
                      "the robot file as designed", "nominal", stats["nominal"]),
-           Delivered("robot_calibrated.yaml",
-                     "calibrated geometry only: joint offsets, link lengths and twists, base "
-                     "and tool; load it into the controller or the offline programming system",
-                     "geometric", stats["geometric"])]
+           Delivered("robot_calibrated.yaml", contents, "geometric",
+                     Accuracy.of(written) if written is not None else stats["geometric"])]
     if effects_differ(result):
         out.append(Delivered("robot_calibrated.yaml with effects_calibrated.yaml",
                              "geometry plus the effects found; the effects take hold where they "
@@ -107,6 +116,14 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
                              "them robocal fk and compensate use the geometry alone", "final",
                              stats["final"]))
     return out
+
+
+def _written_errors(result: CalibrationResult) -> np.ndarray | None:
+    """Per-measurement errors [m] of robot_calibrated.yaml as written, on the data the
+    delivered accuracy is judged on (``calibration.job.measured``), or None."""
+    errors = (result.delivered or {}).get("errors") or {}
+    role, _ = judged_on(result)
+    return errors.get(role)
 
 
 def recommended(result: CalibrationResult) -> str:

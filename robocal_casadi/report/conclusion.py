@@ -59,6 +59,12 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
             f"to {length(summary.rms_final)} RMS",
             f"to {length(summary.rms_final)} RMS with the effects, "
             f"{length(summary.rms_geometric)} with the geometry alone")
+    delivery = getattr(result, "delivery", None)
+    if delivery is not None and delivery.refused:
+        paragraphs.insert(0, f"Do not load a calibrated model: {delivery.reason}. The robot "
+                             f"is better left as it is"
+                             + (" with only the mounted instrument calibrated" if
+                                delivery.recommended == "instrument_only" else "") + ".")
     if not held_out:
         paragraphs.append("No held-out data was given, so this shows how well the model fits, "
                           "not how well it predicts new poses; calibrate with --validate to "

@@ -327,3 +327,22 @@ def effect_evidence(view: EffectView, units: Units) -> Figure:
                 figure.legend(handles=handles, loc="outside lower center", ncols=len(handles))
         figure.suptitle(f"{view.title}: error before and after")
     return figure
+
+
+def predicted_errors(errors: np.ndarray, scale: float, unit: str) -> Figure:
+    """Histogram of the predicted tool-position error [``unit``] over the sampled poses of
+    the work cell (``delivery.accuracy``)."""
+    with report_style():
+        figure = new_figure(2.8)
+        axes = figure.add_subplot()
+        values = np.asarray(errors, dtype=float) / scale
+        axes.hist(values, bins=30, color=COLOURS["final"], alpha=0.8)
+        axes.axvline(float(np.sqrt(np.mean(values**2))), color=COLOURS["geometric"],
+                     linestyle="--", linewidth=1.0, label="RMS")
+        axes.axvline(float(np.percentile(values, 95)), color=COLOURS["nominal"],
+                     linestyle=":", linewidth=1.0, label="95th percentile")
+        axes.set_xlabel(f"predicted tool-position error [{unit}]")
+        axes.set_ylabel("poses")
+        axes.set_title("Predicted error over the joint ranges the data cover")
+        axes.legend(loc="upper right")
+    return figure

@@ -60,7 +60,8 @@ def build_document(result: CalibrationResult, title: str | None = None,
                   + (", as are result.json and robot_calibrated.yaml." if
                      result.units.length != shown.length else "."))
     candidates = (conclusion_section(result), accuracy_section(result),
-                  applying_section(result), robot_and_data_section(result),
+                  applying_section(result), work_cell_section(result),
+                  robot_and_data_section(result),
                   errors_section(result), parameters_section(result), effects_section(result),
                   identifiability_section(result), sphere_section(result),
                   instrument_section(result), appendix_section(result))
@@ -190,6 +191,36 @@ def applying_section(result: CalibrationResult) -> Section:
                                 "effects did worse than the geometric calibration.",
                                 "conclusion"))
     return Section("applying", "Applying the result", tuple(blocks))
+
+
+def work_cell_section(result: CalibrationResult) -> Section | None:
+    """The tool-position error predicted for robot_calibrated.yaml away from the measured
+    points, over the joint ranges the data cover (``delivery.accuracy``)."""
+    predicted = result.predicted_accuracy
+    if predicted is None:
+        return None
+    units = display_units(result.units)
+    scale, unit = units.length_scale, units.length
+    rows = (("RMS", format_number(predicted.rms / scale)),
+            ("95th percentile", format_number(predicted.p95 / scale)),
+            ("maximum", format_number(predicted.max / scale)),
+            ("of which the model does not describe", format_number(predicted.structured / scale)))
+    text = (f"The measured points say how well the model fits where the robot was measured. "
+            f"Away from them, the error of robot_calibrated.yaml is predicted from the "
+            f"uncertainty left in every parameter (the data and the tolerances together) and "
+            f"from what the model still lacks, at {predicted.samples} poses spread over the "
+            f"joint ranges the data cover, after the robot's placement in the cell (a rigid "
+            f"motion of its base) is registered. Directions the data barely see keep the "
+            f"uncertainty of their tolerances: where this figure is well above the held-out "
+            f"error, the data determine the robot only near the measured region.")
+    blocks: list = [Paragraph(text), Table("predicted", f"Predicted tool-position error [{unit}]",
+                                           ("statistic", "value"), rows,
+                                           numeric=(False, True))]
+    if len(predicted.errors):
+        blocks.append(Plot("predicted-error", "Predicted tool-position error over the poses "
+                           "sampled in the work cell.",
+                           partial(figures.predicted_errors, predicted.errors, scale, unit)))
+    return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
 
 
 def identifiability_section(result: CalibrationResult) -> Section:
