@@ -80,7 +80,7 @@ def split(dataset: Path, table: Path, share: float) -> tuple[Path, Path]:
 
 
 def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, int],
-             noise: float, diagnose: bool, folder: Path) -> dict:
+             noise: float, diagnose: bool, folder: Path, mounted_error: float | None) -> dict:
     if isinstance(errors, tuple):  # drawn once, so fit and held-out data share the truth
         _, errors = true_parameters(load_robot(robot_file), errors,
                                     np.random.default_rng(1000 + seed))
@@ -88,7 +88,7 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
     # the instrument included (drawn at the prior's tolerance).
     fit = simulate(robot_file, kind, out_dir=folder / "all", rows=rows[0] + rows[1],
                    noise=noise, geometric_errors=errors, seed=seed, progress=False, force=True,
-                   mounted_error=MOUNTED_ERROR)
+                   mounted_error=mounted_error)
     fit_path, held_path = split(fit.dataset_path, fit.table_path, rows[1] / sum(rows))
     truth = fit.truth.robot
     outcome = run_job([load_dataset(fit_path)], [load_dataset(held_path)],
@@ -144,11 +144,11 @@ def main() -> None:
                 folder = Path(tmp) / f"{kind}-{seed}"
                 if kind == "laser_readme":
                     row = one_case(robot_file, "sphere_laser", seed, README_ERRORS, (60, 60),
-                                   1e-5, args.diagnose, folder)
+                                   1e-5, args.diagnose, folder, None)
                 else:
                     units, held, noise = KINDS[kind]
                     row = one_case(robot_file, kind, seed, ERRORS, (units, held), noise,
-                                   args.diagnose, folder)
+                                   args.diagnose, folder, MOUNTED_ERROR)
                 rows.append(row)
                 print(f"{kind} seed {seed}: {row}", file=sys.stderr)
             report["cases"][kind] = rows
