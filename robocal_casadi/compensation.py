@@ -9,8 +9,15 @@ until the geometry *with* the effects reaches the target (Gauss-Newton on the to
 with the effects, ``_with_effects``), to ``EFFECT_TOLERANCE``.
 
 A target is a tool position ``x, y, z`` [m] (world frame), optionally with the tool
-orientation ``qw, qx, qy, qz``. Position-only targets leave the orientation free and
-each solve starts from the previous solution (smooth motion along a path).
+orientation ``qw, qx, qy, qz``. Every answer keeps the configuration (shoulder, elbow,
+wrist branch) of its seed: the joints that reached the target before (a taught program),
+or else the nominal model's inverse kinematics of the target, solved along the targets
+from the previous solution (smooth motion along a path). The answer is solved from the
+seed and accepted when no singularity lies between them
+(``configuration.same_configuration``); otherwise the target is approached from the
+seed's own pose in small steps, each on the branch of the last (``_walk``); a target
+that only another branch reaches is reported (``STATUS_BRANCH``), never switched to.
+Position-only targets keep the tool turned as at the seed (a soft preference).
 """
 
 from __future__ import annotations
