@@ -53,12 +53,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("robot", metavar="ROBOT_OR_CALIBRATED_DIR",
                         help="robot file, or a calibration folder with robot_calibrated.yaml")
     parser.add_argument("targets", metavar="TARGETS.csv",
-                        help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame)")
+                        help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame) "
+                        "and optionally the seed joints q1..qn (robot units)")
     parser.add_argument("--out", metavar="JOINTS.csv", required=True,
                         help="output table: extra input columns, q1..qn, status, errors")
     parser.add_argument("--start", metavar="Q1,...,QN",
-                        help="joints to start the first solve from (robot units; default the "
-                        "middle of the limits)")
+                        help="joints to start the nominal solve of the first row without "
+                        "seed joints from (robot units; default the middle of the limits)")
     parser.add_argument("--restarts", type=int, default=10,
                         help="random starts per target before it is unreachable (default 10)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of the random starts")
