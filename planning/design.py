@@ -27,7 +27,7 @@ from .accuracy import tool_error, tool_weights
 from .approximate import optimal_approximate
 from .candidates import Candidate, generate
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
-from .information import Information, exact_condition
+from .information import EXACT_TOLERANCE, Information, exact_condition
 from .order import Travel, order_candidates
 from .refine import refine_plan
 from .rows import RowModel
@@ -57,7 +57,8 @@ class Plan:
     ``condition_all`` the condition number over every parameter not exactly
     unidentifiable; ``travel`` the joint moves between consecutive poses in run order;
     ``tool_error_bound`` [m] the least predicted tool error any plan of the same size
-    chosen from the candidates could have (``approximate``; refinement may go below it).
+    chosen from the candidates could have (``approximate``; refinement may go below it);
+    ``random_conditions_all`` the random plans' ``condition_all``.
     """
 
     setup: PlanSetup
@@ -75,6 +76,7 @@ class Plan:
     condition_all: float = float("nan")
     travel: Travel | None = None
     tool_error_bound: float = float("nan")
+    random_conditions_all: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def random_tool_median(self) -> float:
@@ -122,8 +124,9 @@ class Plan:
                 f"{1e3 * self.random_tool_median:.4g} mm; no choice among the candidates "
                 f"can go below {1e3 * self.tool_error_bound:.4g} mm (refinement, which "
                 f"leaves them, may)\n"
-                f"condition number over every parameter not exactly unidentifiable: "
-                f"{self.condition_all:.4g}"
+                f"condition number over every parameter not exactly unidentifiable: plan "
+                f"{self.condition_all:.4g}, random median "
+                f"{_median(self.random_conditions_all):.4g}"
                 + (f"\n{self.travel.summary()}" if self.travel is not None else "")
                 + (f"\n{self.warning}" if self.warning else ""))
 
@@ -139,6 +142,10 @@ class Plan:
         return (f"warning: this plan is predicted to place the tool "
                 f"{self.tool_error / random:.3g} times less accurately than the median random "
                 f"plan of its size; the index 'tool' plans for accuracy")
+
+
+def _median(values: np.ndarray) -> float:
+    return float(np.median(values)) if len(values) else float("nan")
 
 
 def pool_size_for(count: int, kind: str) -> int:
@@ -173,8 +180,11 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
                          f"that many (--count {count})", file=setup.path)
     row_model = RowModel(setup, kinematics)
     weights = tool_weights(setup, workspace, row_model.parameters, np.random.default_rng(seed))
+    # The condition index is judged over every parameter not exactly unidentifiable, the
+    # measure the summary reports: a weak parameter left out of the search would come
+    # back in the plan's condition number unchecked.
     info = Information(row_model.blocks(candidates), row_model.parameters, row_model.shared,
-                       weights)
+                       weights, tolerance=EXACT_TOLERANCE if index == "O2" else None)
     needed = math.ceil((info.m + info.shared) / info.rows_per_candidate())
     if count < needed:
         what = setup.model.unit_name
@@ -213,6 +223,9 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     random_values = np.array([index_value(index, info.spectrum(d, scaling(index)))
                               for d in randoms])
     random_tool = np.array([tool_error(info.spectrum(d, "tool"), setup.noise) for d in randoms])
+    random_condition = np.array([exact_condition(row_model.blocks([candidates[i] for i in d]),
+                                                 row_model.parameters, row_model.shared)
+                                 for d in randoms])
     blocks = row_model.blocks(list(chosen_candidates))
     predicted = tool_error(info.spectrum_of([info.restrict(b) for b in blocks], "tool"),
                            setup.noise)
@@ -221,4 +234,4 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     return Plan(setup, ordered, index, value, random_values, spectrum,
                 info.identifiable_names, len(candidates), swaps, refined, predicted,
                 random_tool, exact_condition(blocks, row_model.parameters, row_model.shared),
-                travel, bound)
+                travel, bound, random_condition)

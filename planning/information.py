@@ -24,10 +24,15 @@ NEGLIGIBLE = 1e-7  # relative column norm counted as no effect
 
 
 class Information:
-    """Per-candidate information matrices restricted to identifiable + shared columns."""
+    """Per-candidate information matrices restricted to identifiable + shared columns.
+
+    ``tolerance``: the smallest own part of a parameter's effect over the pool that counts
+    as identifiable (default the engine's practical rule; ``EXACT_TOLERANCE`` keeps every
+    parameter that is not exactly unidentifiable, as the condition index ``O2`` is judged).
+    """
 
     def __init__(self, blocks: list[Block], parameters: tuple[str, ...], shared: int,
-                 tool_weights: np.ndarray | None = None):
+                 tool_weights: np.ndarray | None = None, tolerance: float | None = None):
         self.parameters = parameters
         self.shared = shared
         n_par = len(parameters)
@@ -42,7 +47,8 @@ class Information:
         judged = analyse(X, parameters + shared_names, range(n_par),
                          range(n_par, n_par + shared),
                          invisible_reason="no effect on these measurements",
-                         absorbed_reason="absorbed by the placement unknowns")
+                         absorbed_reason="absorbed by the placement unknowns",
+                         **({} if tolerance is None else {"tolerance": tolerance}))
         self.identifiable = np.array([parameters.index(n) for n in judged.identifiable], int)
         self.reasons = dict(judged.unidentifiable)
         keep = np.concatenate([self.identifiable, np.arange(n_par, n_par + shared)]).astype(int)

@@ -8,9 +8,13 @@ wider than the arm's mechanism allows or missing.
   distances up to the flange).
 * A revolute joint without limits gets +-``DEFAULT_LIMIT`` (one turn, 175 deg each way:
   every angle reachable, cables never wound more than half a turn).
-* Prismatic joints keep what the file gives.
+* Every limit the file gives is kept at a distance: ``LIMIT_MARGIN`` (5%) of the joint's
+  range, at most ``MARGIN_ANGLE`` (5 deg; ``MARGIN_LENGTH``, 5 mm, for a prismatic joint),
+  inside each end. A pose on a limit stops the controller at the slightest overshoot, and
+  the calibration's own joint offsets move the limits by a fraction of a degree.
+* Prismatic joints otherwise keep what the file gives.
 
-Limits narrower than these stay as they are.
+Limits narrower than these stay as they are (less their margin).
 """
 
 from __future__ import annotations
@@ -25,6 +29,14 @@ from robocal_casadi.robot import Robot
 ELBOW_LIMIT = np.radians(175.0)
 DEFAULT_LIMIT = np.radians(175.0)
 LONG_LINK = 0.2
+LIMIT_MARGIN = 0.05  # fraction of a joint's range kept free inside each of its limits
+MARGIN_ANGLE = np.radians(5.0)  # [rad] the largest such margin of a revolute joint
+MARGIN_LENGTH = 5e-3  # [m] the largest such margin of a prismatic joint
+
+
+def limit_margin(lower: float, upper: float, revolute: bool) -> float:
+    """The margin [rad or m] kept inside each limit of a joint with range [lower, upper]."""
+    return min(LIMIT_MARGIN * (upper - lower), MARGIN_ANGLE if revolute else MARGIN_LENGTH)
 
 
 def axis_points(robot: Robot) -> np.ndarray:
@@ -61,10 +73,15 @@ def working_ranges(robot: Robot) -> Robot:
     folding = set(elbows(robot))
     joints = []
     for k, joint in enumerate(robot.joints):
+        if joint.limits is not None:
+            margin = limit_margin(joint.limits[0], joint.limits[1], joint.revolute)
+            lo, hi = joint.limits[0] + margin, joint.limits[1] - margin
         if not joint.revolute:
-            joints.append(joint)
+            joints.append(joint if joint.limits is None
+                          else replace(joint, limits=(float(lo), float(hi))))
             continue
-        lo, hi = joint.limits if joint.limits is not None else (-DEFAULT_LIMIT, DEFAULT_LIMIT)
+        if joint.limits is None:
+            lo, hi = -DEFAULT_LIMIT, DEFAULT_LIMIT
         if k in folding:
             lo, hi = max(lo, -ELBOW_LIMIT), min(hi, ELBOW_LIMIT)
         joints.append(replace(joint, limits=(float(lo), float(hi))))

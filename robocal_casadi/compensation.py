@@ -9,19 +9,29 @@ until the geometry *with* the effects reaches the target (Gauss-Newton on the to
 with the effects, ``_with_effects``), to ``EFFECT_TOLERANCE``.
 
 A target is a tool position ``x, y, z`` [m] (world frame), optionally with the tool
-orientation ``qw, qx, qy, qz``. Position-only targets leave the orientation free and
-each solve starts from the previous solution (smooth motion along a path).
+orientation ``qw, qx, qy, qz``. Every answer keeps the configuration (shoulder, elbow,
+wrist branch) of its seed: the joints that reached the target before (a taught program),
+or else the nominal model's inverse kinematics of the target, solved along the targets
+from the previous solution (smooth motion along a path). The answer is solved from the
+seed and accepted when no singularity lies between them
+(``configuration.same_configuration``); otherwise the target is approached from the
+seed's own pose in small steps, each on the branch of the last (``_walk``); a target
+that only another branch reaches is reported (``STATUS_BRANCH``), never switched to.
+Position-only targets keep the tool turned as at the seed (a soft preference).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from .checks import count
+from .configuration import same_configuration
 from .errors import InputError
-from .ik import inverse_kinematics
+from .ik import IKBatchResult, inverse_kinematics
 from .kinematics import Kinematics
 from .robot import Robot
 from .transforms import matrix_from_quaternion
@@ -30,6 +40,10 @@ STATUS_OK = "ok"
 EFFECT_TOLERANCE = 1e-11  # [m], [rad]: what the refinement may leave of the target
 EFFECT_ROUNDS = 20
 STATUS_UNREACHABLE = "unreachable"
+STATUS_BRANCH = "branch"  # reachable, but only on another branch than the seed's
+WALK_LENGTH = 0.01  # [m] largest tool move per step of a walk from the seed's pose
+WALK_ANGLE = math.radians(5.0)  # [rad] largest tool turn per step of that walk
+WALK_STEPS = 200  # a seed further than this many steps from its target is not walked
 
 
 @dataclass(frozen=True)
@@ -64,16 +78,22 @@ def target_poses(targets: np.ndarray) -> np.ndarray:
     return poses
 
 
-def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
-               seed: int = 0, effects=None, extras: dict | None = None) -> Compensation:
-    """Joints that put ``robot``'s tool on each target (see the module docstring).
+def compensate(robot: Robot, targets, *, start=None, seeds=None, nominal: Robot | None = None,
+               restarts: int = 10, seed: int = 0, effects=None,
+               extras: dict | None = None) -> Compensation:
+    """Joints that put ``robot``'s tool on each target, each on the branch of its seed
+    (see the module docstring).
 
-    ``targets`` (N, 3) positions or (N, 7) poses, SI, world frame. ``start`` (dof,) the
-    first solve's seed [rad or m] (default: the middle of the limits). ``restarts``
-    random seeds (within the limits, from ``seed``) per target before it counts as
-    unreachable. ``effects`` (an ``EffectModel`` of ``robot``) and ``extras`` (its per-row
-    values, ``EffectModel.columns``) make the joints land with the effects applied; the
-    errors reported are then those of the tool with the effects.
+    ``targets`` (N, 3) positions or (N, 7) poses, SI, world frame. ``seeds`` (N, dof)
+    [rad or m]: the joints that reached each target before (a taught program), NaN rows
+    where none is known; a row without one is seeded with the inverse kinematics of
+    ``nominal`` (the robot the controller knows; default ``robot``), solved in order from
+    ``start`` (default the middle of the limits) and then from the previous solution, with
+    ``restarts`` random starts (within the limits, from ``seed``) per target. A row whose
+    seed's branch cannot reach the target gets status ``branch`` and no joints.
+    ``effects`` (an ``EffectModel`` of ``robot``) and ``extras`` (its per-row values,
+    ``EffectModel.columns``) make the joints land with the effects applied; the errors
+    reported are then those of the tool with the effects.
     """
     restarts = count(restarts, "restarts", minimum=0)
     targets = np.atleast_2d(np.asarray(targets, dtype=float))
@@ -82,17 +102,128 @@ def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
                          f"got {targets.shape[1]}")
     kinematics = Kinematics(robot)
     rng = np.random.default_rng(seed)
-    if targets.shape[1] == 7:
-        batch = inverse_kinematics(kinematics, "pose").solve_batch(
-            target_poses(targets), seeds=start, restarts=restarts, rng=rng)
-    else:
-        batch = inverse_kinematics(kinematics, "point").solve_batch(
-            targets, seeds=start, offset=np.asarray(robot.tool.xyz), restarts=restarts, rng=rng)
+    mode = "pose" if targets.shape[1] == 7 else "point"
+    goals = target_poses(targets) if mode == "pose" else targets[:, :3]
+    solver = inverse_kinematics(kinematics, mode)
+    offset: dict[str, Any] = {} if mode == "pose" else {"offset": np.asarray(robot.tool.xyz)}
+    seeds = _seeds(seeds, len(targets), robot.dof)
+    p_nominal = None if nominal is None else kinematics.registry.vector_of(nominal)
+    unseeded = np.flatnonzero(np.isnan(seeds).any(axis=1))
+    if unseeded.size:
+        first = solver.solve_batch(goals[unseeded], seeds=start, restarts=restarts, rng=rng,
+                                   p=p_nominal, **offset)
+        seeds[unseeded[first.success]] = first.q[first.success]
+    solved = [_on_branch(solver, goals[i], seeds[i], offset, restarts, rng)
+              if np.isfinite(seeds[i]).all()
+              else _any_branch(solver, goals[i], start, offset, restarts, rng)
+              for i in range(len(targets))]
+    batch = IKBatchResult(np.array([s[0].q for s in solved]),
+                          np.array([s[1] == STATUS_OK for s in solved]),
+                          np.array([s[0].position_error for s in solved]),
+                          np.array([s[0].orientation_error for s in solved]),
+                          np.array([s[0].iterations for s in solved]))
     if effects is not None and effects.effects:
         batch = _with_effects(kinematics, effects, extras or {}, targets, batch)
+    statuses = tuple(status if ok or status != STATUS_OK else STATUS_UNREACHABLE
+                     for (_, status), ok in zip(solved, batch.success))
     joints = np.where(batch.success[:, None], batch.q, np.nan)
-    status = tuple(STATUS_OK if s else STATUS_UNREACHABLE for s in batch.success)
-    return Compensation(joints, status, batch.position_error, batch.orientation_error)
+    return Compensation(joints, statuses, batch.position_error, batch.orientation_error)
+
+
+def _seeds(seeds, rows: int, dof: int) -> np.ndarray:
+    """Per-row seeds (rows, dof) [rad or m], NaN rows where none is given."""
+    if seeds is None:
+        return np.full((rows, dof), np.nan)
+    seeds = np.array(seeds, dtype=float)
+    if seeds.shape != (rows, dof):
+        raise InputError(f"seeds need one row of {dof} joints per target, got shape "
+                         f"{seeds.shape} for {rows} targets")
+    partial = np.isnan(seeds).any(axis=1) & ~np.isnan(seeds).all(axis=1)
+    if partial.any() or np.isinf(seeds).any():
+        row = int(np.flatnonzero(partial | np.isinf(seeds).any(axis=1))[0])
+        raise InputError(f"seed row {row} is incomplete or infinite: give every joint or none")
+    return seeds
+
+
+def _any_branch(solver, goal, start, offset: dict, restarts: int, rng):
+    """A row with no seed at all (the nominal model could not reach it either)."""
+    result = solver.solve(goal, seed=start, restarts=restarts, rng=rng, **offset)
+    return result, STATUS_OK if result.success else STATUS_UNREACHABLE
+
+
+def _on_branch(solver, goal, seed: np.ndarray, offset: dict, restarts: int, rng):
+    """``(IKResult, status)`` for one target on the branch of ``seed``: a solve from the
+    seed, else a walk from the seed's own pose to the goal in small steps, each on the
+    branch of the last (``configuration.same_configuration``); ``branch`` when only
+    another branch reaches the goal, ``unreachable`` when none does."""
+    kinematics = solver.kinematics
+    options = dict(offset)
+    if solver.mode == "point":  # keep the tool turned as the seed had it
+        options["orientation"] = kinematics.flange_poses(seed[None])[0][:3, :3]
+    direct = _near(solver.solve(goal, seed=seed, **options), seed, kinematics.robot)
+    if direct.success and same_configuration(kinematics, seed, direct.q):
+        return direct, STATUS_OK
+    walked = _walk(solver, goal, seed, options)
+    if walked is not None:
+        return walked, STATUS_OK
+    anywhere = solver.solve(goal, seed=seed, restarts=restarts, rng=rng, **options)
+    return anywhere, STATUS_BRANCH if anywhere.success else STATUS_UNREACHABLE
+
+
+def _walk(solver, goal, seed: np.ndarray, options: dict):
+    """The goal reached from the seed's own tool pose (or point) in steps of at most
+    ``WALK_LENGTH`` / ``WALK_ANGLE``, each solved from the last and on its branch; None
+    when a step fails or changes branch."""
+    kinematics = solver.kinematics
+    here = kinematics.tool_poses(seed[None])[0]
+    if solver.mode == "point":
+        here = here[:3, 3]
+        steps = int(np.ceil(np.linalg.norm(goal - here) / WALK_LENGTH))
+    else:
+        turn = _rotation_vector(here[:3, :3].T @ goal[:3, :3])
+        steps = int(np.ceil(max(np.linalg.norm(goal[:3, 3] - here[:3, 3]) / WALK_LENGTH,
+                                np.linalg.norm(turn) / WALK_ANGLE)))
+    if steps > WALK_STEPS:
+        return None
+    q, result = seed, None
+    for k in range(1, max(steps, 1) + 1):
+        s = k / max(steps, 1)
+        if solver.mode == "point":
+            step_goal = here + s * (goal - here)
+        else:
+            step_goal = np.eye(4)
+            step_goal[:3, :3] = here[:3, :3] @ _rotation_matrix(s * turn)
+            step_goal[:3, 3] = here[:3, 3] + s * (goal[:3, 3] - here[:3, 3])
+        result = _near(solver.solve(step_goal, seed=q, **options), q, kinematics.robot)
+        if not (result.success and same_configuration(kinematics, q, result.q)):
+            return None
+        q = result.q
+    return result
+
+
+def _near(result, seed: np.ndarray, robot: Robot):
+    """``result`` with each revolute joint turned by whole turns to lie nearest ``seed``
+    within the limits (the solver may wrap a joint a turn away: the same pose, but a
+    program would unwind the joint)."""
+    q = np.array(result.q, dtype=float)
+    for i, joint in enumerate(robot.joints):
+        if not joint.revolute or not np.isfinite(q[i]):
+            continue
+        turns = q[i] + 2 * math.pi * np.arange(-3, 4)
+        inside = turns[(turns >= robot.lower_limits[i]) & (turns <= robot.upper_limits[i])]
+        if inside.size:
+            q[i] = inside[np.argmin(np.abs(inside - seed[i]))]
+    return replace(result, q=q)
+
+
+def _rotation_matrix(vector: np.ndarray) -> np.ndarray:
+    """Rotation [rad] about ``vector``'s direction by its length (Rodrigues)."""
+    angle = float(np.linalg.norm(vector))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = vector / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
 def _rows_of(extras: dict, rows: np.ndarray, count: int) -> dict:
@@ -106,7 +237,6 @@ def _with_effects(kinematics: Kinematics, effects, extras: dict, targets: np.nda
     change it by a negligible fraction) and ``e`` the remaining error of the tool with the
     effects (position, and rotation vector for pose targets; world frame), the minimum-norm
     step, so a position-only target keeps the orientation it was solved with."""
-    from dataclasses import replace
 
     count = len(targets)
     poses = target_poses(targets) if targets.shape[1] == 7 else None

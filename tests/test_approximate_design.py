@@ -61,11 +61,23 @@ def test_no_plan_from_the_pool_predicts_below_the_bound(tracker):
 def test_a_reading_the_solver_left_unrunnable_keeps_its_start(tracker):
     setup, kin, workspace = runnable_setup(setup_from_dataset(tracker))
     plan = design_plan(tracker, 12, seed=5, pool=60, refine=False, quiet=True)
-    candidates = list(plan.candidates)[:3]
+
+    def turned(candidate, angle):
+        joints = candidate.joints.copy()
+        joints[0, 0] += angle
+        return joints
+
+    def hidden(joints):
+        joints = np.clip(joints, workspace.lower, workspace.upper)
+        return not visible(setup, kin.flange_poses(joints, workspace.p)).all()
+
+    # a reading whose base turn by half a turn, and by a quarter (the half-way retry),
+    # both face the reflector away from the tracker
+    away = next(c for c in plan.candidates
+                if hidden(turned(c, np.pi)) and hidden(turned(c, np.pi / 2)))
+    candidates = [c for c in plan.candidates if c is not away][:2] + [away]
     moved = [c.joints + 0.01 for c in candidates]
-    # the third reading turned so the reflector faces away from the tracker
-    moved[2] = candidates[2].joints.copy()
-    moved[2][0, 0] += np.pi
+    moved[2] = turned(away, np.pi)
     rebuilt = _rebuild(setup, workspace, candidates, moved)
     assert rebuilt is not None
     poses = kin.flange_poses(np.vstack([c.joints for c in rebuilt]), workspace.p)

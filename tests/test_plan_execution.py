@@ -73,14 +73,18 @@ def test_working_ranges_limit_the_elbow_and_fill_missing_limits():
     assert elbows(ur) == [2]  # between the two long links
     ranged = working_ranges(ur)
     assert ranged.joints[2].limits == pytest.approx((-ELBOW_LIMIT, ELBOW_LIMIT))
-    for k in (0, 1, 3, 4, 5):  # the others keep the controller's +-360 deg
-        assert ranged.joints[k].limits == ur.joints[k].limits
+    for k in (0, 1, 3, 4, 5):  # the others keep the controller's +-360 deg, less 5 deg
+        assert ranged.joints[k].limits == pytest.approx(
+            (ur.joints[k].limits[0] + math.radians(5), ur.joints[k].limits[1] - math.radians(5)))
     from dataclasses import replace
     bare = replace(ur, joints=tuple(replace(j, limits=None) for j in ur.joints))
     assert all(j.limits is not None and j.limits[1] == pytest.approx(math.radians(175))
                for j in working_ranges(bare).joints)
-    r6 = industrial_6r()  # narrower limits stay as they are
-    assert [j.limits for j in working_ranges(r6).joints] == [j.limits for j in r6.joints]
+    r6 = industrial_6r()  # narrower limits stay as they are, less their margin
+    for ranged_joint, joint in zip(working_ranges(r6).joints, r6.joints):
+        lo, hi = joint.limits
+        margin = min(0.05 * (hi - lo), math.radians(5))
+        assert ranged_joint.limits == pytest.approx((lo + margin, hi - margin))
 
 
 def test_capsules_catch_a_folded_elbow_the_table_and_a_blocked_line_of_sight():

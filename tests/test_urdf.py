@@ -331,3 +331,61 @@ def test_dh_equivalent_has_the_same_kinematics(tmp_path, text, tip):
             [0.5723, 0.612])
     else:
         assert parallel == [] and equivalent.notes == ()
+
+
+# A six-revolute arm of the common industrial design (axes 4, 5, 6 meeting in one wrist
+# point, axis 4 perpendicular to axis 3): not a UR.
+SPHERICAL_WRIST = {
+    "name": "spherical-wrist-6r", "convention": "dh", "units": {"length": "mm", "angle": "deg"},
+    "joints": [
+        {"type": "revolute", "theta": 0, "d": 400, "a": 25, "alpha": -90, "limits": [-170, 170]},
+        {"type": "revolute", "theta": -90, "d": 0, "a": 455, "alpha": 0, "limits": [-90, 150]},
+        {"type": "revolute", "theta": 0, "d": 0, "a": 35, "alpha": -90, "limits": [-200, 80]},
+        {"type": "revolute", "theta": 0, "d": 420, "a": 0, "alpha": 90, "limits": [-185, 185]},
+        {"type": "revolute", "theta": 0, "d": 0, "a": 0, "alpha": -90, "limits": [-120, 120]},
+        {"type": "revolute", "theta": 0, "d": 80, "a": 0, "alpha": 0, "limits": [-350, 350]}],
+}
+
+
+def test_ur_structure_is_read_from_the_axes(ur10):
+    """The UR10 passes in DH and URDF form and after a calibration-sized change; an arm
+    with a spherical wrist, the Panda and a UR10 whose elbow twists do not."""
+    from robocal_casadi.urdf.writer import ur_structure_problem
+
+    ur = load_robot(UR10_DH)
+    assert ur_structure_problem(ur) is None
+    assert ur_structure_problem(load_robot(ur10, tip_link="tool0")) is None
+    values = ur.parameter_vector()
+    names = ur.parameters().names
+    nudged = values.copy()
+    for name, change in (("alpha3", np.radians(0.3)), ("a4", 2e-3), ("d5", -1e-3)):
+        nudged[names.index(name)] += change
+    assert ur_structure_problem(ur.with_parameters(nudged)) is None
+    twisted = values.copy()
+    twisted[names.index("alpha2")] += np.radians(30)
+    assert "not parallel" in ur_structure_problem(ur.with_parameters(twisted))
+    assert "not parallel" in ur_structure_problem(robot_from_dict(SPHERICAL_WRIST))
+    assert "six revolute" in ur_structure_problem(load_robot(PANDA_MDH))
+
+
+def _bare_folder(folder: Path, content: dict) -> Path:
+    """A calibration folder holding only a robot file and a result.json without changes."""
+    folder.mkdir()
+    (folder / "robot_calibrated.yaml").write_text(yaml.safe_dump(content))
+    (folder / "result.json").write_text('{"parameters": []}')
+    return folder
+
+
+def test_ur_calibration_export_refuses_other_arms(tmp_path, capsys):
+    """--ur-calibration writes for a UR arm and refuses another six-joint arm in one line,
+    exit 2, nothing written."""
+    other = _bare_folder(tmp_path / "other", SPHERICAL_WRIST)
+    out = tmp_path / "other.yaml"
+    assert main(["export", str(other), "--ur-calibration", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "not a UR arm" in error and "--ur-calibration" in error
+    assert not out.exists()
+    ur = _bare_folder(tmp_path / "ur", yaml.safe_load(UR10_DH.read_text()))
+    out = tmp_path / "ur.yaml"
+    assert main(["export", str(ur), "--ur-calibration", str(out)]) == 0
+    assert set(yaml.safe_load(out.read_text())["kinematics"]) >= {"shoulder", "wrist_3"}

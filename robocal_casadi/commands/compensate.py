@@ -1,20 +1,29 @@
-"""Joint commands that put the calibrated robot's tool on Cartesian targets.
+"""Joint commands that put the calibrated robot's tool on Cartesian targets, each on the
+branch (shoulder, elbow, wrist configuration) the robot used before.
 
 ROBOT is a robot file or a calibration folder (a result of `robocal calibrate`, whose
 robot_calibrated.yaml is used). TARGETS.csv has columns x,y,z (tool position) and
-optionally qw,qx,qy,qz (tool orientation), in ROBOT's length unit and world frame; other
-columns are copied through. JOINTS.csv gets those columns, then q1..qn (ROBOT's units),
-status (ok, or unreachable: no solution within the joint limits was found from the
-first start and --restarts random ones; its joint cells are left empty), position_error
-and, with orientations, orientation_error (the residual of the solve, ROBOT's units).
+optionally qw,qx,qy,qz (tool orientation), in ROBOT's length unit and world frame, and
+optionally q1..qn: the joints that reached each target before (a taught program, ROBOT's
+units; a row may leave them all empty); other columns are copied through. JOINTS.csv gets
+those columns, the given joints as seed_q1..seed_qn, then q1..qn (ROBOT's units), status,
+position_error and, with orientations, orientation_error (the residual of the solve,
+ROBOT's units). Status is ok; branch (the target is reachable, but only on another branch
+than the seed's: the joint cells are left empty rather than switching configuration); or
+unreachable (no solution within the joint limits from the seed, the first start and
+--restarts random ones; joint cells empty).
 
-Position-only targets leave the tool orientation free; each solve starts from the
-previous solution, so a path of targets gives a smooth joint path. Only the calibrated
-geometry is used unless --with-effects: then the joints are refined until the geometry
-with the effects the calibration identified (the folder's effects_calibrated.yaml) reaches
-each target, so the robot lands with the accuracy result.json reports for the model with
-effects. Effects that read a payload [kg] or a temperature [C] take them from TARGETS.csv's
-payload/temperature columns, or from --payload/--temperature.
+Each target is solved from its seed and kept on the seed's branch (no singularity between
+the seed and the answer, see robocal_casadi.configuration). A row without seed joints is
+seeded with the inverse kinematics of the nominal robot (the folder's result.json nominal
+values; the robot file itself otherwise), solved in order from --start and then from the
+previous solution, so a path of targets gives a smooth joint path. Position-only targets
+keep the tool turned as at the seed. Only the calibrated geometry is used unless
+--with-effects: then the joints are refined until the geometry with the effects the
+calibration identified (the folder's effects_calibrated.yaml) reaches each target, so the
+robot lands with the accuracy result.json reports for the model with effects. Effects that
+read a payload [kg] or a temperature [C] take them from TARGETS.csv's payload/temperature
+columns, or from --payload/--temperature.
 """
 
 from __future__ import annotations
@@ -25,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..compensation import compensate
+from ..compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
 from ..errors import InputError
 from ..fields import MAX_LENGTH, check_magnitude
 from ..output import atomic_file
@@ -37,18 +46,20 @@ CALIBRATED_ROBOT = "robot_calibrated.yaml"
 POSITION = ("x", "y", "z")
 QUATERNION = ("qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
+SEED_PREFIX = "seed_"  # the given joints, written back beside the answer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("robot", metavar="ROBOT_OR_CALIBRATED_DIR",
                         help="robot file, or a calibration folder with robot_calibrated.yaml")
     parser.add_argument("targets", metavar="TARGETS.csv",
-                        help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame)")
+                        help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame) "
+                        "and optionally the seed joints q1..qn (robot units)")
     parser.add_argument("--out", metavar="JOINTS.csv", required=True,
                         help="output table: extra input columns, q1..qn, status, errors")
     parser.add_argument("--start", metavar="Q1,...,QN",
-                        help="joints to start the first solve from (robot units; default the "
-                        "middle of the limits)")
+                        help="joints to start the nominal solve of the first row without "
+                        "seed joints from (robot units; default the middle of the limits)")
     parser.add_argument("--restarts", type=int, default=10,
                         help="random starts per target before it is unreachable (default 10)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of the random starts")
@@ -102,13 +113,15 @@ def run(args: argparse.Namespace) -> int:
                              f"within {QUATERNION_TOLERANCE:g}", file=table.path,
                              where=f"line {table.line(first)}")
     joint_names = [f"q{i}" for i in range(1, robot.dof + 1)]
-    extras = [c for c in table.columns if c not in columns]
-    clashes = [c for c in extras if c in joint_names or c in ("status", "position_error",
-                                                              "orientation_error")]
+    scales = robot.reading_scales()
+    seeds = seed_joints(table, robot, joint_names)
+    extras = [c for c in table.columns if c not in columns and c not in joint_names]
+    taken = [f"{SEED_PREFIX}{c}" for c in joint_names] if seeds is not None else []
+    clashes = [c for c in extras if c in taken or c in ("status", "position_error",
+                                                        "orientation_error")]
     if clashes:
         raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path,
                          where="line 1")
-    scales = robot.reading_scales()
     start = None
     if args.start:
         try:
@@ -139,15 +152,19 @@ def run(args: argparse.Namespace) -> int:
         model = load_effects(robot_argument, robot)
         extras_values = row_values(model, table, payload=args.payload,
                                    temperature=args.temperature)
-    result = compensate(robot, targets, start=start, restarts=args.restarts, seed=args.seed,
-                        effects=model, extras=extras_values)
-    out_columns = extras + joint_names + ["status", "position_error"]
+    nominal = nominal_robot(robot_argument, robot)
+    result = compensate(robot, targets, start=start, seeds=seeds, nominal=nominal,
+                        restarts=args.restarts, seed=args.seed, effects=model,
+                        extras=extras_values)
+    out_columns = extras + taken + joint_names + ["status", "position_error"]
     if has_orientation:
         out_columns.append("orientation_error")
     rows = []
     text = {c: table.text(c) for c in extras}
     for i in range(len(result)):
         row: list = [text[c][i] for c in extras]
+        if seeds is not None:
+            row += [table.text(c)[i] for c in joint_names]
         row += list(result.joints[i] / scales)
         row += [result.status[i], result.position_error[i] / L]
         if has_orientation:
@@ -156,6 +173,44 @@ def run(args: argparse.Namespace) -> int:
         rows.append(row)
     with atomic_file(args.out) as staging:
         write_table(staging, out_columns, rows)
-    unreachable = sum(s != "ok" for s in result.status)
-    print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable)")
+    unreachable = sum(s == STATUS_UNREACHABLE for s in result.status)
+    other = sum(s == STATUS_BRANCH for s in result.status)
+    print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable, {other} "
+          f"reachable only on another branch than their seed's)")
     return 0
+
+
+def seed_joints(table, robot: Robot, joint_names: list[str]) -> np.ndarray | None:
+    """Per-row seed joints [rad or m] from columns q1..qn (robot units; a row left empty
+    is seeded from the nominal inverse kinematics), or None without those columns."""
+    present = [c for c in joint_names if table.has(c)]
+    if not present:
+        return None
+    if len(present) != len(joint_names):
+        missing = [c for c in joint_names if c not in present]
+        raise InputError(f"seed joints need all of {joint_names}; missing {missing}",
+                         file=table.path, where="line 1")
+    values = np.column_stack([table.numbers(c, allow_empty=True) for c in joint_names])
+    empty = np.isnan(values)
+    partial = np.flatnonzero(empty.any(axis=1) & ~empty.all(axis=1))
+    if partial.size:
+        raise InputError("seed joints q1..qn must all be given or all be empty",
+                         file=table.path, where=f"line {table.line(int(partial[0]))}")
+    seeds = values * robot.reading_scales()
+    lower, upper = robot.lower_limits, robot.upper_limits
+    outside = np.argwhere((seeds < lower) | (seeds > upper))
+    if outside.size:
+        row, k = (int(v) for v in outside[0])
+        raise InputError(f"seed {joint_names[k]} = {values[row, k]:g} is outside the robot's "
+                         f"limits", file=table.path, where=f"line {table.line(row)}")
+    return seeds
+
+
+def nominal_robot(argument: Path, calibrated: Robot) -> Robot:
+    """The robot the controller knows: for a calibration folder with result.json the
+    calibrated robot at the nominal values listed there, else ``calibrated`` itself."""
+    if argument.is_dir() and (argument / "result.json").is_file():
+        from .export import nominal_of
+
+        return nominal_of(calibrated, argument)
+    return calibrated

@@ -9,7 +9,8 @@ the nominal robot, so the --like file must describe the arm the calibration star
 with its root link as the robot file's world frame. Without --like a DH robot is written
 as a plain description (links frame_0..frame_n, joints joint_1..joint_n).
 --ur-calibration OUT.yaml writes UR's kinematics file (x, y, z, roll, pitch, yaw per joint,
-as ur_description and the UR ROS drivers read it) for six-joint UR arms.
+as ur_description and the UR ROS drivers read it) for arms with UR's structure; another
+arm is refused (``urdf.writer.ur_structure_problem``).
 
 Only the geometry is exported: effects listed in DIR/result.json are not part of a URDF.
 """

@@ -6,10 +6,13 @@ camera observations time,q1..qn,x,y,z,roll,pitch,yaw. For each row it solves one
 NLP (target at (0, 0, Z) in the end frame, end z axis on the target, end x axis level,
 joint limits, smallest move from the previous answer) and writes JOINTS.csv:
 time,q1..qn,status,solve_ms with the joints in the job's units. `status` is ok,
-limited (with --max-step: a bounded step towards a reachable goal), unreachable or
-failed; an unreachable or failed row keeps the last safe joints (the first row's capture
-joints before any answer). Rows are solved in order, as a controller would; a row the
-previous joints cannot reach smoothly is seeded from inverse kinematics.
+limited (a bounded step towards a reachable goal that needs more than this row may move:
+--max-step, or the job's max_velocity times the time since the previous row),
+unreachable or failed; an unreachable or failed row keeps the last safe joints (the first
+row's capture joints before any answer). Rows are solved in order, as a controller would;
+a row the previous joints cannot reach smoothly is seeded from inverse kinematics. Where
+the goal's z axis is within 1e-3 rad of `up`, every turn about it is level to within
+that angle and the turn nearest the previous joints is kept.
 
 With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml.
 """
@@ -44,6 +47,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_allow_outside_data(parser)
 
 
+def cycle_bound(job, row: int) -> np.ndarray | None:
+    """Row ``row``'s largest joint move [rad or m]: the job's speed limits times the time
+    since the previous row (the first row: times the time to the next one, the cycle the
+    controller runs at); None without speed limits or, for a one-row job, without a cycle
+    time."""
+    if job.max_velocity is None or job.rows < 2:
+        return None
+    other = row - 1 if row > 0 else 1
+    return job.max_velocity * abs(float(job.time[row] - job.time[other]))
+
+
 def run(args: argparse.Namespace) -> int:
     job_path = Path(args.job)
     output_file(args.out, inputs=[job_path])
@@ -69,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
     counts = dict.fromkeys(STATUSES, 0)
     with Progress("track", total=job.rows) as bar:
         for i in range(job.rows):
-            step = tracker.step(job.joints[i], job.observations[i])
+            step = tracker.step(job.joints[i], job.observations[i],
+                                max_step=cycle_bound(job, i))
             counts[step.status] += 1
             rows.append([job.time[i], *(step.q / scales), step.status, step.solve_ms])
             bar.update(i + 1)

@@ -125,6 +125,18 @@ def _positive_floor(values: np.ndarray) -> float:
 # ----------------------------------------------------------------------------- figures
 
 
+def shown_ratio_title(values: np.ndarray) -> str:
+    """The singular-value plot's title: the ratio of the largest to the smallest positive
+    value the axis shows (zeros, drawn at the floor, are counted apart)."""
+    positive = values[values > 0]
+    zeros = int(values.size - positive.size)
+    if positive.size == 0:
+        return "Singular values: all zero"
+    title = (f"Singular values: largest / smallest shown = "
+             f"{positive.max() / positive.min():.4g}")
+    return title + (f" ({zeros} exactly zero, drawn at the floor)" if zeros else "")
+
+
 def singular_values(identifiability: Identifiability) -> Figure:
     """Singular values of the scaled identification Jacobian, log scale, largest first."""
     with report_style():
@@ -142,8 +154,7 @@ def singular_values(identifiability: Identifiability) -> Figure:
             axes.legend(loc="lower left")
         axes.set_xlabel("singular value index (largest first)")
         axes.set_ylabel("singular value (scaled Jacobian) [-]")
-        axes.set_title(f"Identifiability: condition number "
-                       f"{identifiability.condition_number:.4g}")
+        axes.set_title(shown_ratio_title(values))
         axes.xaxis.set_major_locator(ticker.MaxNLocator(integer=True))
     return figure
 

@@ -23,7 +23,7 @@ from ..results import DatasetResiduals
 from ..robot import Robot
 from ..units import Units
 from .figures import COLOURS, WIDTH, _binned_rms, _thin, new_figure, report_style
-from .numbers import errors_of, joint_reading_unit
+from .numbers import errors_of, format_at_resolution, joint_reading_unit, resolution_of
 
 BEFORE, AFTER = "nominal", "final"
 TITLES = {BEFORE: "before: nominal robot", AFTER: "after: calibrated"}
@@ -53,6 +53,15 @@ def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(values)))) if values.size else float("nan")
 
 
+def mean_and_rms(values: np.ndarray) -> str:
+    """``mean ...\nRMS ...``: the RMS to 3 significant digits and the mean to the same
+    decimal place, so a mean below what the RMS resolves prints as 0."""
+    spread = _rms(values)
+    mean = float(np.mean(values)) if values.size else float("nan")
+    return (f"mean {format_at_resolution(mean, resolution_of(spread), sign=True)}\n"
+            f"RMS {spread:.3g}")
+
+
 # ----------------------------------------------------------------------------- positions
 
 
@@ -72,8 +81,8 @@ def position_axes(residuals: Sequence[DatasetResiduals], units: Units) -> Figure
                 axes.hist(values, bins=40, color=COLOURS[model], alpha=0.85)
                 axes.axvline(0.0, color="#222222", linewidth=0.6)
                 axes.set_title(f"{AXES[a]}, {TITLES[model]}", fontsize=9)
-                axes.text(0.02, 0.95, f"mean {np.mean(values):+.3g}\nRMS {_rms(values):.3g}",
-                          transform=axes.transAxes, va="top", fontsize=7.5)
+                axes.text(0.02, 0.95, mean_and_rms(values), transform=axes.transAxes,
+                          va="top", fontsize=7.5)
                 axes.set_xlabel(f"{AXES[a]} error [{units.length}]")
                 if a == 0:
                     axes.set_ylabel("count")

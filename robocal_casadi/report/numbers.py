@@ -8,6 +8,8 @@ prismatic joints in the length unit.
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,3 +131,44 @@ def display_units(units: Units) -> Units:
     """The units the report shows: lengths in mm whatever the file uses (errors and
     corrections are millimetre-sized), angles in the file's angle unit."""
     return Units("mm", units.angle)
+
+
+def format_at_resolution(value: float, resolution: float, *, sign: bool = False) -> str:
+    """``value`` rounded to the decimal place of ``resolution`` (both in one unit, > 0):
+    a value below the resolution prints as ``0``, never as ``+2.49e-14``. ``sign`` puts a
+    ``+`` before positive values; '-' for a value that is not finite."""
+    if not math.isfinite(value):
+        return "-"
+    if not (math.isfinite(resolution) and resolution > 0):
+        return "0" if value == 0 else f"{value:{'+' if sign else ''}.3g}"
+    places = -math.floor(math.log10(resolution))
+    rounded = round(value, places)
+    if rounded == 0:
+        return "0"
+    return f"{rounded:{'+' if sign else ''}.{max(places, 0)}f}"
+
+
+def resolution_of(spread: float, digits: int = 3) -> float:
+    """The resolution of a number printed with ``digits`` significant digits: one unit of
+    its last digit (NaN for a spread that is zero or not finite)."""
+    if not (math.isfinite(spread) and spread > 0):
+        return math.nan
+    return 10.0 ** (math.floor(math.log10(spread)) - digits + 1)
+
+
+_TERM = re.compile(r"([+-](?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\*([A-Za-z_][\w./\[\]-]*)")
+
+
+def relation_in_units(relation: str, left: str, quantity_of: Callable[[str], str],
+                      units: Units) -> str:
+    """A relation ``+c*name ...`` saying what a change of ``left`` acts like, with the
+    coefficients in SI (``name``'s unit per ``left``'s unit: m/rad for a length standing in
+    for an angle), rewritten for the report's ``units`` (mm/rad with lengths in mm)."""
+    source = units.scale(quantity_of(left))
+
+    def convert(match: re.Match) -> str:
+        name = match.group(2)
+        factor = float(match.group(1)) * source / units.scale(quantity_of(name))
+        return f"{factor:+.4g}*{name}"
+
+    return _TERM.sub(convert, relation)

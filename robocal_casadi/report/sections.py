@@ -10,7 +10,8 @@ the file's unit (``numbers.display_units``), angles in the file's angle unit.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import re
+from collections.abc import Callable, Sequence
 from functools import partial
 
 import numpy as np
@@ -35,6 +36,7 @@ from .numbers import (
     parameter_decimals,
     pooled,
     quantity_of_placement,
+    relation_in_units,
     row_count,
 )
 from .unexplained import unexplained_blocks
@@ -223,6 +225,31 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
 
 
+_RELATION = re.compile(r"(\w+) (acts like|~) ([^);]*)")
+
+
+def quantity_lookup(result: CalibrationResult) -> Callable[[str], str]:
+    """The quantity (length, angle, none) of any unknown a calibration names."""
+    registry = result.robot_nominal.parameters()
+    mounted = dict(getattr(result, "mounted_quantities", None) or {})
+
+    def quantity_of(name: str) -> str:
+        if name in registry.names:
+            return registry.quantity(name)
+        return mounted.get(name) or quantity_of_placement(name)
+
+    return quantity_of
+
+
+def relations_in_units(text: str, result: CalibrationResult) -> str:
+    """``text`` with every ``NAME acts like ...`` / ``NAME ~ ...`` relation's coefficients
+    (SI in the calibration's words) in the report's units."""
+    units = display_units(result.units)
+    quantity_of = quantity_lookup(result)
+    return _RELATION.sub(lambda m: f"{m.group(1)} {m.group(2)} " + relation_in_units(
+        m.group(3), m.group(1), quantity_of, units), text)
+
+
 def identifiability_section(result: CalibrationResult) -> Section:
     ident = result.identifiability
     blocks: list = [Paragraph(
@@ -234,7 +261,8 @@ def identifiability_section(result: CalibrationResult) -> Section:
         blocks.append(Plot("singular-values", "Singular values of the scaled identification "
                            "Jacobian (log scale)", partial(figures.singular_values, ident)))
     if ident.unidentifiable:
-        rows = tuple((name, reason) for name, reason in ident.unidentifiable.items())
+        rows = tuple((name, relations_in_units(reason, result))
+                     for name, reason in ident.unidentifiable.items())
         blocks.append(Details("not-identifiable", f"{len(rows)} parameters not identifiable, "
                               f"held at nominal, with the reason",
                               (Table("not-identifiable", "Not identifiable, held at nominal",
@@ -244,7 +272,8 @@ def identifiability_section(result: CalibrationResult) -> Section:
     if ident.combinations:
         blocks.append(Table("combinations", "Base-parameter combinations (only these sums or "
                             "differences are determined)", ("combination",),
-                            tuple((c,) for c in ident.combinations)))
+                            tuple((relations_in_units(c, result),)
+                                  for c in ident.combinations)))
     return Section("identifiability", "Identifiability", tuple(blocks))
 
 
@@ -290,7 +319,8 @@ def parameters_section(result: CalibrationResult) -> Section:
                                 f"tell them apart from other parameters or the placement.",
                                 "note"))
     if held:
-        reasons = tuple(row(p)[:3] + (p.reason or "not identifiable",) for p in held)
+        reasons = tuple(row(p)[:3] + (relations_in_units(p.reason or "not identifiable",
+                                                         result),) for p in held)
         blocks.append(Details("parameters-held", f"{len(held)} parameters held at nominal "
                               f"(the data cannot determine them)",
                               (Table("parameters-held", "Held at nominal",
@@ -456,6 +486,7 @@ DIAGNOSIS_HEADERS = {
     "held": "held at zero", "remaining_norm": "independence",
     "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "held-out RMS before",
     "cv_rms_after": "held-out RMS with it", "decision": "decision",
+    "estimate": "estimate (SI units, as in result.json)",
 }
 NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
                 "cv_rms_before", "cv_rms_after"}

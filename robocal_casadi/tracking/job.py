@@ -7,6 +7,8 @@ units: {length: mm, angle: deg}
 camera: {xyz: [a, b, c]}      # camera origin in the end frame, axes parallel to it
 standoff: 300.0               # Z: the target stays at (0, 0, Z) in the end frame
 up: [0, 0, 1]                 # optional: worktable normal in the world frame
+max_velocity: 180             # optional: joint speed limit, one value or one per joint,
+                              # job's angle (length for prismatic joints) unit per second
 data: observations.csv        # time,q1..qn,x,y,z,roll,pitch,yaw in the job's units
 ```
 
@@ -56,7 +58,8 @@ from ..units import Units, units_of
 from .conventions import MARKER_CONVENTIONS, method_observation, observation_rotation
 from .tracker import unit_up
 
-KEYS = ("kind", "robot", "units", "camera", "standoff", "up", "data", "marker_convention")
+KEYS = ("kind", "robot", "units", "camera", "standoff", "up", "data", "marker_convention",
+        "max_velocity")
 OBSERVATION_COLUMNS = ("x", "y", "z", "roll", "pitch", "yaw")
 #: Orientation columns each marker convention accepts, in order of preference.
 ORIENTATION_COLUMNS = {"method": (("roll", "pitch", "yaw"), ("qw", "qx", "qy", "qz")),
@@ -89,6 +92,7 @@ class TrackingJob:
     time: np.ndarray = field(repr=False)
     joints: np.ndarray = field(repr=False)
     observations: np.ndarray = field(repr=False)
+    max_velocity: np.ndarray | None = None  # (n) [rad/s or m/s], None: no limit given
 
     @property
     def rows(self) -> int:
@@ -183,7 +187,24 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
                        camera_xyz=camera_xyz, camera_rotation=camera_rotation,
                        marker_convention=convention, standoff=standoff, up=up,
                        data_path=data_path, time=time, joints=joints,
-                       observations=observations)
+                       observations=observations,
+                       max_velocity=_max_velocity(content.get("max_velocity"), robot, units,
+                                                  path))
+
+
+def _max_velocity(value, robot: Robot, units: Units, path: Path) -> np.ndarray | None:
+    """``max_velocity`` (one value or one per joint, job units per second) in SI, or None."""
+    if value is None:
+        return None
+    n = robot.dof
+    raw = np.array(vector(value if isinstance(value, list) else [value] * n, n, file=path,
+                          where="max_velocity"))
+    if not (np.all(np.isfinite(raw)) and np.all(raw > 0)):
+        raise InputError(f"joint speed limits must be positive numbers, got {cut(value)}",
+                         file=path, where="max_velocity")
+    scales = np.array([units.angle_scale if j.revolute else units.length_scale
+                       for j in robot.joints])
+    return raw * scales
 
 
 def _unit_quaternion(value, file, where: str) -> np.ndarray:

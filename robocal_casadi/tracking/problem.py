@@ -17,7 +17,9 @@ with ``u = up - (up . z_goal) z_goal``, the part of ``up`` across the goal's z a
 the z axis is met, ``u . x_end = up . x_end`` (``x_end`` is perpendicular to ``z_end``), so
 this is the level condition itself; written with ``u`` it stays well posed when the goal
 looks straight along ``up`` (camera looking down at the table): then every turn about z
-is level, the row vanishes, and the turn goes to the smallest-move objective.
+is level, the row vanishes, and the turn goes to the smallest-move objective. The row
+also vanishes (and the level is not counted in the angle error) while the goal's z axis
+is within ``DEGENERATE_TILT`` of ``+-up``: there every turn is level to within that tilt.
 
 ``z_end = z_goal`` rather than ``-z_goal`` is checked by the angle error, not by the
 equations; starting from the previous joints the solver stays on the right side. A 6R
@@ -32,6 +34,7 @@ and ``errors`` the constraint errors used to verify every answer.
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 
 import casadi as ca
@@ -42,6 +45,11 @@ from ..kinematics import Kinematics
 from ..robot import Robot
 from .goal import goal_pose
 
+#: [rad] A goal whose z axis is within this angle of the worktable normal has a free turn
+#: about it: every turn is level to within this angle (0.06 deg), and requiring an exact
+#: level there would swing the last joint by up to a half turn between two cycles whose
+#: z axes differ by a hair. Beyond it the x axis is held level exactly.
+DEGENERATE_TILT = 1e-3
 #: Number of equality constraints: position (3), z axis direction (2), level (1).
 CONSTRAINTS = 6
 #: Proximal term on the multipliers in the closed-form step: keeps the step defined when
@@ -67,8 +75,15 @@ def constraint_expressions(T_world_end, goal, up):
     p_end, x_end, z_end = T_world_end[:3, 3], T_world_end[:3, 0], T_world_end[:3, 2]
     p_goal, x_goal, y_goal, z_goal = goal[0:3], goal[3:6], goal[6:9], goal[9:12]
     across = up - ca.dot(up, z_goal) * z_goal
+    across = ca.if_else(_turn_is_free(up, z_goal), ca.DM.zeros(3), across)
     return ca.vertcat(p_end - p_goal, ca.dot(x_goal, z_end), ca.dot(y_goal, z_end),
                       ca.dot(across, x_end))
+
+
+def _turn_is_free(up, z_goal):
+    """1 where the goal's z axis lies within ``DEGENERATE_TILT`` of ``+-up``: every turn
+    about it is level to within that tilt, so the turn is left to the smallest move."""
+    return ca.norm_2(ca.cross(up, z_goal)) <= math.sin(DEGENERATE_TILT)
 
 
 def error_expressions(T_world_end, goal, up):
@@ -83,6 +98,7 @@ def error_expressions(T_world_end, goal, up):
     z_goal = goal[9:12]
     facing = ca.atan2(ca.norm_2(ca.cross(z_end, z_goal)), ca.dot(z_end, z_goal))
     tilt = ca.fabs(ca.asin(ca.fmin(1.0, ca.fmax(-1.0, ca.dot(up, x_end)))))
+    tilt = ca.if_else(_turn_is_free(up, z_goal), 0.0, tilt)
     return position_error, ca.fmax(facing, tilt)
 
 

@@ -265,14 +265,18 @@ class Tracker:
         return self._goal_out
 
     def step(self, q_capture: Sequence[float] | np.ndarray,
-             observation: Sequence[float] | np.ndarray) -> TrackStep:
+             observation: Sequence[float] | np.ndarray, *,
+             max_step: Sequence[float] | np.ndarray | None = None) -> TrackStep:
         """One cycle: joints facing the target from the standoff, level, closest to the
         previous answer.
 
         ``q_capture`` (n) [rad or m] the joints when the image was taken; ``observation``
-        ``(x, y, z [m], roll, pitch, yaw [rad])`` the target in the camera.
+        ``(x, y, z [m], roll, pitch, yaw [rad])`` the target in the camera; ``max_step``
+        (n) [rad or m] this cycle's largest move per joint (e.g. the speed limits times
+        the cycle time), combined with the tracker's own by the smaller of the two.
         """
         start = time.perf_counter()
+        steps = self._cycle_steps(max_step)
         q_read = _vector(q_capture, self.robot.dof, "q_capture")
         target = _vector(observation, 6, "observation")
         finite = bool(np.isfinite(q_read).all() and np.isfinite(target).all())
@@ -288,9 +292,9 @@ class Tracker:
         if math.dist(goal[0:3], self._base_origin) > self.reach:
             return self._refuse("unreachable", start)
         lower, upper = self.lower, self.upper
-        if self.max_step is not None:
-            lower = np.maximum(lower, previous - self.max_step)
-            upper = np.minimum(upper, previous + self.max_step)
+        if steps is not None:
+            lower = np.maximum(lower, previous - steps)
+            upper = np.minimum(upper, previous + steps)
         outcome = self.solver.solve(previous, goal, lower, upper)
         q, position_error, angle_error, verified = self._settle(outcome, previous, goal, lower,
                                                                 upper)
@@ -300,7 +304,7 @@ class Tracker:
             # Nothing meets the goal near the previous joints (within the step bound, if
             # any): look for the goal within the joint limits alone, from the previous
             # joints and then from inverse kinematics, and approach it by a bounded step.
-            far, iterations_far = self._search(previous, goal)
+            far, iterations_far = self._search(previous, goal, steps)
             iterations += iterations_far
             if far is None:
                 status = "unreachable" if outcome.infeasible or self.seed_from_ik else "failed"
@@ -308,9 +312,9 @@ class Tracker:
             else:
                 q, position_error, angle_error = far
                 status = "ok"
-                if self.max_step is not None:
+                if steps is not None:
                     move = np.abs(q - previous)
-                    share = float(np.min(np.where(move > 0, self.max_step / np.where(
+                    share = float(np.min(np.where(move > 0, steps / np.where(
                         move > 0, move, 1.0), np.inf), initial=1.0))
                     if share < 1.0:
                         q = previous + share * (q - previous)
@@ -325,6 +329,17 @@ class Tracker:
         constraint_error = max(position_error, angle_error)
         return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
                          position_error, angle_error, iterations)
+
+    def _cycle_steps(self, max_step) -> np.ndarray | None:
+        """This cycle's step bound (n) [rad or m]: the smaller of the tracker's and
+        ``max_step`` (non-negative; zero holds the joint), None for neither."""
+        if max_step is None:
+            return self.max_step
+        steps = _vector(max_step, self.robot.dof, "max_step")
+        if not (np.all(np.isfinite(steps)) and np.all(steps >= 0)):
+            raise InputError(f"max_step must be non-negative, got {list(steps)}",
+                             where="max_step")
+        return steps if self.max_step is None else np.minimum(steps, self.max_step)
 
     def _settle(self, outcome: SolveOutcome, previous: np.ndarray, goal: np.ndarray,
                 lower: np.ndarray, upper: np.ndarray
@@ -344,7 +359,7 @@ class Tracker:
             q = np.minimum(np.maximum(q, lower), upper)
         return q, position_error, angle_error, verified
 
-    def _search(self, previous: np.ndarray, goal: np.ndarray
+    def _search(self, previous: np.ndarray, goal: np.ndarray, steps: np.ndarray | None
                 ) -> tuple[tuple[np.ndarray, float, float] | None, int]:
         """Joints meeting ``goal`` within the joint limits (no step bound), smallest move
         from ``previous`` near where they were found: ``((q, position_error,
@@ -356,7 +371,7 @@ class Tracker:
         refinement does not verify, e.g. a redundant arm stopped by a limit).
         """
         iterations = 0
-        if self.max_step is not None:
+        if steps is not None:
             outcome = self.solver.solve(previous, goal, self.lower, self.upper)
             iterations += outcome.iterations
             q, position_error, angle_error, verified = self._settle(

@@ -223,6 +223,63 @@ def dh_ur_origins(robot: Robot) -> list[np.ndarray]:
     return [parts[0][0]] + [parts[i - 1][1] @ parts[i][0] for i in range(1, 6)]
 
 
+UR_ANGLE_TOLERANCE = np.radians(2.0)  # [rad]: calibration moves axes by far less, a
+#                                       different design by tens of degrees
+UR_OFFSET_TOLERANCE = 0.01  # fraction of the reach: how far "intersecting" axes may pass
+
+
+def joint_axes(robot: Robot, q=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(point [m], unit direction)`` of every joint axis in the world frame at ``q``
+    [rad or m] (default all zero), from the robot's own geometry."""
+    q = np.zeros(robot.dof) if q is None else np.asarray(q, dtype=float)
+    if robot.convention == "urdf":
+        frames = _urdf_link_frames(robot, q)[:-1]
+        return [(T[:3, 3], T[:3, :3] @ np.asarray(j.axis, dtype=float)
+                 / np.linalg.norm(j.axis)) for T, j in zip(frames, robot.joints)]
+    return [(T[:3, 3], T[:3, 2]) for T in _dh_moving_frames(robot, q)[:-1]]
+
+
+def _line_distance(first: tuple[np.ndarray, np.ndarray],
+                   second: tuple[np.ndarray, np.ndarray]) -> float:
+    """Shortest distance [m] between two lines ``(point, unit direction)``."""
+    (p, u), (r, v) = first, second
+    normal = np.cross(u, v)
+    if np.linalg.norm(normal) < 1e-9:  # parallel: distance of r from the first line
+        w = r - p
+        return float(np.linalg.norm(w - (w @ u) * u))
+    return float(abs((r - p) @ normal) / np.linalg.norm(normal))
+
+
+def ur_structure_problem(robot: Robot) -> str | None:
+    """Why ``robot`` does not have a UR arm's structure, or None when it does.
+
+    UR's structure, read from the joint axes at zero joints: six revolute joints; axes 2,
+    3 and 4 parallel (shoulder, elbow and wrist 1 turn in one plane) with non-zero upper
+    arm and forearm lengths between them; axis 1 perpendicular to axis 2 and meeting it;
+    axes 5 and 6 each perpendicular to the one before and meeting it. Angles are judged to
+    ``UR_ANGLE_TOLERANCE``, meetings to ``UR_OFFSET_TOLERANCE`` of the reach, so a
+    calibrated UR passes and an arm of another design (a spherical wrist, a seventh
+    joint, an offset elbow) does not.
+    """
+    if robot.dof != 6 or not all(j.revolute for j in robot.joints):
+        return (f"it has {robot.dof} joints of types {sorted({j.type for j in robot.joints})}, "
+                "UR arms have six revolute joints")
+    axes = joint_axes(robot)
+    reach = max(robot.reach(), 1e-3)
+    cos_tol, sin_tol = np.cos(UR_ANGLE_TOLERANCE), np.sin(UR_ANGLE_TOLERANCE)
+    for i, j in ((1, 2), (2, 3)):
+        if abs(axes[i][1] @ axes[j][1]) < cos_tol:
+            return f"axes {i + 1} and {j + 1} are not parallel (UR: shoulder, elbow, wrist 1)"
+        if _line_distance(axes[i], axes[j]) <= UR_OFFSET_TOLERANCE * reach:
+            return f"axes {i + 1} and {j + 1} have no link length between them"
+    for i, j in ((0, 1), (3, 4), (4, 5)):
+        if abs(axes[i][1] @ axes[j][1]) > sin_tol:
+            return f"axes {i + 1} and {j + 1} are not perpendicular"
+        if _line_distance(axes[i], axes[j]) > UR_OFFSET_TOLERANCE * reach:
+            return f"axes {i + 1} and {j + 1} do not meet"
+    return None
+
+
 def ur_calibration(calibrated: Robot, like: Path | None = None, *,
                    nominal: Robot | None = None, base_link: str | None = None,
                    tip_link: str | None = None) -> dict:
@@ -231,10 +288,10 @@ def ur_calibration(calibrated: Robot, like: Path | None = None, *,
     it: each joint's own origin. From a ``urdf`` robot (or with ``like``, a URDF of the
     arm) the origins are the ones ``urdf_over`` writes; from a DH robot alone they are
     ``B_{i-1} A_i``."""
-    if calibrated.dof != 6 or not all(j.revolute for j in calibrated.joints):
-        raise InputError(f"UR's kinematics file describes six revolute joints; the calibrated "
-                         f"robot has {calibrated.dof} joints of types "
-                         f"{sorted({j.type for j in calibrated.joints})}")
+    problem = ur_structure_problem(calibrated)
+    if problem is not None:
+        raise InputError(f"robot {calibrated.name!r} is not a UR arm: {problem}; UR's "
+                         "kinematics file describes only UR arms", where="--ur-calibration")
     if calibrated.convention == "urdf" or like is not None:
         source = like if like is not None else Path(_source(calibrated).file)
         document = read_document(source)
