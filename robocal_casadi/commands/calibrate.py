@@ -26,6 +26,7 @@ from ..errors import InputError
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import PROFILES, ProfileCost, profile_parameters
+from ..report.errors_table import write_errors_csv
 from ..results import CalibrationResult
 from ..robot import save_robot
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
@@ -93,6 +94,7 @@ def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
             if (out / name).is_file() and not (out / name).is_symlink():
                 shutil.copy2(out / name, staging / name)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2) + "\n")
+        write_errors_csv(result, staging)
         save_robot(result.robot_calibrated, staging / "robot_calibrated.yaml")
         save_effects(result, staging)
         if report:
