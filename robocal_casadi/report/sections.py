@@ -24,6 +24,7 @@ from .conclusion import conclusion_paragraphs
 from .content import Details, Document, Paragraph, Plot, Section, Table
 from .effect_views import effect_models_of, effect_title, effect_view
 from .info import ReportInfo
+from .iso9283 import iso9283_blocks
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
@@ -161,7 +162,8 @@ def accuracy_section(result: CalibrationResult) -> Section:
                "on new poses." if result.validation is not None else
                "No held-out data were given: these figures show how well the model fits "
                "the data it was fitted on."))
-    return Section("accuracy", "Accuracy summary", (Paragraph(text), table))
+    return Section("accuracy", "Accuracy summary", (Paragraph(text), table,
+                                                     *iso9283_blocks(result, units)))
 
 
 def applying_section(result: CalibrationResult) -> Section:
