@@ -282,7 +282,7 @@ def _repeatability_blocks(found: Repeatability, measures: list, units) -> list:
     if not found.found:
         return [Paragraph(f"Repeatability: none can be given. The data hold no repeated visit "
                           f"of a pose (no two readings of a dataset with joint readings equal "
-                          f"to within {POSE_TOLERANCE:g} rad). To state it, measure a few "
+                          f"to within {POSE_TOLERANCE * 1e6:g} µrad). To state it, measure a few "
                           f"poses several times each (ISO 9283 asks for {VISITS_ASKED}).",
                           "conclusion")]
     s = units.length_scale
