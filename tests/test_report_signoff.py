@@ -133,3 +133,26 @@ def test_every_length_in_a_table_is_in_millimetres(length):
             k = table.header.index("unit")
             units = {row[k] for row in table.rows}
             assert "m" not in units and "" not in units, table.name
+
+
+def test_matplotlib_pdf_table_wider_than_the_page_wraps_inside_it():
+    """Eight columns of 60-character text (about 500 characters a row, more than a page
+    holds at the smallest type): every cell is drawn, word for word, within the margins."""
+    from robocal_casadi.report import pdf
+    from robocal_casadi.report.content import Table
+    from robocal_casadi.report.figures import new_figure, report_style
+
+    words = "a long description of what this column holds for the reader"
+    table = Table("wide", "A wide table", tuple(f"column {k}" for k in range(8)),
+                  tuple(tuple(f"{words} {k}" for k in range(8)) for _ in range(3)))
+    flowables = pdf._table(table)
+    assert len(flowables) == 1
+    with report_style():
+        figure = new_figure(pdf.PAGE[1], pdf.PAGE[0])
+    figure.set_layout_engine(None)
+    flowables[0].draw(figure, pdf.MARGIN)
+    renderer = figure.canvas.get_renderer()
+    right = max(t.get_window_extent(renderer).x1 for t in figure.texts) / figure.dpi
+    assert right <= pdf.PAGE[0] - pdf.MARGIN + 0.05  # [in], a glyph's side bearing
+    drawn = " ".join(t.get_text() for t in figure.texts)
+    assert drawn.count("reader") == 24 and drawn.count("description") == 24

@@ -125,13 +125,12 @@ def _text(text: str, size: float, *, weight: str = "normal", colour: str = INK,
 def _table(table: Table) -> list[_Flowable]:
     """The table, whole; split by rows (header repeated) only when taller than a page.
 
-    A text cell longer than ``CELL`` characters wraps inside its row (the row grows);
-    numbers never wrap."""
-    table = _wrapped_cells(table)
-    widths = [max([len(h)] + [len(line) for r in table.rows for line in r[j].split("\n")])
-              for j, h in enumerate(table.header)]
+    A text cell longer than ``CELL`` characters wraps inside its row (the row grows), and
+    narrower still when the table would not otherwise fit the page's width at the
+    smallest type; numbers never wrap."""
+    table, widths = _fitted(table)
     characters = sum(widths) + 2 * (len(widths) - 1)
-    size = max(4.5, min(8.0, WIDTH * 72 / (characters * CHAR_WIDTH)))
+    size = max(SMALLEST, min(8.0, WIDTH * 72 / (characters * CHAR_WIDTH)))
     row = size * 1.55 / 72
     caption = _wrap(table.caption, 8.5, bold=True)
     caption_height = len(caption) * 8.5 * 1.4 / 72
@@ -154,12 +153,30 @@ def _table(table: Table) -> list[_Flowable]:
 
 
 CELL = 56  # characters of a text cell before it wraps
+NARROWEST = 8  # characters a text cell is narrowed to, at most, to fit the page
+SMALLEST = 4.5  # [pt] smallest type of a table
+MOST_CHARACTERS = int(WIDTH * 72 / (SMALLEST * CHAR_WIDTH))  # a row's width at that size
 
 
-def _wrapped_cells(table: Table) -> Table:
+def _fitted(table: Table) -> tuple[Table, list[int]]:
+    """The table with its text cells wrapped, and each column's width [characters]: at
+    ``CELL`` characters, then narrower until the row fits ``MOST_CHARACTERS`` (headers,
+    which do not wrap, and numbers set the least)."""
+    cell = CELL
+    while True:
+        wrapped = _wrapped_cells(table, cell)
+        widths = [max([len(h)] + [len(line) for r in wrapped.rows for line in r[j].split("\n")])
+                  for j, h in enumerate(wrapped.header)]
+        if sum(widths) + 2 * (len(widths) - 1) <= MOST_CHARACTERS or cell <= NARROWEST:
+            return wrapped, widths
+        cell = max(NARROWEST, min(cell, max(widths)) - 4)
+
+
+def _wrapped_cells(table: Table, cell: int = CELL) -> Table:
     from dataclasses import replace
 
-    rows = tuple(tuple(c if numeric or len(c) <= CELL else "\n".join(textwrap.wrap(c, CELL))
+    rows = tuple(tuple(c if numeric or len(c) <= cell else
+                       "\n".join(textwrap.wrap(c, cell, break_long_words=True))
                        for c, numeric in zip(r, table.numeric)) for r in table.rows)
     return replace(table, rows=rows)
 
