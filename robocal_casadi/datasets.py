@@ -144,10 +144,14 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
     # the directions of motion belong to the full table's order: computed before cutting
     extras = with_directions(dataset.joints, dataset.extras)
     changes: dict[str, Any] = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
-    for name in ("joints", "measured", "distance", "flange_poses", "pose", "lines"):
+    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
+    # the table's lines, unless the rows were changed in memory after reading
+    lines = dataset.lines
+    changes["lines"] = None if lines is None or len(lines) != len(mask) else \
+        np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)

@@ -67,10 +67,12 @@ def error_rows(residuals: DatasetResiduals, role: str) -> Iterator[tuple]:
 
 def csv_line(residuals: DatasetResiduals, row: int) -> int:
     """The line (1-based, the header on line 1) of data row ``row`` in the dataset's CSV
-    table: as read when the result carries it, else ``row + 2`` (a table without blank
-    lines)."""
-    if residuals.lines is not None:
-        return int(np.asarray(residuals.lines)[row])
+    table: as read when the result carries it for every row, else ``row + 2`` (a table
+    without blank lines)."""
+    lines = residuals.lines
+    if lines is not None and row < len(lines) and \
+            (residuals.joints is None or len(residuals.joints) == len(lines)):
+        return int(np.asarray(lines)[row])
     return row + 2
 
 
