@@ -78,6 +78,7 @@ class DatasetBase:
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read
+    lines: np.ndarray | None = None  # per data row, its line in the CSV table (1-based)
 
     @property
     def rows(self) -> int:
@@ -147,6 +148,10 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
+    # the table's lines, unless the rows were changed in memory after reading
+    lines = dataset.lines
+    changes["lines"] = None if lines is None or len(lines) != len(mask) else \
+        np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)
@@ -203,8 +208,9 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if content.get("payload_com") is not None:
         payload_com = np.array(quantities(content["payload_com"], 3, units.length_scale, "length",
                                           file=path, where="payload_com", unit=units.length))
+    lines = None if table is None else np.array([table.line(i) for i in range(len(table))])
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
-                  data_path=data_path, payload_com=payload_com, raw=content)
+                  data_path=data_path, payload_com=payload_com, raw=content, lines=lines)
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}

@@ -214,7 +214,8 @@ class DatasetResiduals:
     """Per-measurement errors [m] of one dataset under each model, for reports.
 
     ``rows`` gives each error's data row (-1 for errors that belong to no single row,
-    such as a bar-length error); ``joints`` (N x dof) and ``extras`` are the dataset's.
+    such as a bar-length error); ``joints`` (N x dof), ``extras`` and ``lines`` (the CSV
+    line of each data row, None when unknown) are the dataset's.
     """
 
     label: str
@@ -231,6 +232,7 @@ class DatasetResiduals:
     components: dict[str, np.ndarray] = field(default_factory=dict)
     terms: tuple[ErrorTerm, ...] = ()  # what each error is (empty: not recorded)
     frame: str = ""  # frame of the position components: "instrument" or "base"
+    lines: np.ndarray | None = None  # per data row, its line in the CSV table (1-based)
 
     def __repr__(self) -> str:
         rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")  # noqa: E731

@@ -41,6 +41,11 @@ def test_writes_the_contract_files_in_the_robot_units(tracker, tmp_path, capsys)
     assert calibrated.joints[1].a == pytest.approx(a2["estimate"] * 1e-3, abs=1e-15)
     assert result["validation"]["rms_geometric"] < 0.1 * result["validation"]["rms_nominal"]
     assert "validation RMS [mm]" in capsys.readouterr().out
+    # errors.csv beside it: every fitted and held-out reading, on its table line
+    table = (out / "errors.csv").read_text().splitlines()
+    assert table[0].startswith("dataset,role,line,")
+    roles = [line.split(",")[1] for line in table[1:]]
+    assert roles == ["fit"] * 120 + ["validation"] * 60
 
 
 def test_too_few_rows_to_identify_is_refused(tracker, tmp_path, capsys):

@@ -50,7 +50,7 @@ def test_demo_without_chromium_keeps_the_screenshot(small_case, capsys):
     assert (case / "result.json").read_text().splitlines()[:20] == first.splitlines()[:20]
     assert (case / MARKER).is_file()
     assert sorted(p.name for p in case.iterdir() if not p.name.startswith(".")) == [
-        "report.html", "report.png", "result.json", "robot_calibrated.yaml"]
+        "errors.csv", "report.html", "report.png", "result.json", "robot_calibrated.yaml"]
 
 
 def test_demo_does_not_replace_a_folder_it_did_not_write(small_case, capsys):

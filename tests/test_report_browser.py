@@ -148,3 +148,34 @@ def test_printed_pages_keep_tables_whole_and_figures_with_captions(tmp_path, pri
         holding = [k + 1 for k, page in enumerate(pages) if words in page]
         assert holding, f"caption of {plot.name!r} not found"
         assert all(images.get(k, 0) > 0 for k in holding), f"{plot.name!r} caption without image"
+
+
+@needs_chromium
+@pytest.mark.skipif(shutil.which("pdftotext") is None,
+                    reason="poppler-utils not installed (apt-get install poppler-utils)")
+def test_chromium_numbers_the_printed_pages_and_prints_the_sign_off(tmp_path):
+    """Printed by Chromium, every page carries "page k of n" in its bottom margin, the
+    last holds the sign-off, and every table's last column header is on the page (a
+    table cut at the page edge loses its right-hand columns)."""
+    from robocal_casadi.report import build_document
+    from robocal_casadi.report.info import ReportInfo
+
+    result = synthetic_result(validation=False, effects=False)
+    info = ReportInfo(operator="J. Smith")
+    path = write_report(result, tmp_path / "report.html", pdf=True, printer="chromium",
+                        info=info)
+    pages = _page_texts(path.with_suffix(".pdf"))
+    pages = [page for page in pages if page]
+    for k, page in enumerate(pages, start=1):
+        assert f"page {k} of {len(pages)}" in page
+    assert "Measured and calibrated by" in pages[-1] and "J. Smith" in pages[-1]
+    document = build_document(result, info=info)
+    tables = [b for s in document.sections for b in s.blocks
+              if type(b).__name__ == "Table" and 0 < len(b.rows) <= 25 and b.numeric[-1]
+              and b.rows[-1][-1] not in ("", "-")]
+    assert tables
+    for table in tables:  # numbers never wrap: the last row's last number is there whole
+        caption = " ".join(table.caption.split())[:40]
+        last = table.rows[-1][-1]
+        assert any(caption in page and last in page[page.index(caption):] for page in pages), \
+            f"table {table.name!r}: its last column is not on the page"

@@ -165,7 +165,7 @@ def _residuals(problem: Problem, x_nominal, x_geometric, x_final) -> list[Datase
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
-            frame=model.component_frame))
+            frame=model.component_frame, lines=dataset.lines))
     return out
 
 
@@ -738,7 +738,7 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(dataset.extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
-            frame=model.component_frame))
+            frame=model.component_frame, lines=dataset.lines))
     validation_problem, x_validation = stages[-1]
     return Validation(summary, tuple(residuals),
                       _spheres(validation_problem, x_validation, None, "validation"))

@@ -30,6 +30,7 @@ from ..effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import ProfileCost, profile_parameters
+from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult
 from ..robot import load_robot, save_robot
@@ -214,6 +215,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
         result = measured(result, datasets, validation, staging / ROBOT_FILE, staging)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2)
                                              + "\n")
+        write_errors_csv(result, staging)
         if report.report:
             from ..report import write_report
 

@@ -93,6 +93,17 @@ class Section:
 
 
 @dataclass(frozen=True)
+class SignOff:
+    """One signature on the report: what the signer attests (``title``), and the name and
+    organisation when known (empty: a line to fill in by hand); role, date and signature
+    are always left to the signer."""
+
+    title: str
+    name: str = ""
+    organisation: str = ""
+
+
+@dataclass(frozen=True)
 class Document:
     """The whole report: a title, a one-line subtitle and its sections in order."""
 
@@ -102,6 +113,7 @@ class Document:
     facts: tuple[tuple[str, str], ...] = ()  # the customer's fields: (title, value)
     logo: str | None = None  # a data: URI
     units_note: str = ""  # the report's units and the file's, in words
+    sign_off: tuple[SignOff, ...] = ()  # signature blocks at the end
 
     def __repr__(self) -> str:
         return f"Document({self.title!r}, sections={[s.anchor for s in self.sections]})"

@@ -18,8 +18,8 @@ evaluation (``Effect.contribution``, the same ``delta`` the identification used)
 the values of the result (``result.effect_models``, ``result.effect_values``, SI), on
 the calibrated geometry: the joint correction ``dq_j`` [rad or m] for joint effects, the
 relative length change ``k (T - T_ref)`` [1] for thermal drift. Everything returned here
-is in display units (the robot file's length and angle units; torques in N m, forces in
-N).
+is in display units (``numbers.display_units``: lengths in mm, angles in the robot
+file's angle unit; torques in N m, forces in N).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from ..effects.motion import with_directions
 from ..results import CalibrationResult, DatasetResiduals, EffectFinding
 from ..robot import Robot
 from ..units import Units
-from .numbers import errors_of, joint_reading_unit
+from .numbers import display_units, errors_of, joint_reading_unit
 
 
 @dataclass(frozen=True)
@@ -156,7 +156,7 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
                       if (np.asarray(r.rows) >= 0).any())
     if not residuals:
         return None
-    units = result.units
+    units = display_units(result.units)
     models = effect_models_of(result, finding)
     # per-row inputs of the row order (directions of motion) come from the full table
     with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))
@@ -180,7 +180,7 @@ def _gather(residuals: DatasetResiduals, units: Units):
 
 
 def _joint_view(result, finding, title, models, residuals) -> EffectView:
-    units, robot = result.units, result.robot_calibrated
+    units, robot = display_units(result.units), result.robot_calibrated
     compliance = finding.name == "joint_compliance"
     torque = compliance and robot.has_inertia
     model = models[0][0] if models else None

@@ -55,6 +55,7 @@ def write_pdf(document: Document, path: str | Path) -> Path:
                                page_break=section.appendix))
         for block in section.blocks:
             flowables += _block(block)
+    flowables += _sign_off(document)
     with atomic_file(path) as staging, PdfPages(staging) as pages:
         _paginate(flowables, pages, document.title)
         info = pages.infodict()
@@ -124,13 +125,12 @@ def _text(text: str, size: float, *, weight: str = "normal", colour: str = INK,
 def _table(table: Table) -> list[_Flowable]:
     """The table, whole; split by rows (header repeated) only when taller than a page.
 
-    A text cell longer than ``CELL`` characters wraps inside its row (the row grows);
-    numbers never wrap."""
-    table = _wrapped_cells(table)
-    widths = [max([len(h)] + [len(line) for r in table.rows for line in r[j].split("\n")])
-              for j, h in enumerate(table.header)]
+    A text cell longer than ``CELL`` characters wraps inside its row (the row grows), and
+    narrower still when the table would not otherwise fit the page's width at the
+    smallest type; numbers never wrap."""
+    table, widths = _fitted(table)
     characters = sum(widths) + 2 * (len(widths) - 1)
-    size = max(4.5, min(8.0, WIDTH * 72 / (characters * CHAR_WIDTH)))
+    size = max(SMALLEST, min(8.0, WIDTH * 72 / (characters * CHAR_WIDTH)))
     row = size * 1.55 / 72
     caption = _wrap(table.caption, 8.5, bold=True)
     caption_height = len(caption) * 8.5 * 1.4 / 72
@@ -153,12 +153,30 @@ def _table(table: Table) -> list[_Flowable]:
 
 
 CELL = 56  # characters of a text cell before it wraps
+NARROWEST = 8  # characters a text cell is narrowed to, at most, to fit the page
+SMALLEST = 4.5  # [pt] smallest type of a table
+MOST_CHARACTERS = int(WIDTH * 72 / (SMALLEST * CHAR_WIDTH))  # a row's width at that size
 
 
-def _wrapped_cells(table: Table) -> Table:
+def _fitted(table: Table) -> tuple[Table, list[int]]:
+    """The table with its text cells wrapped, and each column's width [characters]: at
+    ``CELL`` characters, then narrower until the row fits ``MOST_CHARACTERS`` (headers,
+    which do not wrap, and numbers set the least)."""
+    cell = CELL
+    while True:
+        wrapped = _wrapped_cells(table, cell)
+        widths = [max([len(h)] + [len(line) for r in wrapped.rows for line in r[j].split("\n")])
+                  for j, h in enumerate(wrapped.header)]
+        if sum(widths) + 2 * (len(widths) - 1) <= MOST_CHARACTERS or cell <= NARROWEST:
+            return wrapped, widths
+        cell = max(NARROWEST, min(cell, max(widths)) - 4)
+
+
+def _wrapped_cells(table: Table, cell: int = CELL) -> Table:
     from dataclasses import replace
 
-    rows = tuple(tuple(c if numeric or len(c) <= CELL else "\n".join(textwrap.wrap(c, CELL))
+    rows = tuple(tuple(c if numeric or len(c) <= cell else
+                       "\n".join(textwrap.wrap(c, cell, break_long_words=True))
                        for c, numeric in zip(r, table.numeric)) for r in table.rows)
     return replace(table, rows=rows)
 
@@ -242,28 +260,63 @@ def _title_block(document: Document) -> list[_Flowable]:
 
 
 def _paginate(flowables: list[_Flowable], pages: PdfPages, title: str) -> None:
-    page_number, figure, top = 0, None, BOTTOM
+    """Lay the flowables out over pages, each with ``title``, page k of n at its foot."""
+    layout = _pages(flowables)
+    for number, placed in enumerate(layout, start=1):
+        with report_style():
+            figure = new_figure(PAGE[1], PAGE[0])
+        figure.set_layout_engine(None)
+        for i, top in placed:
+            flowables[i].draw(figure, top)
+        figure.text(0.5, _y(PAGE[1] - MARGIN / 2), f"{title}   page {number} of {len(layout)}",
+                    ha="center", fontsize=7.5, color=MUTED)
+        pages.savefig(figure)
 
-    def finish() -> None:
-        if figure is not None:
-            figure.text(0.5, _y(PAGE[1] - MARGIN / 2), f"{title}   page {page_number}",
-                        ha="center", fontsize=7.5, color=MUTED)
-            pages.savefig(figure)
 
+def _pages(flowables: list[_Flowable]) -> list[list[tuple[int, float]]]:
+    """Per page, ``(flowable index, top [in])`` of what it holds: a flowable goes on the
+    next page when it does not fit (a heading with the start of what follows) or asks
+    for a page of its own."""
+    out: list[list[tuple[int, float]]] = []
+    top = BOTTOM
     for i, item in enumerate(flowables):
         needed = item.height
         if item.keep_with_next and i + 1 < len(flowables):
             needed += min(flowables[i + 1].height, BOTTOM - MARGIN - item.height)
-        if figure is None or top + needed > BOTTOM or getattr(item, "page_break", False):
-            finish()
-            with report_style():
-                figure = new_figure(PAGE[1], PAGE[0])
-            figure.set_layout_engine(None)
-            page_number += 1
+        if not out or top + needed > BOTTOM or getattr(item, "page_break", False):
+            out.append([])
             top = MARGIN
-        item.draw(figure, top)
+        out[-1].append((i, top))
         top += item.height
-    finish()
+    return out
+
+
+def _sign_off(document: Document) -> list[_Flowable]:
+    """The signature blocks, each kept whole: what is attested, then name (and
+    organisation) when known and lines for role, date and signature."""
+    if not document.sign_off:
+        return []
+    out = [_text("Sign-off", 13.0, weight="bold", keep_with_next=True, rule=True)]
+    blank = "_" * 44
+    for signer in document.sign_off:
+        fields = [("name", signer.name or blank)]
+        if signer.organisation:
+            fields.append(("for", signer.organisation))
+        fields += [("role", blank), ("date", blank), ("signature", blank)]
+        lines = [_text(signer.title, 10.0, weight="bold")]
+        lines += [_text(f"{label}:  {value}", TEXT_SIZE) for label, value in fields]
+        out.append(_together(lines))
+    return out
+
+
+def _together(parts: list[_Flowable]) -> _Flowable:
+    """One flowable of ``parts`` one under the other: never split over two pages."""
+    def draw(figure: Figure, top: float) -> None:
+        for part in parts:
+            part.draw(figure, top)
+            top += part.height
+
+    return _Flowable(sum(part.height for part in parts), draw)
 
 
 def _x(inches: float) -> float:

@@ -22,9 +22,10 @@ from ..units import Units
 from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
 from .conclusion import conclusion_paragraphs
-from .content import Details, Document, Paragraph, Plot, Section, Table
+from .content import Details, Document, Paragraph, Plot, Section, SignOff, Table
 from .effect_views import effect_models_of, effect_title, effect_view
 from .info import ReportInfo
+from .iso9283 import iso9283_blocks
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
@@ -69,7 +70,16 @@ def build_document(result: CalibrationResult, title: str | None = None,
                   instrument_section(result), appendix_section(result))
     facts = info.facts() + (("robot", robot.name),)
     return Document(title, subtitle, tuple(s for s in candidates if s is not None),
-                    facts=facts, logo=info.logo_uri(), units_note=units_note)
+                    facts=facts, logo=info.logo_uri(), units_note=units_note,
+                    sign_off=sign_off(info))
+
+
+def sign_off(info: ReportInfo) -> tuple[SignOff, ...]:
+    """Who signs the report: whoever measured and calibrated (``operator``) and the
+    customer's acceptance (``customer``: the organisation); names not given are left to
+    fill in."""
+    return (SignOff("Measured and calibrated by", info.operator or ""),
+            SignOff("Checked and accepted for the customer", "", info.customer or ""))
 
 
 # ----------------------------------------------------------------------------- sections
@@ -164,7 +174,8 @@ def accuracy_section(result: CalibrationResult) -> Section:
                "on new poses." if result.validation is not None else
                "No held-out data were given: these figures show how well the model fits "
                "the data it was fitted on."))
-    return Section("accuracy", "Accuracy summary", (Paragraph(text), table))
+    return Section("accuracy", "Accuracy summary", (Paragraph(text), table,
+                                                     *iso9283_blocks(result, units)))
 
 
 def applying_section(result: CalibrationResult) -> Section:
