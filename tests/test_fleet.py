@@ -112,6 +112,26 @@ def test_fleet_result_equals_a_single_calibrate_run(first_run, fleet_files):
                         direct.fit.rms_final / dataset.units.length_scale, rel_tol=1e-9)
 
 
+def _without_times(value):
+    """``value`` (parsed JSON) without wall-clock figures (``seconds``)."""
+    if isinstance(value, dict):
+        return {k: _without_times(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [_without_times(v) for v in value]
+    return value
+
+
+def test_fleet_result_file_is_the_calibrate_verbs_key_by_key(first_run, fleet_files, tmp_path):
+    _, out, _ = first_run
+    single = tmp_path / "single"
+    assert main(["calibrate", str(fleet_files / "r1" / "dataset.yaml"), "--out", str(single),
+                 "--no-report"]) == 0
+    fleet = json.loads((out / "r1" / "result.json").read_text())
+    direct = json.loads((single / "result.json").read_text())
+    assert {"delivered", "recommended", "predicted_accuracy"} <= set(fleet)
+    assert _without_times(fleet) == _without_times(direct)
+
+
 def test_fleet_flags_the_robot_with_outlying_compliance(first_run):
     _, out, summary = first_run
     flagged = {r["robot"] for r in summary["standing_out"]}

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from ..calibration.solver import Loss, Method
 
 RECORD = "fleet_robot.json"
-RECORD_VERSION = 1
+RECORD_VERSION = 2  # 2: results carry what is delivered and the predicted accuracy
 
 
 @dataclass(frozen=True)
@@ -188,6 +188,10 @@ def robot_summary(result) -> dict:
             "validation": rms(result.validation), "effects": effects,
             "compliance": compliance, "joint_offsets": offsets,
             "recommended": result.recommended,
+            "delivered_model": (result.delivered or {}).get("model"),
+            "predicted_accuracy": None if result.predicted_accuracy is None else {
+                "rms": result.predicted_accuracy.rms, "p95": result.predicted_accuracy.p95,
+                "max": result.predicted_accuracy.max},
             "condition_number": float(result.condition_number)}
 
 

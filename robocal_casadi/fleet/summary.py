@@ -179,6 +179,10 @@ class FleetSummary:
                 "unit": self.units.length, **{k: v / length for k, v in rms.items()}}
         entry["effects"] = summary.get("effects", [])
         entry["recommended"] = summary.get("recommended")
+        entry["delivered_model"] = summary.get("delivered_model")
+        predicted = summary.get("predicted_accuracy")
+        entry["predicted_accuracy"] = None if predicted is None else {
+            "unit": self.units.length, **{k: v / length for k, v in predicted.items()}}
         entry["joint_offsets"] = {
             name: {"name": o["name"], "unit": self.unit(o["quantity"]),
                    "estimate": o["estimate"] / self.scale(o["quantity"]),
