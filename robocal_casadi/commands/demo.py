@@ -24,7 +24,8 @@ from pathlib import Path
 from ..calibration import calibrate
 from ..datasets import load_dataset
 from .arguments import add_force, output_folder
-from .calibrate import summary, write_outputs
+from .calibrate import summary, summary_fields, write_outputs
+from .console import summarise
 
 PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
              "mid_left")
@@ -61,8 +62,10 @@ def cases() -> dict[str, tuple[list[Path], list[Path]]]:
 
 def run(args: argparse.Namespace) -> int:
     chosen = cases()
-    for name in chosen:
-        output_folder(args.out / name, force=args.force)
+    for name, (fit_files, validation_files) in chosen.items():
+        output_folder(args.out / name, verb="demo", force=args.force,
+                      inputs=[*fit_files, *validation_files], keeps=(SCREENSHOT,))
+    done = {}
     for name, (fit_files, validation_files) in chosen.items():
         print(f"== {name}")
         fit = [load_dataset(p) for p in fit_files]
@@ -75,8 +78,10 @@ def run(args: argparse.Namespace) -> int:
             from ..report import find_chromium
 
             render = find_chromium() is not None
-        write_outputs(result, out, keep=() if render else (SCREENSHOT,))
-        print(summary(result))
+        write_outputs(result, out, keep=() if render else (SCREENSHOT,), verb="demo")
+        print(summary(result, diagnosed=not args.no_diagnose))
+        done[name] = {**summary_fields(result, diagnosed=not args.no_diagnose),
+                      "out": str(out)}
         if render:
             from ..report import screenshot_report
 
@@ -85,4 +90,5 @@ def run(args: argparse.Namespace) -> int:
             kept = "kept from the previous run" if (out / SCREENSHOT).exists() else "not rendered"
             print(f"(no Chromium found: {SCREENSHOT} {kept})")
         print(f"wrote {out}/report.html")
+    summarise(args, cases=done)
     return 0
