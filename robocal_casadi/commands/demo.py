@@ -9,9 +9,11 @@ Two cases, each calibrated on part of the data and validated on the rest:
 
 Each case writes result.json, robot_calibrated.yaml and report.html (plus a screenshot
 report.png when Chromium is installed) into OUT/<case>/, replacing that folder as a
-whole. Without Chromium (or with --no-screenshot) a report.png already in the folder is
-kept: the data and the results are the same on every run, so the screenshot still
-shows the report (only its time stamp and solver times differ).
+whole. OUT defaults to ./robocal-demo, a folder the repository's .gitignore lists, so a
+fresh clone stays clean; the repository's own example reports are written with
+--out reports. Without Chromium (or with --no-screenshot) a report.png already in the
+folder is kept: the data and the results are the same on every run, so the screenshot
+still shows the report (only its time stamp and solver times differ).
 """
 
 from __future__ import annotations
@@ -31,11 +33,13 @@ PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_rig
              "mid_left")
 PANDA_VALIDATION = ("mid-high", "mid_right")
 SCREENSHOT = "report.png"
+DEFAULT_OUT = Path("robocal-demo")  # untracked (.gitignore): the demo never dirties a clone
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", type=Path, default=Path("reports"),
-                        help="folder for the reports (default: ./reports)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"folder for the reports (default: ./{DEFAULT_OUT}; the "
+                        "repository's example reports: --out reports)")
     parser.add_argument("--no-diagnose", action="store_true",
                         help="stop after the geometric model")
     parser.add_argument("--no-screenshot", action="store_true",
