@@ -190,3 +190,17 @@ def test_fleet_robot_gets_the_rule_profile_and_report_fields(data, tmp_path):
     changed = Settings(diagnose=False, rule="prior", profile="dh-only",
                        report_fields=(("customer", "ACME Robotics"),), allow_outside_data=True)
     assert calibrate_robot(robot, tmp_path, changed).status == "calibrated"  # not "unchanged"
+
+
+def test_fleet_without_dask_says_how_to_install_it(data, tmp_path, capsys, monkeypatch):
+    """The core install has no Dask: one line naming the extra, nothing written."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import raises ImportError
+    fleet = tmp_path / "fleet.yaml"
+    fleet.write_text(f"robots:\n  - name: r1\n    datasets: [{data / 'fit' / 'dataset.yaml'}]\n")
+    out = tmp_path / "fleet-out"
+    assert main(["fleet", str(fleet), "--out", str(out), "--allow-outside-data"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pip install" in err[0] and "robocal fleet: error" in err[0]
+    assert not out.exists()

@@ -168,7 +168,7 @@ def _settings(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from ..fleet import load_fleet
     from ..fleet import summarise as compare
-    from ..fleet.engine import run_fleet
+    from ..fleet.engine import require_engine, run_fleet
     from ..fleet.page import render
     from .calibrate import _clean
 
@@ -182,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
     _apart(args.out, args.previous)
     previous = _previous(args.previous, fleet)  # read now: a robot may replace it below
     settings = _settings(args)
+    require_engine()  # before the output folder is made
     _prepare_out(args.out, args.force)
     with _only_run(args.out):
         failed = 0
