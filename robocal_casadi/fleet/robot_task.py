@@ -24,7 +24,7 @@ import time
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, RobocalError
 from ..output import atomic_file, replace_refusal, written_by_robocal
@@ -281,8 +281,9 @@ def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, va
             raise InputError(f"{refusal.split('; ')[0]}; move it away so the robot's result "
                              "can be written there", where=robot.name)
     not_replacing_inputs(folder, [path for _, path in files], option=robot.name)
-    options = dict(diagnose=settings.diagnose, method=settings.method, loss=settings.loss,
-                   max_iterations=settings.max_iterations, rule=settings.rule, progress=False)
+    options: dict[str, Any] = dict(diagnose=settings.diagnose, method=settings.method,
+                                   loss=settings.loss, max_iterations=settings.max_iterations,
+                                   rule=settings.rule, progress=False)
     if settings.profile is None:
         result = calibrate(datasets, validation, **options)
     else:
