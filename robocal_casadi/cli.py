@@ -24,12 +24,20 @@ VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export",
          "fleet")
 
 
+class _Refused(Exception):
+    """A command line the parser refuses: ``prog`` and the one-line ``message``."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog = prog
+        self.message = message
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose refusals are one line, like every other error."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} "
-                     f"(see {self.prog} --help)\n")
+        raise _Refused(self.prog, f"{' '.join(message.split())} (see {self.prog} --help)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,11 +77,20 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
 
 def parse(argv: list[str] | None) -> argparse.Namespace:
     """The arguments; an option the verb does not know is refused in the verb's name
-    (``robocal calibrate: error: unrecognized arguments: ...``)."""
-    parser = build_parser()
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        args._parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    (``robocal calibrate: error: unrecognized arguments: ...``). A refusal exits with
+    status 2 after its one line (and, when ``--json`` was asked for, the JSON object)."""
+    words = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args, unknown = build_parser().parse_known_args(words)
+        if unknown:
+            args._parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    except _Refused as refused:
+        verb = refused.prog.removeprefix("robocal").strip() or None
+        console = Console(verb or "robocal", json="--json" in words)
+        console.fields["error"] = refused.message
+        print(f"{refused.prog}: error: {refused.message}", file=sys.stderr)
+        console.finish(2)
+        raise SystemExit(2) from None
     return args
 
 

@@ -204,3 +204,15 @@ def test_fleet_without_dask_says_how_to_install_it(data, tmp_path, capsys, monke
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install" in err[0] and "robocal fleet: error" in err[0]
     assert not out.exists()
+
+
+def test_json_of_a_refused_command_line(capsys):
+    """A command line the parser refuses still gives its JSON object under --json."""
+    with pytest.raises(SystemExit) as stop:
+        main(["calibrate", "d.yaml", "--out", "o", "--json", "--no-such-option"])
+    assert stop.value.code == 2
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["verb"] == "calibrate" and summary["exit_status"] == 2
+    assert "--no-such-option" in summary["error"]
+    assert captured.err.startswith("robocal calibrate: error: unrecognized arguments")
