@@ -6,12 +6,13 @@ alone, then every verb once, on shipped and simulated data.
 Copies the working tree (the files git tracks or would add) into a temporary folder,
 makes a virtual environment without the machine's site packages, and runs there, from
 the copy's root, the first command of the README's "Set up" section exactly as written
-(it installs the package with its core dependencies only, then runs the demo). Then every
-verb runs once with --json: each must exit 0 (fleet, whose engine is an optional extra,
-exits 2 with one line saying how to install it), print one JSON object on standard output
-and no traceback anywhere. The copy must also be left as git would see it clean: nothing
-written outside the folders git ignores. Exit status 0 when all of that holds, 1 otherwise,
-with the failed step named.
+(it installs the package with its core dependencies only, then runs the demo). Then
+every verb runs once with --json: each must exit 0 (fleet, whose engine is an optional
+extra, exits 2 with one line saying how to install it and writes nothing), print one
+JSON object on standard output and no traceback anywhere; one run with --quiet prints
+nothing. The copy must also be left as git would see it clean: nothing written outside
+the folders git ignores. Exit status 0 when all of that holds, 1 otherwise, with the
+failed step named.
 """
 
 from __future__ import annotations
@@ -137,6 +138,12 @@ def every_verb(run: Run) -> None:
         if (run.cwd / "fleet-out").exists():
             run.failures.append("robocal fleet: refused, yet left its --out folder behind")
     run.verb(["demo", "--no-diagnose", "--no-screenshot", "--out", "demo-again"])
+    quiet = subprocess.run(["robocal", *sim, "--seed", "3", "--out", "sim-quiet", "--quiet"],
+                           cwd=run.cwd, env=run.env, text=True, capture_output=True,
+                           timeout=TIMEOUT)
+    if quiet.returncode != 0 or quiet.stdout or quiet.stderr:
+        run.failures.append(f"robocal simulate --quiet: exit {quiet.returncode}, printed "
+                            f"{quiet.stdout[-500:]!r} {quiet.stderr[-500:]!r}")
 
 
 def main() -> int:
