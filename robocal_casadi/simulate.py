@@ -68,7 +68,7 @@ from .errors import InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .measurement import MODELS
-from .output import atomic_directory, written_by_robocal
+from .output import atomic_directory, replace_refusal
 from .parameters import perturbed_stems
 from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
@@ -446,8 +446,7 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     nominal = load_robot(robot) if isinstance(robot, (str, Path)) else robot
     units = units or nominal.units
     out_dir = Path(out_dir)
-    if not force:
-        _check_out_dir(out_dir)
+    _check_out_dir(out_dir, force)
     rng = np.random.default_rng(seed)
 
     p_true, errors = true_parameters(nominal, geometric_errors, rng)
@@ -476,7 +475,7 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
                   effects=true_effects, noise=float(noise), seed=int(seed),
                   reference_temperature=float(reference_temperature))
     table_name = TABLES[kind]
-    with atomic_directory(out_dir) as staging:
+    with atomic_directory(out_dir, verb="simulate") as staging:
         save_robot(nominal, staging / "robot.yaml")
         dataset = dict(kind=kind, robot="robot.yaml", units=units.as_dict(),
                        **generated.dataset_fields(units), data=table_name)
@@ -495,15 +494,15 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
         point=tuple(leading.get("point", ())), pendant=generated.pendant)
 
 
-def _check_out_dir(out_dir: Path) -> None:
-    """Refuse to replace a folder that holds something other than a simulated dataset."""
+def _check_out_dir(out_dir: Path, force: bool) -> None:
+    """Refuse to replace a folder that holds anything but an earlier simulation's files
+    (``output.replace_refusal``; ``force`` lifts all but the refusal of a dataset)."""
     if out_dir.exists():
         if not out_dir.is_dir():
             raise InputError("exists and is not a folder", file=out_dir, where="--out")
-        if any(out_dir.iterdir()) and not (out_dir / "truth.yaml").is_file() \
-                and not written_by_robocal(out_dir):
-            raise InputError("folder is not empty and holds no earlier simulation "
-                             "(truth.yaml); choose a new folder", file=out_dir, where="--out")
+        refusal = replace_refusal(out_dir, "simulate", force=force)
+        if refusal is not None:
+            raise InputError(refusal, where="--out")
 
 
 @dataclass

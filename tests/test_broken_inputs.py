@@ -962,15 +962,16 @@ def test_leftovers_of_killed_runs_are_removed_and_live_ones_kept(templates, tmp_
 
 
 def test_every_validate_file_is_kept():
+    """One file per --validate; a file after it is a dataset to fit, wherever it stands."""
     from robocal_casadi.cli import build_parser
 
     parser = build_parser()
-    for line in (["--validate", "a.yaml", "--validate", "b.yaml", "--validate", "c.yaml"],
-                 ["--validate", "a.yaml", "b.yaml", "--validate", "c.yaml"],
-                 ["--validate", "a.yaml", "b.yaml", "c.yaml"]):
-        args = parser.parse_args(["calibrate", "fit.yaml", *line, "--out", "r"])
-        assert [p.name for p in args.validate] == ["a.yaml", "b.yaml", "c.yaml"], line
-        assert [p.name for p in args.datasets] == ["fit.yaml"]
+    for line in (["--validate", "a.yaml", "--validate", "b.yaml", "fit.yaml"],
+                 ["fit.yaml", "--validate", "a.yaml", "--validate", "b.yaml"],
+                 ["--validate", "a.yaml", "fit.yaml", "--validate", "b.yaml"]):
+        args = parser.parse_args(["calibrate", *line, "--out", "r"])
+        assert [p.name for p in args.validate] == ["a.yaml", "b.yaml"], line
+        assert [p.name for p in args.datasets] == ["fit.yaml"], line
     assert parser.parse_args(["calibrate", "fit.yaml", "--out", "r"]).validate == []
 
 
@@ -990,8 +991,8 @@ def test_repeated_validate_reaches_the_calibration(templates, tmp_path, capsys, 
         names.append(copy / f"held_out_{k}.yaml")
         (copy / "dataset.yaml").rename(names[-1])
     assert main(["calibrate", str(templates / "tracker" / "dataset.yaml"), "--validate",
-                 str(names[0]), "--validate", str(names[1]), str(names[2]), "--out",
-                 str(tmp_path / "r")]) == 2
+                 str(names[0]), "--validate", str(names[1]), "--validate", str(names[2]),
+                 "--out", str(tmp_path / "r")]) == 2
     capsys.readouterr()
     assert seen["validation"] == ["held_out_0.yaml", "held_out_1.yaml", "held_out_2.yaml"]
 

@@ -7,7 +7,10 @@ checks pass whether or not the demo was re-run, with or without Chromium.
 
 from __future__ import annotations
 
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -20,6 +23,7 @@ from robocal_casadi.examples import ROBOTS
 from robocal_casadi.output import MARKER
 from robocal_casadi.simulate import simulate
 
+REPOSITORY = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 64  # stands in for a rendered screenshot
 
 
@@ -74,3 +78,51 @@ def test_readme_order_on_the_shipped_reports_without_chromium(tmp_path, monkeypa
     for case in sorted(p for p in reports.iterdir() if p.is_dir()):
         check_report_folder(case)
         assert (case / "report.png").read_bytes() == screenshots[case.name]
+
+
+def _git(*arguments: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *arguments], cwd=cwd, capture_output=True, text=True,
+                          timeout=120)
+
+
+def _in_git_checkout() -> bool:
+    return shutil.which("git") is not None and (REPOSITORY / ".git").exists()
+
+
+@pytest.mark.skipif(not _in_git_checkout(), reason="needs git and a checkout")
+def test_default_output_is_ignored_by_git():
+    """What `robocal demo` writes by default is no tracked file and git ignores it."""
+    default = demo.DEFAULT_OUT
+    assert not default.is_absolute()
+    for case in demo.cases():
+        path = default / case / "result.json"
+        assert _git("check-ignore", "-q", str(path), cwd=REPOSITORY).returncode == 0, path
+        assert _git("ls-files", "--error-unmatch", str(path),
+                    cwd=REPOSITORY).returncode != 0, path
+
+
+def test_demo_writes_nothing_outside_its_folder(small_case, monkeypatch, capsys):
+    """Run with the default --out from a folder: only that folder appears."""
+    work = small_case / "clone"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main(["demo", "--no-diagnose"]) == 0
+    capsys.readouterr()
+    assert sorted(p.name for p in work.iterdir()) == [str(demo.DEFAULT_OUT)]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _in_git_checkout(), reason="needs git and a checkout")
+def test_demo_leaves_a_fresh_clone_clean(tmp_path):
+    """The README's first command, `robocal demo`, in a fresh clone of the committed
+    repository (its own code): `git status` stays empty."""
+    clone = tmp_path / "clone"
+    assert _git("clone", "--quiet", str(REPOSITORY), str(clone), cwd=tmp_path).returncode == 0
+    env = {**os.environ, "PYTHONPATH": str(clone)}
+    run = subprocess.run([sys.executable, "-m", "robocal_casadi.cli", "demo",
+                          "--no-screenshot"], cwd=clone, env=env, capture_output=True,
+                         text=True, timeout=1800)
+    assert run.returncode == 0, run.stderr
+    assert "Traceback" not in run.stderr
+    assert (clone / demo.DEFAULT_OUT / "ur10-tracker" / "report.html").is_file()
+    assert _git("status", "--porcelain", "--ignore-submodules", cwd=clone).stdout == ""

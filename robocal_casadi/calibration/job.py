@@ -116,12 +116,14 @@ def deliver(result: CalibrationResult, datasets: Sequence,
 
 
 def run_job(datasets: Sequence, validation: Sequence = (), options: JobOptions = JobOptions(),
-            out: Path | None = None, report: ReportOptions = ReportOptions()) -> JobOutcome:
-    """The whole job; with ``out``, the files written there (see the module docstring)."""
+            out: Path | None = None, report: ReportOptions = ReportOptions(), *,
+            verb: str = "calibrate") -> JobOutcome:
+    """The whole job; with ``out``, the files written there, the folder's marker naming
+    ``verb`` (see the module docstring)."""
     result = calibrate_job(datasets, validation, options)
     if out is None:
         return JobOutcome(measured(result, datasets, validation), None)
-    return write(result, datasets, validation, Path(out), report)
+    return write(result, datasets, validation, Path(out), report, verb=verb)
 
 
 def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence = (),
@@ -204,9 +206,10 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
 
 
 def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, out: Path,
-          report: ReportOptions = ReportOptions()) -> JobOutcome:
-    """Step 3: stage every file, measure the delivered ones as written, move into place."""
-    with atomic_directory(out) as staging:
+          report: ReportOptions = ReportOptions(), *, verb: str = "calibrate") -> JobOutcome:
+    """Step 3: stage every file, measure the delivered ones as written, move into place
+    (the folder's marker names ``verb``)."""
+    with atomic_directory(out, verb=verb) as staging:
         for name in report.keep:
             if (out / name).is_file() and not (out / name).is_symlink():
                 shutil.copy2(out / name, staging / name)

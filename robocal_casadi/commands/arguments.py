@@ -8,8 +8,11 @@ a long computation:
   socket, which replacing would destroy), not one of the run's inputs, in a folder
   that can be written;
 * a folder output is replaced as a whole: it must not be the current folder or hold
-  it, not hold an input, and, when it exists and is not empty, must be a folder robocal
-  wrote (it carries the marker ``.robocal-output``) unless ``--force`` is given.
+  it, nor hold or be any file the run reads; when it exists and is not empty, it must be
+  a folder the same verb wrote, holding only the files it wrote, unchanged (its marker
+  ``.robocal-output`` lists them), unless ``--force`` is given; and a folder holding a
+  dataset, job or fleet file the verb did not write there is refused even with
+  ``--force`` (``output.replace_refusal``).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import stat
 from pathlib import Path
 
 from ..errors import InputError
-from ..output import written_by_robocal
+from ..output import replace_refusal
 
 
 def _nearest_existing(path: Path) -> Path | None:
@@ -95,11 +98,12 @@ def output_file(path: str | Path, option: str = "--out", *, inputs=()) -> Path:
     return path
 
 
-def output_folder(path: str | Path, option: str = "--out", *, force: bool = False,
-                  inputs=()) -> Path:
-    """A folder to write (replaced as a whole): not an existing file, not under one, not
-    the current folder or one holding it, holding none of ``inputs``, and empty or
-    written by robocal unless ``force``."""
+def output_folder(path: str | Path, option: str = "--out", *, verb: str, force: bool = False,
+                  inputs=(), keeps: tuple[str, ...] = ()) -> Path:
+    """A folder for ``verb`` to write (replaced as a whole): not an existing file, not
+    under one, not the current folder or one holding it, holding none of ``inputs``, and
+    empty or one ``verb`` wrote (``output.replace_refusal``; ``force`` lifts part of it).
+    ``keeps``: names the verb carries over into its new folder, so never lost."""
     path = Path(path)
     if str(path).strip() == "":
         raise InputError("expected a folder name", where=option)
@@ -118,15 +122,14 @@ def output_folder(path: str | Path, option: str = "--out", *, force: bool = Fals
         raise InputError(f"{path} is the current folder or holds it; the output folder is "
                          "replaced as a whole, so name a new folder", where=option)
     not_replacing_inputs(path, inputs, option)
-    if mode is not None and not force and not written_by_robocal(path):
+    if mode is not None:
         try:
-            occupied = any(path.iterdir())
+            refusal = replace_refusal(path, verb, force=force, also=keeps)
         except OSError as error:
-            raise InputError(f"{path} cannot be read ({error.strerror})", where=option) from None
-        if occupied:
-            raise InputError(f"{path} is a folder robocal did not write and it is not empty; "
-                             "the output folder is replaced as a whole, so name a new folder "
-                             "(or give --force to replace it)", where=option)
+            raise InputError(f"{path} cannot be read ({error.strerror or error}), so it cannot "
+                             "be checked before it is replaced", where=option) from None
+        if refusal is not None:
+            raise InputError(refusal, where=option)
     _parent_usable(path, option)
     return path
 
@@ -134,8 +137,9 @@ def output_folder(path: str | Path, option: str = "--out", *, force: bool = Fals
 def add_force(parser: argparse.ArgumentParser) -> None:
     """The ``--force`` option of verbs that write a folder."""
     parser.add_argument("--force", action="store_true",
-                        help="replace the --out folder even when robocal did not write it "
-                        "(its contents are deleted)")
+                        help="replace the --out folder even when this verb did not write it "
+                        "(its contents are deleted; never a folder holding a dataset or an "
+                        "input of the run)")
 
 
 def add_allow_outside_data(parser: argparse.ArgumentParser) -> None:
@@ -183,8 +187,8 @@ def seed(text: str) -> int:
 
 
 def not_replacing_inputs(folder: Path, inputs, option: str = "--out") -> None:
-    """Refuse an output folder that holds one of the input files: replacing the folder
-    as a whole would delete them."""
+    """Refuse an output folder that is, or holds, one of the inputs (files or folders the
+    run reads): replacing the folder as a whole would delete them."""
     root = _resolved(Path(folder))
     for item in inputs:
         if item is None:

@@ -24,14 +24,15 @@ from ..errors import InputError
 from ..profiles import PROFILES
 from ..results import CalibrationResult
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
+from .console import summarise
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("datasets", nargs="+", type=Path, metavar="DATASET.yaml")
-    parser.add_argument("--validate", nargs="+", action="extend", type=Path, default=[],
+    parser.add_argument("--validate", action="append", type=Path, default=[],
                         metavar="VAL.yaml",
-                        help="held-out datasets evaluated with the calibrated model "
-                        "(repeatable; every file given is kept)")
+                        help="a held-out dataset evaluated with the calibrated model; one "
+                        "file per flag, repeat it for more")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="output folder (replaced as a whole when the run succeeds)")
     parser.add_argument("--no-diagnose", action="store_true",
@@ -46,6 +47,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "condition number by more than the fraction G, e.g. 0.05")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to the geometric fit (default 200)")
+    add_model_options(parser)
+    parser.add_argument("--no-report", action="store_true", help="skip report.html")
+    add_force(parser)
+    add_allow_outside_data(parser)
+    add_report_options(parser)
+
+
+def add_model_options(parser: argparse.ArgumentParser) -> None:
+    """``--rule`` and ``--profile`` (calibrate and fleet)."""
     parser.add_argument("--rule", choices=("prior", "fraction"), default="prior",
                         help="prior (default): every parameter not exactly undeterminable, "
                              "weighed against its tolerance (maximum a posteriori); fraction: "
@@ -55,9 +65,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit only the robot parameters this controller accepts "
                              "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
                              "offsets, base and tool) and report what that costs")
-    parser.add_argument("--no-report", action="store_true", help="skip report.html")
-    add_force(parser)
-    add_allow_outside_data(parser)
+
+
+def add_report_options(parser: argparse.ArgumentParser) -> None:
+    """``--pdf`` and the report's fields (calibrate and fleet)."""
     parser.add_argument("--pdf", action="store_true",
                         help="also write report.pdf (printed by headless Chromium when "
                              "installed)")
@@ -76,8 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
-def summary(result: CalibrationResult) -> str:
-    """A few lines for the terminal: what was identified and the error before and after."""
+def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
+    """A few lines for the terminal: what was identified and the error before and after
+    (``diagnosed``: whether the residual was tested for effects the model lacks)."""
     units = result.units
     s = units.length_scale
     ident = result.identifiability
@@ -100,10 +112,12 @@ def summary(result: CalibrationResult) -> str:
         if dropped:
             lines.append(f"data selection dropped {len(dropped)} unit(s) of {label}: "
                          f"{', '.join(map(str, dropped))}")
-    if result.effects:
-        for effect in result.effects:
-            lines.append(f"effect: {effect.summary or effect.name}")
-    else:
+    for effect in result.effects:
+        lines.append(f"effect: {effect.summary or effect.name}")
+    if not diagnosed:
+        lines.append("diagnosis: not run (--no-diagnose); the residual was not tested for "
+                     "effects the model lacks")
+    elif not result.effects:
         lines.append("effects: none added")
     if result.effects:
         lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
@@ -126,9 +140,31 @@ def summary(result: CalibrationResult) -> str:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
     if result.unexplained is not None:
         lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
-    else:
+    elif diagnosed:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
+
+
+def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict:
+    """The terminal summary's facts as JSON fields (lengths in the robot file's unit)."""
+    s = result.units.length_scale
+
+    def rms(fit) -> dict | None:
+        return None if fit is None else {"nominal": fit.rms_nominal / s,
+                                         "geometric": fit.rms_geometric / s,
+                                         "final": fit.rms_final / s}
+
+    ident = result.identifiability
+    return {"datasets": list(result.datasets), "unit": result.units.length,
+            "identifiable": len(ident.identifiable), "candidates": len(ident.candidates),
+            "condition_number": float(result.condition_number), "fit_rms": rms(result.fit),
+            "validation_rms": rms(result.validation), "diagnosed": diagnosed,
+            "effects": [e.name for e in result.effects],
+            "recommended": result.recommended, "warning": result.warning or None,
+            "delivered_model": (result.delivered or {}).get("model"),
+            "predicted_accuracy": None if result.predicted_accuracy is None else {
+                "rms": result.predicted_accuracy.rms / s, "p95": result.predicted_accuracy.p95 / s,
+                "max": result.predicted_accuracy.max / s}}
 
 
 def _rejected(result: CalibrationResult, word: str) -> list[str]:
@@ -143,27 +179,42 @@ def _rejected(result: CalibrationResult, word: str) -> list[str]:
     return out
 
 
-def report_info(args: argparse.Namespace, datasets: list):
-    """The report's customer fields: the datasets' ``report:`` blocks in turn, then the
-    command-line options, each overriding what came before."""
-    from ..report.info import ReportInfo, check_logo, info_from_dataset_file
+REPORT_FIELDS = ("customer", "robot_serial", "instrument", "operator", "date")
 
-    info = ReportInfo()
-    for dataset in datasets:
-        info = info.merged(info_from_dataset_file(dataset.path))
-    given = {name: getattr(args, name) for name in ("customer", "robot_serial", "instrument",
-                                                    "operator", "date")
-             if getattr(args, name, None)}
+
+def command_line_info(args: argparse.Namespace):
+    """The report's fields the command line gives, the logo and the templates checked."""
+    from ..report.info import ReportInfo, check_logo
+
+    given = {name: getattr(args, name) for name in REPORT_FIELDS if getattr(args, name, None)}
     if getattr(args, "logo", None):
         given["logo"] = check_logo(args.logo)
     if args.report_templates is not None and not args.report_templates.is_dir():
         raise InputError("is not a folder of report templates", file=args.report_templates,
                          where="--report-templates")
-    return info.merged(ReportInfo(**given))
+    return ReportInfo(**given)
+
+
+def report_info(args: argparse.Namespace, datasets: list):
+    """The report's customer fields: the datasets' ``report:`` blocks in turn, then the
+    command-line options, each overriding what came before."""
+    from ..report.info import ReportInfo, info_from_dataset_file
+
+    info = ReportInfo()
+    for dataset in datasets:
+        info = info.merged(info_from_dataset_file(dataset.path))
+    return info.merged(command_line_info(args))
+
+
+def read_options(args: argparse.Namespace) -> list[Path]:
+    """The files and folders the command line names for reading: the datasets, the
+    held-out datasets, the logo and the report templates."""
+    named = [*args.datasets, *args.validate, args.logo, args.report_templates]
+    return [Path(p) for p in named if p is not None]
 
 
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out, force=args.force, inputs=[*args.datasets, *args.validate])
+    output_folder(args.out, verb="calibrate", force=args.force, inputs=read_options(args))
     if args.max_iterations < 1:
         raise InputError(f"expected a positive count, got {args.max_iterations}",
                          where="--max-iterations")
@@ -182,14 +233,19 @@ def run(args: argparse.Namespace) -> int:
                              "a dataset is either fitted or held out, once", file=dataset.path)
         seen[key] = dataset.path
     info = report_info(args, datasets + validation)
-    not_replacing_inputs(args.out, [p for d in datasets + validation
-                                    for p in (d.path, d.data_path, d.robot_path)])
+    not_replacing_inputs(args.out, [*read_options(args), *(p for d in datasets + validation
+                                                           for p in (d.path, d.data_path,
+                                                                     d.robot_path))])
     options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                          select_growth=args.select_growth, max_iterations=args.max_iterations,
                          rule=args.rule, profile=args.profile, progress=sys.stderr.isatty())
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
-    outcome = run_job(datasets, validation, options, args.out, report)
-    print(summary(outcome.result))
-    print(f"wrote {args.out}: {', '.join(outcome.written)}")
+    outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate")
+    result = outcome.result
+    print(summary(result, diagnosed=not args.no_diagnose))
+    written = [name for name in outcome.written if not name.startswith(".")]
+    print(f"wrote {args.out}/: {', '.join(written)}")
+    summarise(args, **summary_fields(result, diagnosed=not args.no_diagnose),
+              out=str(args.out), written=written)
     return outcome.exit_status

@@ -1,17 +1,19 @@
 """Joint commands that put the calibrated robot's tool on Cartesian targets, each on the
 branch (shoulder, elbow, wrist configuration) the robot used before.
 
-ROBOT is a robot file or a calibration folder (a result of `robocal calibrate`, whose
-robot_calibrated.yaml is used). TARGETS.csv has columns x,y,z (tool position) and
-optionally qw,qx,qy,qz (tool orientation), in ROBOT's length unit and world frame, and
-optionally q1..qn: the joints that reached each target before (a taught program, ROBOT's
-units; a row may leave them all empty); other columns are copied through. JOINTS.csv gets
-those columns, the given joints as seed_q1..seed_qn, then q1..qn (ROBOT's units), status,
-position_error and, with orientations, orientation_error (the residual of the solve,
-ROBOT's units). Status is ok; branch (the target is reachable, but only on another branch
-than the seed's: the joint cells are left empty rather than switching configuration); or
-unreachable (no solution within the joint limits from the seed, the first start and
---restarts random ones; joint cells empty).
+ROBOT.yaml is the robot file; with --calibrated DIR (a result of `robocal calibrate`) the
+geometry comes from DIR/robot_calibrated.yaml, in ROBOT.yaml's units, as for fk and
+track. A calibration folder given in ROBOT.yaml's place is read the same way, in its own
+units. TARGETS.csv has columns x,y,z (tool position) and optionally qw,qx,qy,qz (tool
+orientation), in ROBOT's length unit and world frame, and optionally q1..qn: the joints
+that reached each target before (a taught program, ROBOT's units; a row may leave them
+all empty); other columns are copied through. JOINTS.csv gets those columns, the given
+joints as seed_q1..seed_qn, then q1..qn (ROBOT's units), status, position_error and, with
+orientations, orientation_error (the residual of the solve, ROBOT's units). Status is ok;
+branch (the target is reachable, but only on another branch than the seed's: the joint
+cells are left empty rather than switching configuration); or unreachable (no solution
+within the joint limits from the seed, the first start and --restarts random ones; joint
+cells empty).
 
 Each target is solved from its seed and kept on the seed's branch (no singularity between
 the seed and the answer, see robocal_casadi.configuration). A row without seed joints is
@@ -41,6 +43,7 @@ from ..output import atomic_file
 from ..robot import Robot, load_robot
 from ..table import read_table, write_table
 from .arguments import output_file, seed
+from .console import summarise
 
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
 POSITION = ("x", "y", "z")
@@ -50,8 +53,8 @@ SEED_PREFIX = "seed_"  # the given joints, written back beside the answer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("robot", metavar="ROBOT_OR_CALIBRATED_DIR",
-                        help="robot file, or a calibration folder with robot_calibrated.yaml")
+    parser.add_argument("robot", metavar="ROBOT.yaml",
+                        help="robot file (its units apply to the targets and the joints)")
     parser.add_argument("targets", metavar="TARGETS.csv",
                         help="table with x,y,z[,qw,qx,qy,qz] (robot length unit, world frame) "
                         "and optionally the seed joints q1..qn (robot units)")
@@ -63,6 +66,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--restarts", type=int, default=10,
                         help="random starts per target before it is unreachable (default 10)")
     parser.add_argument("--seed", type=seed, default=0, help="seed of the random starts")
+    parser.add_argument("--calibrated", metavar="DIR",
+                        help="use DIR/robot_calibrated.yaml (geometry only unless "
+                        "--with-effects)")
     from .fk import add_effect_options
 
     add_effect_options(parser)
@@ -81,13 +87,33 @@ def robot_of(argument: str) -> Robot:
     return load_robot(path)
 
 
+def robot_and_calibration(args: argparse.Namespace) -> tuple[Robot, Path | None]:
+    """The robot to compensate, and the calibration folder it comes from (None for a
+    robot file alone): ``ROBOT.yaml [--calibrated DIR]``, or a folder in ROBOT's place."""
+    from .fk import calibrated_robot
+
+    path = Path(args.robot)
+    if path.is_dir():
+        if args.calibrated is not None:
+            raise InputError(f"{path} is a folder; give the robot file, with the calibration "
+                             "as --calibrated DIR", where="--calibrated")
+        return robot_of(args.robot), path
+    robot = robot_of(args.robot)
+    if args.calibrated is None:
+        return robot, None
+    folder = Path(args.calibrated)
+    return calibrated_robot(folder, robot, path), folder
+
+
 def run(args: argparse.Namespace) -> int:
     robot_argument = Path(args.robot)
-    output_file(args.out, inputs=[args.targets, robot_argument / CALIBRATED_ROBOT
-                                  if robot_argument.is_dir() else robot_argument])
+    calibrated = robot_argument if robot_argument.is_dir() else \
+        None if args.calibrated is None else Path(args.calibrated)
+    output_file(args.out, inputs=[args.targets, robot_argument, None if calibrated is None
+                                  else calibrated / CALIBRATED_ROBOT])
     if args.restarts < 0:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
-    robot = robot_of(args.robot)
+    robot, folder = robot_and_calibration(args)
     table = read_table(args.targets, required=POSITION)
     L, A = robot.units.length_scale, robot.units.angle_scale
     has_orientation = [c for c in QUATERNION if table.has(c)]
@@ -144,15 +170,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
     model = extras_values = None
     if args.with_effects:
-        if not robot_argument.is_dir():
-            raise InputError("effects come from a calibration: give the calibration folder, "
-                             "not a robot file", file=robot_argument, where="--with-effects")
+        if folder is None:
+            raise InputError("effects come from a calibration: give --calibrated DIR",
+                             where="--with-effects")
         from ..effect_model import load_effects, row_values
 
-        model = load_effects(robot_argument, robot)
+        model = load_effects(folder, robot)
         extras_values = row_values(model, table, payload=args.payload,
                                    temperature=args.temperature)
-    nominal = nominal_robot(robot_argument, robot)
+    nominal = nominal_robot(folder if folder is not None else robot_argument, robot)
     result = compensate(robot, targets, start=start, seeds=seeds, nominal=nominal,
                         restarts=args.restarts, seed=args.seed, effects=model,
                         extras=extras_values)
@@ -177,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
     other = sum(s == STATUS_BRANCH for s in result.status)
     print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable, {other} "
           f"reachable only on another branch than their seed's)")
+    summarise(args, rows=len(result), unreachable=unreachable, other_branch=other,
+              out=str(args.out), calibrated=None if folder is None else str(folder))
     return 0
 
 

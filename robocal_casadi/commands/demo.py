@@ -9,9 +9,11 @@ Two cases, each calibrated on part of the data and validated on the rest:
 
 Each case writes result.json, robot_calibrated.yaml and report.html (plus a screenshot
 report.png when Chromium is installed) into OUT/<case>/, replacing that folder as a
-whole. Without Chromium (or with --no-screenshot) a report.png already in the folder is
-kept: the data and the results are the same on every run, so the screenshot still
-shows the report (only its time stamp and solver times differ).
+whole. OUT defaults to ./robocal-demo, a folder the repository's .gitignore lists, so a
+fresh clone stays clean; the repository's own example reports are written with
+--out reports. Without Chromium (or with --no-screenshot) a report.png already in the
+folder is kept: the data and the results are the same on every run, so the screenshot
+still shows the report (only its time stamp and solver times differ).
 """
 
 from __future__ import annotations
@@ -24,17 +26,20 @@ from pathlib import Path
 from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..datasets import load_dataset
 from .arguments import add_force, output_folder
-from .calibrate import summary
+from .calibrate import summary, summary_fields
+from .console import summarise
 
 PANDA_FIT = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
              "mid_left")
 PANDA_VALIDATION = ("mid-high", "mid_right")
 SCREENSHOT = "report.png"
+DEFAULT_OUT = Path("robocal-demo")  # untracked (.gitignore): the demo never dirties a clone
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", type=Path, default=Path("reports"),
-                        help="folder for the reports (default: ./reports)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help=f"folder for the reports (default: ./{DEFAULT_OUT}; the "
+                        "repository's example reports: --out reports)")
     parser.add_argument("--no-diagnose", action="store_true",
                         help="stop after the geometric model")
     parser.add_argument("--no-screenshot", action="store_true",
@@ -61,8 +66,10 @@ def cases() -> dict[str, tuple[list[Path], list[Path]]]:
 
 def run(args: argparse.Namespace) -> int:
     chosen = cases()
-    for name in chosen:
-        output_folder(args.out / name, force=args.force)
+    for name, (fit_files, validation_files) in chosen.items():
+        output_folder(args.out / name, verb="demo", force=args.force,
+                      inputs=[*fit_files, *validation_files], keeps=(SCREENSHOT,))
+    done = {}
     for name, (fit_files, validation_files) in chosen.items():
         print(f"== {name}")
         fit = [load_dataset(p) for p in fit_files]
@@ -75,8 +82,11 @@ def run(args: argparse.Namespace) -> int:
             render = find_chromium() is not None
         outcome = run_job(fit, validation,
                           JobOptions(diagnose=not args.no_diagnose, progress=sys.stderr.isatty()),
-                          out, ReportOptions(keep=() if render else (SCREENSHOT,)))
-        print(summary(outcome.result))
+                          out, ReportOptions(keep=() if render else (SCREENSHOT,)), verb="demo")
+        result = outcome.result
+        print(summary(result, diagnosed=not args.no_diagnose))
+        done[name] = {**summary_fields(result, diagnosed=not args.no_diagnose),
+                      "out": str(out)}
         if render:
             from ..report import screenshot_report
 
@@ -85,4 +95,5 @@ def run(args: argparse.Namespace) -> int:
             kept = "kept from the previous run" if (out / SCREENSHOT).exists() else "not rendered"
             print(f"(no Chromium found: {SCREENSHOT} {kept})")
         print(f"wrote {out}/report.html")
+    summarise(args, cases=done)
     return 0

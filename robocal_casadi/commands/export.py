@@ -26,6 +26,7 @@ from ..fields import read_text
 from ..output import atomic_file
 from ..robot import Robot, dump_yaml, load_robot
 from .arguments import output_file
+from .console import summarise
 
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
 RESULT = "result.json"
@@ -102,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         with atomic_file(path) as staging:
             staging.write_text(text)
         print(f"wrote {path}")
+    summarise(args, written=[str(p) for p in texts])
     return 0
 
 

@@ -29,6 +29,7 @@ from ..robot import Robot, load_robot
 from ..table import read_table, write_table
 from ..transforms import quaternion_from_matrix
 from .arguments import input_file, output_file
+from .console import summarise
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
@@ -122,4 +123,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(args.out) as staging:
         write_table(staging, [*extras, *POSE_COLUMNS],
                     [[*kept, *pose] for kept, pose in zip(copied, poses)])
+    print(f"wrote {len(poses)} tool poses to {args.out}")
+    summarise(args, rows=len(poses), out=str(args.out), unit=robot.units.length,
+              calibrated=args.calibrated, with_effects=bool(args.with_effects))
     return 0

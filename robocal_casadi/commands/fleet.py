@@ -36,9 +36,11 @@ from pathlib import Path
 
 from ..calibration import METHODS
 from ..errors import InputError
-from ..output import MARKER, MARKER_TEXT, atomic_file, written_by_robocal
+from ..output import MARKER, Marker, atomic_file, read_marker
 from ..progress import Progress
 from .arguments import add_allow_outside_data, positive_count
+from .calibrate import REPORT_FIELDS, add_model_options, add_report_options, command_line_info
+from .console import summarise
 
 try:
     import fcntl
@@ -76,6 +78,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true",
                         help="write into an --out folder that robocal did not write")
     add_allow_outside_data(parser)
+    add_model_options(parser)
+    add_report_options(parser)
 
 
 @contextlib.contextmanager
@@ -100,18 +104,33 @@ def _only_run(folder: Path) -> Iterator[None]:
 
 def _prepare_out(out: Path, force: bool) -> None:
     """The fleet folder is kept between runs (robots are replaced one by one), so it may
-    be new, empty, or one robocal wrote; any other folder needs --force."""
+    be new, empty, or an earlier fleet run's; any other folder needs --force."""
     if str(out).strip() == "":
         raise InputError("expected a folder name", where="--out")
     if out.exists() and not out.is_dir():
         raise InputError(f"{out} is a file; expected a folder", where="--out")
-    if out.is_dir() and not force and not written_by_robocal(out) and any(out.iterdir()):
-        raise InputError(f"{out} is a folder robocal did not write and it is not empty; name a "
-                         "new folder (or give --force to write the fleet's results into it)",
-                         where="--out")
+    marker = read_marker(out)
+    if out.is_dir() and not force and any(out.iterdir()) and (marker is None
+                                                              or marker.verb != "fleet"):
+        by = "robocal did not write" if marker is None else \
+            f"robocal {marker.verb or '(an earlier version)'} wrote"
+        raise InputError(f"{out} is a folder {by} and it is not empty; name a new folder (or "
+                         "give --force to write the fleet's results into it)", where="--out")
     out.mkdir(parents=True, exist_ok=True)
-    if not written_by_robocal(out):
-        (out / MARKER).write_text(MARKER_TEXT)
+    if marker is None or marker.verb != "fleet":
+        (out / MARKER).write_text(Marker("fleet").text())
+
+
+def _apart(out: Path, previous: Path | None) -> None:
+    """The earlier run compared with is read, never written: refuse an --out that is, holds
+    or lies inside --previous."""
+    if previous is None:
+        return
+    a, b = out.resolve(), previous.resolve()
+    if a == b or a in b.parents or b in a.parents:
+        raise InputError(f"{out} overlaps the earlier results --previous {previous}; this run "
+                         "would replace what it compares with, so write it to another folder",
+                         where="--out")
 
 
 def _previous(folder: Path | None, fleet) -> dict | None:
@@ -130,9 +149,26 @@ def _previous(folder: Path | None, fleet) -> dict | None:
     return found
 
 
+def _settings(args: argparse.Namespace):
+    """The run's settings, the report's logo and templates checked first."""
+    from ..fleet import Settings
+
+    info = command_line_info(args)
+    templates = args.report_templates
+    return Settings(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
+                    max_iterations=args.max_iterations, report=not args.no_report,
+                    allow_outside_data=args.allow_outside_data, recompute=args.recompute,
+                    rule=args.rule, profile=args.profile, pdf=args.pdf,
+                    report_fields=tuple((n, getattr(info, n)) for n in REPORT_FIELDS
+                                        if getattr(info, n)),
+                    logo=None if info.logo is None else os.path.abspath(info.logo),
+                    templates=None if templates is None else os.path.abspath(templates))
+
+
 def run(args: argparse.Namespace) -> int:
-    from ..fleet import Settings, load_fleet, summarise
-    from ..fleet.engine import run_fleet
+    from ..fleet import load_fleet
+    from ..fleet import summarise as compare
+    from ..fleet.engine import require_engine, run_fleet
     from ..fleet.page import render
     from ..output import json_safe as _clean
 
@@ -143,10 +179,10 @@ def run(args: argparse.Namespace) -> int:
                              "(--scheduler) has its own workers", where="--workers")
     positive_count(args.max_iterations, "--max-iterations")
     fleet = load_fleet(args.fleet)
+    _apart(args.out, args.previous)
     previous = _previous(args.previous, fleet)  # read now: a robot may replace it below
-    settings = Settings(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
-                        max_iterations=args.max_iterations, report=not args.no_report,
-                        allow_outside_data=args.allow_outside_data, recompute=args.recompute)
+    settings = _settings(args)
+    require_engine()  # before the output folder is made
     _prepare_out(args.out, args.force)
     with _only_run(args.out):
         failed = 0
@@ -161,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
 
             outcomes = run_fleet(fleet, args.out, settings, scheduler=args.scheduler,
                                  workers=args.workers, on_done=show)
-        summary = summarise(fleet, outcomes, previous=previous,
+        summary = compare(fleet, outcomes, previous=previous,
                             previous_folder=None if args.previous is None else str(args.previous))
         with atomic_file(args.out / "fleet.json") as staging:
             staging.write_text(json.dumps(_clean(summary.to_json()), indent=1) + "\n")
@@ -174,5 +210,9 @@ def run(args: argparse.Namespace) -> int:
     for reason in summary.reasons():
         print(f"stands out: {reason['robot']}: {reason['reason']}")
     print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
+    summarise(args, robots=len(outcomes), calibrated=summary.count("calibrated"),
+              unchanged=summary.count("unchanged"), failed=summary.count("failed"),
+              failures={o.name: o.error for o in summary.failed},
+              stand_out=[dict(r) for r in summary.reasons()], out=str(args.out))
     sys.stdout.flush()
     return 1 if summary.failed else 0

@@ -19,6 +19,7 @@ from ..errors import InputError
 from ..measurement import model_class
 from ..table import Table, read_table
 from .arguments import add_allow_outside_data, output_file, seed
+from .console import summarise
 
 MAX_COUNT = 10_000  # placements or readings in one plan
 INDEX_CHOICES = ("tool", "cond", "O1", "O2", "O3", "O4", "O5")
@@ -100,7 +101,19 @@ def run(args: argparse.Namespace) -> int:
     _write_programs(programs)
     print(plan.summary())
     print(f"wrote {args.out}")
+    _summarise(args, plan, programs)
     return 0
+
+
+def _summarise(args: argparse.Namespace, plan, programs) -> None:
+    """The plan's figures for --json (the tool-position errors in metres)."""
+    figures = {"index": "index", "value": "index_value", "random_median": "random_median",
+               "tool_error": "tool_error_m", "random_tool_median": "random_tool_error_m",
+               "condition_all": "condition_number"}
+    summarise(args, rows=len(plan.joints), out=str(args.out),
+              programs=[path for _, path in programs],
+              **{name: getattr(plan, key) for key, name in figures.items()
+                 if hasattr(plan, key)})
 
 
 def _scan(dataset, args) -> int:
@@ -115,6 +128,7 @@ def _scan(dataset, args) -> int:
     _write_programs(programs)
     print(scan.summary())
     print(f"wrote {args.out}")
+    _summarise(args, scan, programs)
     return 0
 
 

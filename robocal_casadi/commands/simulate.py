@@ -42,6 +42,7 @@ from ..robot import Robot, load_robot
 from ..simulate import READINGS, simulate
 from ..units import Units, parse_units
 from .arguments import add_force, output_folder, seed
+from .console import summarise
 
 # the example names its kind through the registry, the one place kind strings are spelled
 __doc__ = (__doc__ or "").format(effects="\n".join(f"  {cls.simulation_syntax()}"
@@ -173,7 +174,7 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out, force=args.force, inputs=[args.robot])
+    output_folder(args.out, verb="simulate", force=args.force, inputs=[args.robot])
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
     _check_options(args, robot)
     L, A = robot.units.length_scale, robot.units.angle_scale
@@ -241,4 +242,7 @@ def run(args: argparse.Namespace) -> int:
         sphere_radius=options["sphere_radius"])
     print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
           f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
+    summarise(args, kind=args.kind, rows=result.rows, out=str(args.out),
+              dataset=str(result.dataset_path), table=str(result.table_path),
+              truth=str(result.truth_path))
     return 0

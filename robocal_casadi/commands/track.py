@@ -31,6 +31,7 @@ from ..table import write_table
 from ..tracking.job import load_tracking_job
 from ..tracking.tracker import STATUSES, Tracker
 from .arguments import add_allow_outside_data, output_file
+from .console import summarise
 from .fk import calibrated_robot
 
 
@@ -95,4 +96,6 @@ def run(args: argparse.Namespace) -> int:
     tally = ", ".join(f"{counts[s]} {s}" for s in STATUSES)
     print(f"{job.rows} rows: {tally}; solve time median {np.median(times):.3f} ms, "
           f"max {times.max():.3f} ms -> {args.out}")
+    summarise(args, rows=job.rows, statuses=counts, solve_ms_median=float(np.median(times)),
+              solve_ms_max=float(times.max()), out=str(args.out))
     return 0

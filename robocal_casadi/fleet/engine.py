@@ -30,13 +30,19 @@ def machine_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _client(scheduler: str | None, workers: int | None):
-    """A connected client, and the local cluster it owns (None for an existing one)."""
+def require_engine() -> None:
+    """Refuse at once, in one line, when Dask's distributed engine is not installed."""
     try:
-        from dask.distributed import Client, LocalCluster
+        import dask.distributed  # noqa: F401
     except ImportError:
         raise InputError("fleet calibration needs Dask: pip install 'robocal_casadi[fleet]' "
                          "(or: pip install 'dask[distributed]')") from None
+
+
+def _client(scheduler: str | None, workers: int | None):
+    """A connected client, and the local cluster it owns (None for an existing one)."""
+    require_engine()
+    from dask.distributed import Client, LocalCluster
     if scheduler is not None:
         try:
             return Client(scheduler, timeout=CONNECT_TIMEOUT), None

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError, RobocalError
-from ..output import atomic_file, written_by_robocal
+from ..output import atomic_file, replace_refusal, written_by_robocal
 from .spec import FleetRobot
 
 if TYPE_CHECKING:
@@ -49,12 +49,38 @@ class Settings:
     report: bool = True
     allow_outside_data: bool = False
     recompute: bool = False
+    rule: str = "prior"
+    profile: str | None = None
+    pdf: bool = False
+    report_fields: tuple[tuple[str, str], ...] = ()  # (ReportInfo field, text) given for all
+    logo: str | None = None  # path of the reports' logo
+    templates: str | None = None  # folder of report templates
 
     def hashed(self) -> dict:
         """The settings a result depends on (not ``recompute``)."""
         values = asdict(self)
         values.pop("recompute")
         return values
+
+    def read_files(self) -> list[tuple[str, Path]]:
+        """(role, path) of the files the settings name for reading: the logo and every
+        file of the templates folder."""
+        files = [] if self.logo is None else [("logo", Path(self.logo))]
+        if self.templates is not None:
+            files += [("templates", p) for p in sorted(Path(self.templates).iterdir())
+                      if p.is_file()]
+        return files
+
+    def report_info(self, datasets):
+        """The report's fields: the datasets' ``report:`` blocks, then the run's own."""
+        from ..report.info import ReportInfo, info_from_dataset_file
+
+        info = ReportInfo()
+        for dataset in datasets:
+            info = info.merged(info_from_dataset_file(dataset.path))
+        given = ReportInfo(**dict(self.report_fields),
+                           logo=None if self.logo is None else Path(self.logo))
+        return info.merged(given)
 
 
 @dataclass(frozen=True)
@@ -232,7 +258,7 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
             outside = settings.allow_outside_data
             datasets = [load_dataset(p, allow_outside_data=outside) for p in robot.datasets]
             validation = [load_dataset(p, allow_outside_data=outside) for p in robot.validate]
-            files = input_files(datasets, validation)
+            files = input_files(datasets, validation) + settings.read_files()
             digest = input_hash(files, settings)
             record = None if settings.recompute else complete_record(folder, digest)
             if record is not None:
@@ -251,30 +277,27 @@ def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, va
     from ..calibration.job import JobOptions, ReportOptions, calibrate_job, write
     from ..commands.arguments import not_replacing_inputs
 
-    if folder.exists() and not written_by_robocal(folder):
-        if not folder.is_dir() or any(folder.iterdir()):
-            raise InputError(f"{folder} exists and robocal did not write it; move it away so "
-                             "the robot's result can be written there", where=robot.name)
+    if folder.exists():
+        refusal = replace_refusal(folder, "fleet", also=(RECORD,)) if folder.is_dir() else \
+            f"{folder} is a file"
+        if refusal is not None:
+            raise InputError(f"{refusal.split('; ')[0]}; move it away so the robot's result "
+                             "can be written there", where=robot.name)
     not_replacing_inputs(folder, [path for _, path in files], option=robot.name)
     result = calibrate_job(datasets, validation,
                            JobOptions(diagnose=settings.diagnose, method=settings.method,
-                                      loss=settings.loss, max_iterations=settings.max_iterations))
+                                      loss=settings.loss, max_iterations=settings.max_iterations,
+                                      rule=settings.rule, profile=settings.profile))
     if input_hash(files, settings) != digest:
         raise InputError("its input files changed while it was being calibrated; run again",
                          where=robot.name)
-    info = None
-    if settings.report:
-        # The report's customer fields come from the datasets' report blocks, as for
-        # `robocal calibrate` without command-line overrides.
-        from ..report.info import ReportInfo, info_from_dataset_file
-
-        info = ReportInfo()
-        for dataset in [*datasets, *validation]:
-            info = info.merged(info_from_dataset_file(dataset.path))
+    info = settings.report_info([*datasets, *validation]) if settings.report else None
+    templates = None if settings.templates is None else Path(settings.templates)
     outcome = write(result, datasets, validation, folder,
-                    ReportOptions(report=settings.report, info=info))
+                    ReportOptions(report=settings.report, pdf=settings.pdf, info=info,
+                                  templates=templates), verb="fleet")
     summary = robot_summary(outcome.result)
-    written = list(outcome.written)
+    written = [name for name in outcome.written if not name.startswith(".")]
     record = {"version": RECORD_VERSION, "input_hash": digest, "files": written,
               "summary": summary}
     with atomic_file(folder / RECORD) as staging:
