@@ -16,14 +16,15 @@ each solve starts from the previous solution (smooth motion along a path).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from .checks import count
-from .errors import InputError
+from .checks import count, path_argument
+from .errors import ArgumentError
 from .ik import inverse_kinematics
 from .kinematics import Kinematics
-from .robot import Robot
+from .robot import Robot, load_robot
 from .transforms import matrix_from_quaternion
 
 STATUS_OK = "ok"
@@ -64,9 +65,10 @@ def target_poses(targets: np.ndarray) -> np.ndarray:
     return poses
 
 
-def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
+def compensate(robot: Robot | str | Path, targets, *, start=None, restarts: int = 10,
                seed: int = 0, effects=None, extras: dict | None = None) -> Compensation:
-    """Joints that put ``robot``'s tool on each target (see the module docstring).
+    """Joints that put ``robot``'s tool (a ``Robot`` or a robot file) on each target (see
+    the module docstring).
 
     ``targets`` (N, 3) positions or (N, 7) poses, SI, world frame. ``start`` (dof,) the
     first solve's seed [rad or m] (default: the middle of the limits). ``restarts``
@@ -76,10 +78,9 @@ def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
     errors reported are then those of the tool with the effects.
     """
     restarts = count(restarts, "restarts", minimum=0)
-    targets = np.atleast_2d(np.asarray(targets, dtype=float))
-    if targets.ndim != 2 or targets.shape[1] not in (3, 7):
-        raise InputError(f"targets need 3 (x, y, z) or 7 (x, y, z, qw, qx, qy, qz) columns, "
-                         f"got {targets.shape[1]}")
+    if not isinstance(robot, Robot):
+        robot = load_robot(path_argument(robot, "robot", what="a Robot or a robot file"))
+    targets = _targets(targets)
     kinematics = Kinematics(robot)
     rng = np.random.default_rng(seed)
     if targets.shape[1] == 7:
@@ -93,6 +94,28 @@ def compensate(robot: Robot, targets, *, start=None, restarts: int = 10,
     joints = np.where(batch.success[:, None], batch.q, np.nan)
     status = tuple(STATUS_OK if s else STATUS_UNREACHABLE for s in batch.success)
     return Compensation(joints, status, batch.position_error, batch.orientation_error)
+
+
+def _targets(value) -> np.ndarray:
+    """``value`` as finite (N, 3) or (N, 7) float targets, else an ``ArgumentError``."""
+    try:
+        targets = np.atleast_2d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        raise ArgumentError(f"expected numbers (N x 3 or N x 7), got a {type(value).__name__}",
+                            argument="targets") from None
+    if targets.ndim != 2 or targets.shape[1] not in (3, 7) or not targets.size:
+        raise ArgumentError(f"targets need 3 (x, y, z) or 7 (x, y, z, qw, qx, qy, qz) columns, "
+                            f"got shape {targets.shape}", argument="targets")
+    bad = np.flatnonzero(~np.all(np.isfinite(targets), axis=1))
+    if bad.size:
+        raise ArgumentError(f"row {int(bad[0])} is not finite (NaN or infinity); "
+                            f"{bad.size} such row(s)", argument="targets")
+    if targets.shape[1] == 7:
+        zero = np.flatnonzero(np.linalg.norm(targets[:, 3:], axis=1) == 0)
+        if zero.size:
+            raise ArgumentError(f"row {int(zero[0])}: the quaternion (qw, qx, qy, qz) is zero",
+                                argument="targets")
+    return targets
 
 
 def _rows_of(extras: dict, rows: np.ndarray, count: int) -> dict:

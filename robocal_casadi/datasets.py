@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import path_argument
 from .effects.motion import with_directions
 from .errors import InputError
 from .fields import (
@@ -157,17 +158,21 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
 
 
 def load_dataset(path: str | Path, *, require_data: bool = True,
-                 robot: Robot | None = None, allow_outside_data: bool = False) -> Dataset:
+                 robot: Robot | str | Path | None = None,
+                 allow_outside_data: bool = False) -> Dataset:
     """Read and check a dataset file and its table.
 
     ``require_data=False`` (planning) does not read the table (it may be missing, or a
     plan whose measured columns are still empty) and returns no rows.
-    ``robot`` replaces the robot file the dataset names (e.g. a calibrated robot).
+    ``robot`` (a ``Robot`` or a robot file) replaces the robot file the dataset names
+    (e.g. a calibrated robot).
     The data table must lie in the dataset file's folder or below it unless
     ``allow_outside_data`` (see ``fields.referenced_file``).
     Every problem raises ``InputError`` naming the file, the key or line, and what is wrong.
     """
-    path = Path(path)
+    path = path_argument(path, "path")
+    if robot is not None and not isinstance(robot, Robot):
+        robot = load_robot(path_argument(robot, "robot", what="a Robot or a robot file"))
     content = load_yaml(path, what="dataset file")
     looks = file_kind(content)
     if looks is not None and looks != "a dataset file":
