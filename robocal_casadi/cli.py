@@ -16,6 +16,7 @@ from .errors import RobocalError
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet")
+MAX_MESSAGE = 1000  # characters of an error line
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,16 +54,26 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args._module.run(args) or 0)
     except RobocalError as error:
-        message = " ".join(str(error).split())
-        print(f"robocal {args.verb}: error: {message}", file=sys.stderr)
+        print(f"robocal {args.verb}: error: {one_line(str(error))}", file=sys.stderr)
         return 2
     except OSError as error:
         # A path that cannot be read or written (permissions, a full disk, a name that
         # is too long): the user's to fix, so one line, not a traceback.
-        where = f"{error.filename}: " if error.filename else ""
+        where = f"{one_line(str(error.filename), 300)}: " if error.filename else ""
         reason = error.strerror or str(error)
-        print(f"robocal {args.verb}: error: {where}{' '.join(reason.split())}", file=sys.stderr)
+        print(f"robocal {args.verb}: error: {where}{one_line(reason)}", file=sys.stderr)
         return 2
+
+
+def one_line(message: str, limit: int = MAX_MESSAGE) -> str:
+    """``message`` on one line, cut in the middle to ``limit`` characters (a value
+    quoted from a file may be of any size; the start names the file and key, the end
+    says what is wrong)."""
+    text = " ".join(message.split())
+    if len(text) <= limit:
+        return text
+    head = (limit * 2) // 3
+    return f"{text[:head]} [...] {text[-(limit - head - 7):]}"
 
 
 if __name__ == "__main__":

@@ -29,6 +29,8 @@ MAX_TABLE_BYTES = 256 * 2**20  # likewise a data table
 MAX_DEPTH = 100  # nesting of lists and mappings
 MAX_EXPANDED = 100_000  # values in the document once every alias (*name) is expanded
 _MERGE_TAG = "tag:yaml.org,2002:merge"
+MAX_NAME_BYTES = 255  # one component of a path (most file systems)
+MAX_PATH_CHARACTERS = 4096  # a whole path (Linux PATH_MAX)
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -245,10 +247,21 @@ def mapping(value: Any, *, file: str | Path | None, where: str, hint: str = "") 
 
 
 def file_name(value: Any, *, file: str | Path | None, where: str) -> str:
-    """A file name given in a YAML file: non-empty text."""
+    """A file name given in a YAML file: non-empty text, short enough for a file system
+    and without NUL (else an ``InputError`` naming ``file`` and ``where``, the name cut)."""
     if not isinstance(value, str) or not value.strip():
         raise InputError(f"expected a file name, got {_describe(value)}", file=file, where=where)
-    return value.strip()
+    name = value.strip()
+    parts = re.split(r"[/\\]", name)
+    longest = max(len(part.encode("utf-8", "surrogatepass")) for part in parts)
+    if len(name) > MAX_PATH_CHARACTERS or longest > MAX_NAME_BYTES:
+        raise InputError(f"a file name of {len(name):,} characters ({cut(name, 40)}): too long for "
+                         f"a file (at most {MAX_NAME_BYTES} bytes per folder level, "
+                         f"{MAX_PATH_CHARACTERS} in all)", file=file, where=where)
+    if "\x00" in name:
+        raise InputError(f"a NUL character in the file name {cut(name, 40)}", file=file,
+                         where=where)
+    return name
 
 
 def resolved(path: Path) -> Path:

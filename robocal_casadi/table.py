@@ -146,8 +146,9 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
     if columns and all(_NUMBER.fullmatch(c) or _NON_FINITE.fullmatch(c) for c in columns if c):
         raise InputError("the first line holds numbers, not column names: the table needs a "
                          "header line", file=path, where=f"line {header_line}")
-    if len(set(columns)) != len(columns):
-        repeated = sorted({c for c in columns if columns.count(c) > 1})
+    named = [c for c in columns if c]  # unnamed columns (trailing commas) are checked below
+    if len(set(named)) != len(named):
+        repeated = sorted({c for c in named if named.count(c) > 1})
         raise InputError(f"column(s) {repeated} appear more than once in the header "
                          f"{listed(columns)}", file=path, where=f"line {header_line}")
     rows, lines = [], []
