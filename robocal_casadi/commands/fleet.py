@@ -33,6 +33,7 @@ import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ..calibration import METHODS
 from ..errors import InputError
@@ -98,9 +99,10 @@ def _only_run(folder: Path) -> Iterator[None]:
         os.close(handle)
 
 
-def _prepare_out(out: Path, force: bool) -> None:
+def _prepare_out(out: Path, force: bool) -> list[Path]:
     """The fleet folder is kept between runs (robots are replaced one by one), so it may
-    be new, empty, or one robocal wrote; any other folder needs --force."""
+    be new, empty, or one robocal wrote; any other folder needs --force. Returns what it
+    created (the folder, the marker) and the lock file to come, for ``_undo``."""
     if str(out).strip() == "":
         raise InputError("expected a folder name", where="--out")
     if out.exists() and not out.is_dir():
@@ -109,9 +111,28 @@ def _prepare_out(out: Path, force: bool) -> None:
         raise InputError(f"{out} is a folder robocal did not write and it is not empty; name a "
                          "new folder (or give --force to write the fleet's results into it)",
                          where="--out")
+    created = [] if out.exists() else [out]
     out.mkdir(parents=True, exist_ok=True)
     if not written_by_robocal(out):
         (out / MARKER).write_text(MARKER_TEXT)
+        created.append(out / MARKER)
+    if not (out / LOCK).exists():
+        created.append(out / LOCK)
+    return created
+
+
+def _undo(out: Path, created: list[Path]) -> None:
+    """Remove what ``_prepare_out`` and the lock added when the run wrote nothing else
+    (a scheduler that cannot be reached, an interruption before the first robot)."""
+    made = {p.name for p in created if p != out}
+    if any(entry.name not in made for entry in out.iterdir()):
+        return
+    for path in created:
+        if path != out:
+            path.unlink(missing_ok=True)
+    if out in created:
+        with contextlib.suppress(OSError):
+            out.rmdir()
 
 
 def _previous(folder: Path | None, fleet) -> dict | None:
@@ -131,11 +152,11 @@ def _previous(folder: Path | None, fleet) -> dict | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..fleet import Settings, load_fleet, summarise
-    from ..fleet.engine import run_fleet
-    from ..fleet.page import render
-    from .calibrate import _clean
+    from ..fleet import Settings, load_fleet
+    from ..fleet.engine import check_address
 
+    if args.scheduler is not None:
+        check_address(args.scheduler)
     if args.workers is not None:
         positive_count(args.workers, "--workers")
         if args.scheduler is not None:
@@ -147,7 +168,30 @@ def run(args: argparse.Namespace) -> int:
     settings = Settings(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                         max_iterations=args.max_iterations, report=not args.no_report,
                         allow_outside_data=args.allow_outside_data, recompute=args.recompute)
-    _prepare_out(args.out, args.force)
+    created = _prepare_out(args.out, args.force)
+    try:
+        outcomes, summary = _run_locked(args, fleet, settings, previous)
+    except BaseException:
+        _undo(args.out, created)
+        raise
+    print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
+          f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
+    for outcome in summary.failed:
+        print(f"failed: {outcome.name}: {outcome.error}")
+    for reason in summary.reasons():
+        print(f"stands out: {reason['robot']}: {reason['reason']}")
+    print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
+    sys.stdout.flush()
+    return 1 if summary.failed else 0
+
+
+def _run_locked(args: argparse.Namespace, fleet, settings, previous) -> tuple[list, Any]:
+    """Calibrate every robot into ``args.out`` under its lock; write the fleet's files."""
+    from ..fleet import summarise
+    from ..fleet.engine import run_fleet
+    from ..fleet.page import render
+    from .calibrate import _clean
+
     with _only_run(args.out):
         failed = 0
         with Progress("fleet", total=len(fleet.robots)) as bar:
@@ -167,12 +211,4 @@ def run(args: argparse.Namespace) -> int:
             staging.write_text(json.dumps(_clean(summary.to_json()), indent=1) + "\n")
         with atomic_file(args.out / "fleet.html") as staging:
             staging.write_text(render(summary))
-    print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
-          f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
-    for outcome in summary.failed:
-        print(f"failed: {outcome.name}: {outcome.error}")
-    for reason in summary.reasons():
-        print(f"stands out: {reason['robot']}: {reason['reason']}")
-    print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
-    sys.stdout.flush()
-    return 1 if summary.failed else 0
+    return outcomes, summary

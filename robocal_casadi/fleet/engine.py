@@ -12,14 +12,30 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ..errors import InputError
+from ..fields import cut
 from .robot_task import RobotOutcome, Settings, calibrate_robot
 from .spec import Fleet
 
-CONNECT_TIMEOUT = 30.0  # [s] to reach an existing scheduler
+CONNECT_TIMEOUT = 5.0  # [s] to reach an existing scheduler (a live one answers in ms)
+PROTOCOLS = ("tcp", "tls", "ucx", "ws", "wss")  # Dask's address schemes
+_ADDRESS = re.compile(r"(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:]+\]|[A-Za-z0-9._-]+)"
+                      r"(?::(?P<port>\d{1,5}))?")
+
+
+def check_address(address: str) -> None:
+    """Refuse a scheduler address that is not ``[scheme://]host[:port]`` with a Dask
+    scheme and a port in 1..65535 (``InputError`` naming ``--scheduler``), before any
+    connection is tried."""
+    match = _ADDRESS.fullmatch(address.strip())
+    if match is None or (match["scheme"] or "tcp") not in PROTOCOLS or (
+            match["port"] is not None and not 0 < int(match["port"]) < 65536):
+        raise InputError(f"expected an address like tcp://HOST:PORT (schemes "
+                         f"{', '.join(PROTOCOLS)}), got {cut(address)}", where="--scheduler")
 
 
 def machine_cores() -> int:
@@ -38,6 +54,7 @@ def _client(scheduler: str | None, workers: int | None):
         raise InputError("fleet calibration needs Dask: pip install 'robocal_casadi[fleet]' "
                          "(or: pip install 'dask[distributed]')") from None
     if scheduler is not None:
+        check_address(scheduler)
         try:
             return Client(scheduler, timeout=CONNECT_TIMEOUT), None
         except (OSError, TimeoutError, ValueError) as error:
