@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 
 from .errors import RobocalError
+from .output import clear_interrupt, interrupted, note_interrupt
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet")
 MAX_MESSAGE = 1000  # characters of an error line
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT, as shells report it)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -48,9 +52,45 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _on_interrupt(signum, frame) -> None:
+    """Ctrl-C: remember it (a library may swallow the exception) and stop."""
+    note_interrupt()
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run one verb; the exit status is 0, 1 (a robot of a fleet failed), 2 (bad input),
+    3 (a calibration no better than doing nothing) or 130 (interrupted)."""
+    verb = "robocal"
+    clear_interrupt()
+    handler = None
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.signal(signal.SIGINT, _on_interrupt)
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        verb = f"robocal {args.verb}"
+        status = _run(args)
+        if interrupted():  # swallowed by a library, yet the user asked to stop
+            raise KeyboardInterrupt
+        return status
+    except KeyboardInterrupt:
+        return _interrupted(verb)
+    except BaseException:
+        if interrupted():  # e.g. a solver turning the interruption into its own error
+            return _interrupted(verb)
+        raise
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGINT, handler)
+
+
+def _interrupted(verb: str) -> int:
+    print(f"{verb}: interrupted; no output was left half-written", file=sys.stderr)
+    return INTERRUPTED
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         return int(args._module.run(args) or 0)
     except RobocalError as error:

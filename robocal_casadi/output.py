@@ -9,6 +9,9 @@ writes beside them (when their process is gone, or after a day).
 Every output folder holds a marker file, ``.robocal-output``: a folder with it was
 written by robocal and may be replaced as a whole by the next run; any other non-empty
 folder is refused unless the caller forces it (see ``commands.arguments``).
+
+An interruption (Ctrl-C) that a library swallowed (a solver that catches the signal and
+carries on) is remembered by ``note_interrupt``; nothing is moved into place after it.
 """
 
 from __future__ import annotations
@@ -28,6 +31,29 @@ MARKER_TEXT = ("robocal_casadi wrote this folder; a run given it as --out replac
                "whole.\n")
 STAGING_TAG = "robocal"
 STALE_AGE = 24 * 3600.0  # [s] staging left by a live process is removed after a day
+
+
+_interrupt = {"seen": False}
+
+
+def note_interrupt() -> None:
+    """Remember that the user asked to stop (called from the command line's handler)."""
+    _interrupt["seen"] = True
+
+
+def clear_interrupt() -> None:
+    """Forget an earlier interruption (each command-line run starts afresh)."""
+    _interrupt["seen"] = False
+
+
+def interrupted() -> bool:
+    """Whether an interruption was noted since the program started."""
+    return _interrupt["seen"]
+
+
+def _check_interrupted() -> None:
+    if _interrupt["seen"]:
+        raise KeyboardInterrupt
 
 
 def _staging_prefix(target: Path) -> str:
@@ -97,6 +123,7 @@ def atomic_directory(target: str | Path) -> Iterator[Path]:
     try:
         yield staging
         (staging / MARKER).write_text(MARKER_TEXT)
+        _check_interrupted()
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -127,6 +154,7 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     staging = Path(name)
     try:
         yield staging
+        _check_interrupted()
     except BaseException:
         staging.unlink(missing_ok=True)
         raise
