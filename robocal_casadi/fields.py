@@ -13,7 +13,7 @@ import re
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import IO, Any, Literal, overload
 
 import yaml
 
@@ -128,10 +128,8 @@ def _describe(value: Any) -> str:
     return type(value).__name__
 
 
-def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> str:
-    """The UTF-8 text of ``path`` (a leading byte-order mark dropped); an ``InputError``
-    for a missing file, a folder, a device or pipe, a file larger than ``limit`` bytes
-    (checked before reading), an unreadable file or bytes that are not UTF-8."""
+def _checked_file(path: Path, what: str, limit: int) -> None:
+    """Refuse ``path`` unless it is an existing regular file of at most ``limit`` bytes."""
     try:
         mode = path.stat()
     except FileNotFoundError:
@@ -148,6 +146,24 @@ def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) ->
     if mode.st_size > limit:
         raise InputError(f"the {what} has {mode.st_size:,} bytes, more than the "
                          f"{limit // 2**20} MiB a {what} may have", file=path)
+
+
+def open_checked(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> IO[str]:
+    """``path`` opened as UTF-8 text for reading as a stream (a byte-order mark dropped,
+    line endings left to the reader: ``newline=""``), after the checks of ``read_text``
+    that need no reading; decoding errors surface while reading."""
+    _checked_file(path, what, limit)
+    try:
+        return path.open("r", encoding="utf-8-sig", newline="")
+    except OSError as error:
+        raise InputError(f"cannot read the {what} ({error.strerror})", file=path) from None
+
+
+def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> str:
+    """The UTF-8 text of ``path`` (a leading byte-order mark dropped); an ``InputError``
+    for a missing file, a folder, a device or pipe, a file larger than ``limit`` bytes
+    (checked before reading), an unreadable file or bytes that are not UTF-8."""
+    _checked_file(path, what, limit)
     try:
         with path.open("rb") as handle:
             data = handle.read(limit + 1)
