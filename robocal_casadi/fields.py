@@ -190,7 +190,12 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
     ``InputError`` naming the file (and the line)."""
     path = Path(path)
     text = read_text(path, what=what)
-    loader = _StrictLoader(text)
+    try:
+        loader = _StrictLoader(text)
+    except yaml.reader.ReaderError as error:  # a control character, found before parsing
+        line = text[:error.position].count("\n") + 1
+        raise InputError(f"not valid YAML (the control character {error.character:#06x} may "
+                         f"not appear in a YAML file)", file=path, where=f"line {line}") from None
     try:
         node = loader.get_single_node()
         if node is not None:

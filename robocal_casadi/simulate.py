@@ -60,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from .checks import choice, count, positive
+from .checks import choice, count, path_argument, positive
 from .datasets import KINDS, Dataset, load_dataset
 from .effects import EFFECTS, Effect, TrueWorld
 from .effects.motion import direction_column, is_direction_column
@@ -457,7 +457,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     if table_rows > MAX_ROWS:
         raise ArgumentError(f"{rows:,} units of {kind} make {table_rows:,} table rows, more than "
                             f"the {MAX_ROWS:,} a simulated table may have", argument="rows")
-    nominal = load_robot(robot) if isinstance(robot, (str, Path)) else robot
+    nominal = robot if isinstance(robot, Robot) else load_robot(
+        path_argument(robot, "robot", what="a Robot or a robot file"))
     units = units or nominal.units
     out_dir = Path(out_dir)
     if not force:

@@ -370,10 +370,16 @@ def parameter_names(value, valid: Sequence[str], argument: str) -> tuple[str, ..
             raise ArgumentError(f"unknown parameter {cut(name)}{hint}; the robot's parameters "
                                 f"are {cut(list(valid), 120)}", argument=argument)
         out.append(name)
+    if not out:
+        raise ArgumentError("no parameter names given: nothing could be fitted (give None "
+                            "for all of them)", argument=argument)
     return tuple(dict.fromkeys(out))
 
 
 def _check_effects(effects: Sequence) -> None:
+    if not isinstance(effects, (list, tuple)):
+        raise ArgumentError(f"expected a list of Effect objects, got a {type(effects).__name__}",
+                            argument="effects")
     wrong = sorted({type(e).__name__ for e in effects if not isinstance(e, Effect)})
     if wrong:
         raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
