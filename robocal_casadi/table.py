@@ -256,11 +256,11 @@ def read_table(path: str | Path, *, required: Sequence[str] = ()) -> Table:
         if len(pending[0]) >= CHUNK:
             _pack(pending, chunks)
     _pack(pending, chunks)
-    cells = []
+    packed: list[np.ndarray] = []
     for slot in range(len(keep)):  # one column at a time: its chunks go as it is joined
-        cells.append(np.concatenate(chunks[slot]) if chunks[slot] else np.zeros(0, "S1"))
+        packed.append(np.concatenate(chunks[slot]) if chunks[slot] else np.zeros(0, "S1"))
         chunks[slot] = []
-    table = Table(path, tuple(columns[k] for k in keep), tuple(cells),
+    table = Table(path, tuple(columns[k] for k in keep), tuple(packed),
                   np.frombuffer(lines, dtype=np.int64).copy())
     table.require(*required)
     if not lines:
