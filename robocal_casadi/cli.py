@@ -16,6 +16,7 @@ import threading
 
 from .errors import RobocalError
 from .output import clear_interrupt, interrupted, note_interrupt
+from .workers import command_started
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet")
@@ -70,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         verb = f"robocal {args.verb}"
-        status = _run(args)
+        with command_started():
+            status = _run(args)
         if interrupted():  # swallowed by a library, yet the user asked to stop
             raise KeyboardInterrupt
         return status

@@ -8,7 +8,9 @@ Data come from the shipped UR10 tracker series and from ``robocal_casadi.simulat
 from __future__ import annotations
 
 import os
+import re
 import shutil
+import signal
 import subprocess
 import sys
 import textwrap
@@ -25,6 +27,7 @@ from robocal_casadi.simulate import MAX_ROWS, simulate
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 UR10 = REPOSITORY / "robocal_casadi" / "data" / "ur10-ipa"
+STAGING = re.compile(r"\..+\.robocal-\d+-.*")  # output.py's staging names
 
 
 @pytest.fixture()
@@ -183,6 +186,30 @@ def test_an_interruption_a_library_swallowed_still_stops_the_output(tmp_path, mo
     capsys.readouterr()
     assert main(["simulate", "--example", "ur_type", "--kind", "tracker_points", "--rows", "4",
                  "--out", str(tmp_path / "later")]) == 0  # the next run starts afresh
+
+
+def test_ctrl_c_to_a_fleet_reaches_no_worker(ur10, tmp_path):
+    """Ctrl-C goes to the terminal's whole process group: the fleet's worker processes
+    get it too and must print nothing; the verb ends as any other."""
+    pytest.importorskip("dask.distributed")
+    (ur10 / "fleet.yaml").write_text("robots:\n  - name: a\n    datasets: [series_D_fit.yaml]\n"
+                                     "  - name: b\n    datasets: [series_D_fit.yaml]\n")
+    out = tmp_path / "fleet-out"
+    process = subprocess.Popen([sys.executable, "-m", "robocal_casadi.cli", "fleet",
+                                str(ur10 / "fleet.yaml"), "--out", str(out), "--workers", "1",
+                                "--no-report"], cwd=REPOSITORY, start_new_session=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        process.wait(timeout=4.0)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGINT)
+    _, err = process.communicate(timeout=300)
+    assert process.returncode == 130, err[-2000:]
+    assert err.strip().splitlines() == [
+        "robocal fleet: interrupted; no output was left half-written"], err[-2000:]
+    if out.exists():  # robots finished before the interruption are kept whole
+        staging = [p.name for p in out.rglob("*") if STAGING.fullmatch(p.name)]
+        assert staging == [] and not (out / "fleet.json").exists()
 
 
 # ----------------------------------------------------------------------------- counts

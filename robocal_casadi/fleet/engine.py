@@ -10,14 +10,18 @@ files and the output folder under the same paths.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
+import signal
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ..errors import InputError
 from ..fields import cut
+from ..output import note_interrupt
 from .robot_task import RobotOutcome, Settings, calibrate_robot
 from .spec import Fleet
 
@@ -64,14 +68,42 @@ def _client(scheduler: str | None, workers: int | None):
     # One single-threaded process per core: a calibration is one busy thread, and
     # processes keep each worker's compiled functions and memory apart. The scheduler's
     # status page goes to a free port on this machine only (Dask's usual 8787 may be taken).
-    cluster = LocalCluster(n_workers=workers or machine_cores(), threads_per_worker=1,
-                           processes=True, dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
+    with _interrupt_deferred() as seen:
+        try:
+            cluster = LocalCluster(n_workers=workers or machine_cores(), threads_per_worker=1,
+                                   processes=True, dashboard_address="127.0.0.1:0",
+                                   silence_logs=logging.ERROR)
+        except Exception:
+            if seen:  # a worker stopped by the same Ctrl-C while it started
+                raise KeyboardInterrupt from None
+            raise
     try:
+        if seen:
+            raise KeyboardInterrupt
         return Client(cluster), cluster
     except BaseException:
         cluster.close()
         raise
+
+
+@contextlib.contextmanager
+def _interrupt_deferred() -> Iterator[list[int]]:
+    """Note Ctrl-C inside (in the yielded list) instead of raising it: a cluster stopped
+    half-way through its start cannot be closed, and Dask would complain at exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    seen: list[int] = []
+
+    def note(number: int, frame) -> None:
+        seen.append(number)
+        note_interrupt()
+
+    previous = signal.signal(signal.SIGINT, note)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_tasks(fleet: Fleet, out: Path, settings: Settings, *, scheduler: str | None = None,
