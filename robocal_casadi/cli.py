@@ -95,16 +95,20 @@ def _interrupted(verb: str) -> int:
 def _run(args: argparse.Namespace) -> int:
     try:
         return int(args._module.run(args) or 0)
-    except RobocalError as error:
-        print(f"robocal {args.verb}: error: {one_line(str(error))}", file=sys.stderr)
+    except (RobocalError, OSError) as error:
+        if interrupted():  # a failure the interruption caused: say it was interrupted
+            raise KeyboardInterrupt from None
+        print(f"robocal {args.verb}: error: {_error_line(error)}", file=sys.stderr)
         return 2
-    except OSError as error:
-        # A path that cannot be read or written (permissions, a full disk, a name that
-        # is too long): the user's to fix, so one line, not a traceback.
-        where = f"{one_line(str(error.filename), 300)}: " if error.filename else ""
-        reason = error.strerror or str(error)
-        print(f"robocal {args.verb}: error: {where}{one_line(reason)}", file=sys.stderr)
-        return 2
+
+
+def _error_line(error: RobocalError | OSError) -> str:
+    """What went wrong, on one line. An ``OSError`` is a path that cannot be read or
+    written (permissions, a full disk, a name that is too long): the user's to fix."""
+    if isinstance(error, RobocalError):
+        return one_line(str(error))
+    where = f"{one_line(str(error.filename), 300)}: " if error.filename else ""
+    return f"{where}{one_line(error.strerror or str(error))}"
 
 
 def one_line(message: str, limit: int = MAX_MESSAGE) -> str:

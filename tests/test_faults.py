@@ -21,7 +21,7 @@ import pytest
 
 from robocal_casadi import calibrate, compensate, load_dataset, load_robot
 from robocal_casadi.cli import MAX_MESSAGE, main
-from robocal_casadi.errors import ArgumentError, InputError
+from robocal_casadi.errors import ArgumentError, InputError, SolverError
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.simulate import MAX_ROWS, simulate
 
@@ -210,6 +210,25 @@ def test_ctrl_c_to_a_fleet_reaches_no_worker(ur10, tmp_path):
     if out.exists():  # robots finished before the interruption are kept whole
         staging = [p.name for p in out.rglob("*") if STAGING.fullmatch(p.name)]
         assert staging == [] and not (out / "fleet.json").exists()
+
+
+@pytest.mark.parametrize("raised", [SolverError("the solver was stopped"),
+                                    SystemError("returned a result with an exception set")])
+def test_an_interruption_a_library_turned_into_its_error_is_one_line(monkeypatch, capsys,
+                                                                     raised):
+    """A solver that catches Ctrl-C and raises its own error: still 'interrupted'."""
+    from robocal_casadi.commands import simulate as simulate_verb
+    from robocal_casadi.output import note_interrupt
+
+    def stopped(args) -> int:
+        note_interrupt()
+        raise raised
+
+    monkeypatch.setattr(simulate_verb, "run", stopped)
+    status = main(["simulate", "--example", "ur_type", "--kind", "tracker_points", "--out",
+                   "unused"])
+    assert status == 130 and _one_line(capsys).endswith("interrupted; no output was left "
+                                                        "half-written")
 
 
 # ----------------------------------------------------------------------------- counts
