@@ -3,6 +3,8 @@
 The public API is re-exported here; see the README for a worked example.
 """
 
+# First, before the heavy imports: a worker process of a command must not answer Ctrl-C.
+from . import workers  # noqa: F401, I001
 from .calibration import calibrate
 from .compensation import compensate
 from .datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset

@@ -10,7 +10,9 @@ from __future__ import annotations
 import difflib
 import math
 import operator
+import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
@@ -98,3 +100,14 @@ def rotation_matrix(value: Any, argument: str, *, tolerance: float = 1e-6) -> np
         raise ArgumentError(f"expected a rotation matrix (orthonormal, determinant +1), got "
                             f"determinant {np.linalg.det(R):.6g}", argument=argument)
     return R
+
+
+def path_argument(value: Any, argument: str, *, what: str = "a file path") -> Path:
+    """``value`` (text or a path-like object) as a ``Path``; anything else, and empty
+    text, is an ``ArgumentError`` saying what was given."""
+    if isinstance(value, (str, os.PathLike)) and not isinstance(value, bytes):
+        path = Path(value)
+        if str(value).strip():
+            return path
+        raise ArgumentError(f"expected {what}, got empty text", argument=argument)
+    raise ArgumentError(f"expected {what}, got {_shown(value)}", argument=argument)

@@ -14,14 +14,20 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 
 from . import __version__
 from .commands.console import Console
 from .errors import RobocalError
+from .output import clear_interrupt, interrupted, note_interrupt
+from .workers import command_started
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet")
+MAX_MESSAGE = 1000  # characters of an error line
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT, as shells report it)
 
 
 class _Refused(Exception):
@@ -87,30 +93,81 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     except _Refused as refused:
         verb = refused.prog.removeprefix("robocal").strip() or None
         console = Console(verb or "robocal", json="--json" in words)
-        console.fields["error"] = refused.message
-        print(f"{refused.prog}: error: {refused.message}", file=sys.stderr)
+        console.fields["error"] = one_line(refused.message)
+        print(f"{refused.prog}: error: {one_line(refused.message)}", file=sys.stderr)
         console.finish(2)
         raise SystemExit(2) from None
     return args
 
 
+def _on_interrupt(signum, frame) -> None:
+    """Ctrl-C: remember it (a library may swallow the exception) and stop."""
+    note_interrupt()
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = parse(argv)
-    console = Console(args.verb, quiet=args.quiet, json=args.json)
-    args.console = console
-    with console.capture():
-        try:
-            status = int(args._module.run(args) or 0)
-        except RobocalError as error:
-            status = console.error(" ".join(str(error).split()))
-        except OSError as error:
-            # A path that cannot be read or written (permissions, a full disk, a name that
-            # is too long): the user's to fix, so one line, not a traceback.
-            where = f"{error.filename}: " if error.filename else ""
-            reason = error.strerror or str(error)
-            status = console.error(f"{where}{' '.join(reason.split())}")
-    console.finish(status)
-    return status
+    """Run one verb; the exit status is 0, 1 (a robot of a fleet failed), 2 (bad input),
+    3 (a calibration no better than doing nothing) or 130 (interrupted)."""
+    verb = "robocal"
+    clear_interrupt()
+    handler = None
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.signal(signal.SIGINT, _on_interrupt)
+    try:
+        args = parse(argv)
+        verb = f"robocal {args.verb}"
+        console = Console(args.verb, quiet=args.quiet, json=args.json)
+        args.console = console
+        with command_started(), console.capture():
+            status = _run(args, console)
+        if interrupted():  # swallowed by a library, yet the user asked to stop
+            raise KeyboardInterrupt
+        console.finish(status)
+        return status
+    except KeyboardInterrupt:
+        return _interrupted(verb)
+    except BaseException:
+        if interrupted():  # e.g. a solver turning the interruption into its own error
+            return _interrupted(verb)
+        raise
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGINT, handler)
+
+
+def _interrupted(verb: str) -> int:
+    print(f"{verb}: interrupted; no output was left half-written", file=sys.stderr)
+    return INTERRUPTED
+
+
+def _run(args: argparse.Namespace, console: Console) -> int:
+    try:
+        return int(args._module.run(args) or 0)
+    except (RobocalError, OSError) as error:
+        if interrupted():  # a failure the interruption caused: say it was interrupted
+            raise KeyboardInterrupt from None
+        return console.error(_error_line(error))
+
+
+def _error_line(error: RobocalError | OSError) -> str:
+    """What went wrong, on one line. An ``OSError`` is a path that cannot be read or
+    written (permissions, a full disk, a name that is too long): the user's to fix."""
+    if isinstance(error, RobocalError):
+        return one_line(str(error))
+    where = f"{one_line(str(error.filename), 300)}: " if error.filename else ""
+    return f"{where}{one_line(error.strerror or str(error))}"
+
+
+def one_line(message: str, limit: int = MAX_MESSAGE) -> str:
+    """``message`` on one line, cut in the middle to ``limit`` characters (a value
+    quoted from a file may be of any size; the start names the file and key, the end
+    says what is wrong)."""
+    text = " ".join(message.split())
+    if len(text) <= limit:
+        return text
+    head = (limit * 2) // 3
+    return f"{text[:head]} [...] {text[-(limit - head - 7):]}"
 
 
 if __name__ == "__main__":

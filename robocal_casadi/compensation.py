@@ -24,16 +24,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .checks import count
+from .checks import count, path_argument
 from .configuration import same_configuration
-from .errors import InputError
+from .errors import ArgumentError, InputError
 from .ik import IKBatchResult, inverse_kinematics
 from .kinematics import Kinematics
-from .robot import Robot
+from .robot import Robot, load_robot
 from .transforms import matrix_from_quaternion
 
 STATUS_OK = "ok"
@@ -78,11 +79,11 @@ def target_poses(targets: np.ndarray) -> np.ndarray:
     return poses
 
 
-def compensate(robot: Robot, targets, *, start=None, seeds=None, nominal: Robot | None = None,
-               restarts: int = 10, seed: int = 0, effects=None,
+def compensate(robot: Robot | str | Path, targets, *, start=None, seeds=None,
+               nominal: Robot | None = None, restarts: int = 10, seed: int = 0, effects=None,
                extras: dict | None = None) -> Compensation:
-    """Joints that put ``robot``'s tool on each target, each on the branch of its seed
-    (see the module docstring).
+    """Joints that put ``robot``'s tool (a ``Robot`` or a robot file) on each target, each
+    on the branch of its seed (see the module docstring).
 
     ``targets`` (N, 3) positions or (N, 7) poses, SI, world frame. ``seeds`` (N, dof)
     [rad or m]: the joints that reached each target before (a taught program), NaN rows
@@ -96,10 +97,9 @@ def compensate(robot: Robot, targets, *, start=None, seeds=None, nominal: Robot 
     reported are then those of the tool with the effects.
     """
     restarts = count(restarts, "restarts", minimum=0)
-    targets = np.atleast_2d(np.asarray(targets, dtype=float))
-    if targets.ndim != 2 or targets.shape[1] not in (3, 7):
-        raise InputError(f"targets need 3 (x, y, z) or 7 (x, y, z, qw, qx, qy, qz) columns, "
-                         f"got {targets.shape[1]}")
+    if not isinstance(robot, Robot):
+        robot = load_robot(path_argument(robot, "robot", what="a Robot or a robot file"))
+    targets = _targets(targets)
     kinematics = Kinematics(robot)
     rng = np.random.default_rng(seed)
     mode = "pose" if targets.shape[1] == 7 else "point"
@@ -224,6 +224,28 @@ def _rotation_matrix(vector: np.ndarray) -> np.ndarray:
     k = vector / angle
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def _targets(value) -> np.ndarray:
+    """``value`` as finite (N, 3) or (N, 7) float targets, else an ``ArgumentError``."""
+    try:
+        targets = np.atleast_2d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        raise ArgumentError(f"expected numbers (N x 3 or N x 7), got a {type(value).__name__}",
+                            argument="targets") from None
+    if targets.ndim != 2 or targets.shape[1] not in (3, 7) or not targets.size:
+        raise ArgumentError(f"targets need 3 (x, y, z) or 7 (x, y, z, qw, qx, qy, qz) columns, "
+                            f"got shape {targets.shape}", argument="targets")
+    bad = np.flatnonzero(~np.all(np.isfinite(targets), axis=1))
+    if bad.size:
+        raise ArgumentError(f"row {int(bad[0])} is not finite (NaN or infinity); "
+                            f"{bad.size} such row(s)", argument="targets")
+    if targets.shape[1] == 7:
+        zero = np.flatnonzero(np.linalg.norm(targets[:, 3:], axis=1) == 0)
+        if zero.size:
+            raise ArgumentError(f"row {int(zero[0])}: the quaternion (qw, qx, qy, qz) is zero",
+                                argument="targets")
+    return targets
 
 
 def _rows_of(extras: dict, rows: np.ndarray, count: int) -> dict:

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import path_argument
 from .effects.motion import with_directions
 from .errors import InputError
 from .fields import (
@@ -162,17 +163,21 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
 
 
 def load_dataset(path: str | Path, *, require_data: bool = True,
-                 robot: Robot | None = None, allow_outside_data: bool = False) -> Dataset:
+                 robot: Robot | str | Path | None = None,
+                 allow_outside_data: bool = False) -> Dataset:
     """Read and check a dataset file and its table.
 
     ``require_data=False`` (planning) does not read the table (it may be missing, or a
     plan whose measured columns are still empty) and returns no rows.
-    ``robot`` replaces the robot file the dataset names (e.g. a calibrated robot).
+    ``robot`` (a ``Robot`` or a robot file) replaces the robot file the dataset names
+    (e.g. a calibrated robot).
     The data table must lie in the dataset file's folder or below it unless
     ``allow_outside_data`` (see ``fields.referenced_file``).
     Every problem raises ``InputError`` naming the file, the key or line, and what is wrong.
     """
-    path = Path(path)
+    path = path_argument(path, "path")
+    if robot is not None and not isinstance(robot, Robot):
+        robot = load_robot(path_argument(robot, "robot", what="a Robot or a robot file"))
     content = load_yaml(path, what="dataset file")
     looks = file_kind(content)
     if looks is not None and looks != "a dataset file":
@@ -196,6 +201,9 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if data_path is not None:
         if data_path.is_dir():
             raise InputError(f"the data table {data_path} is a folder", file=path, where="data")
+        if data_path.exists() and not data_path.is_file():
+            raise InputError(f"the data table {data_path} is not a regular file (a device, "
+                             f"pipe or socket)", file=path, where="data")
         if not data_path.exists() and not data_path.is_symlink() and require_data:
             raise InputError(f"data table {data_path} not found", file=path, where="data")
         # Planning describes a set-up: its table may be missing or an unmeasured plan.
@@ -261,8 +269,11 @@ def referenced_robot(content: dict, path: Path, robot: Robot | None = None
     if robot is None:
         if robot_path.is_dir():
             raise InputError(f"robot file {robot_path} is a folder", file=path, where="robot")
-        if not robot_path.is_file() and not robot_path.is_symlink():  # a loop: named below
+        if not robot_path.exists() and not robot_path.is_symlink():  # a loop: named below
             raise InputError(f"robot file {robot_path} not found", file=path, where="robot")
+        if robot_path.exists() and not robot_path.is_file():
+            raise InputError(f"robot file {robot_path} is not a regular file (a device, pipe "
+                             f"or socket)", file=path, where="robot")
         links = {}
         for key in ("base_link", "tip_link"):  # the chain of a URDF robot
             if content.get(key) is not None:
@@ -397,8 +408,35 @@ def _extras(table: Table, used: set[str]) -> dict[str, np.ndarray]:
 def _with_table(common: dict, table: Table | None, robot: Robot, used: set[str]) -> dict:
     if table is None:
         return common
-    return dict(common, joints=joint_readings(table, robot, common["units"], used,
-                                              common.get("robot_path")))
+    joints = joint_readings(table, robot, common["units"], used, common.get("robot_path"))
+    _check_angle_unit(joints, robot, common["units"], table)
+    return dict(common, joints=joints)
+
+
+UNIT_CHECK_ROWS = 10  # readings needed before a narrow spread counts as a unit mix-up
+WIDE_RANGE = np.radians(90.0)  # a joint whose limits span more than this may move widely
+
+
+def _check_angle_unit(joints: np.ndarray, robot: Robot, units: Units, table: Table) -> None:
+    """Refuse calibration readings that look like radians in a file that declares deg.
+
+    Every revolute reading within +-2 pi deg (+-6.3 deg), while they do vary and the
+    robot's limits allow far more, is what radians read as degrees give; such data
+    could not calibrate anything even if meant (the arm hardly moved), and the fit
+    would end in undetermined parameters without saying why.
+    """
+    revolute = [j for j, joint in enumerate(robot.joints) if joint.revolute]
+    if units.angle != "deg" or not revolute or len(joints) < UNIT_CHECK_ROWS:
+        return
+    readings = joints[:, revolute] / units.angle_scale  # as written, in deg
+    spans = robot.upper_limits[revolute] - robot.lower_limits[revolute]
+    if (np.all(np.abs(readings) <= 2 * np.pi) and np.any(np.ptp(readings, axis=0) > 0)
+            and np.any(spans > WIDE_RANGE)):
+        raise InputError(f"every joint angle of the {len(joints)} readings lies within "
+                         f"+-{2 * np.pi:.3g} deg although the file declares deg and the "
+                         f"robot's limits allow far more: radians in a file that declares "
+                         f"deg? (set units: {{angle: rad}})", file=table.path,
+                         where=f"columns {', '.join(f'q{j + 1}' for j in revolute)}")
 
 
 def _touch_columns(table: Table, path: Path) -> tuple[np.ndarray, tuple[str, ...]]:

@@ -13,7 +13,7 @@ import re
 import reprlib
 import stat
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import IO, Any, Literal, overload
 
 import yaml
 
@@ -29,6 +29,8 @@ MAX_TABLE_BYTES = 256 * 2**20  # likewise a data table
 MAX_DEPTH = 100  # nesting of lists and mappings
 MAX_EXPANDED = 100_000  # values in the document once every alias (*name) is expanded
 _MERGE_TAG = "tag:yaml.org,2002:merge"
+MAX_NAME_BYTES = 255  # one component of a path (most file systems)
+MAX_PATH_CHARACTERS = 4096  # a whole path (Linux PATH_MAX)
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -126,10 +128,8 @@ def _describe(value: Any) -> str:
     return type(value).__name__
 
 
-def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> str:
-    """The UTF-8 text of ``path`` (a leading byte-order mark dropped); an ``InputError``
-    for a missing file, a folder, a device or pipe, a file larger than ``limit`` bytes
-    (checked before reading), an unreadable file or bytes that are not UTF-8."""
+def _checked_file(path: Path, what: str, limit: int) -> None:
+    """Refuse ``path`` unless it is an existing regular file of at most ``limit`` bytes."""
     try:
         mode = path.stat()
     except FileNotFoundError:
@@ -146,6 +146,24 @@ def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) ->
     if mode.st_size > limit:
         raise InputError(f"the {what} has {mode.st_size:,} bytes, more than the "
                          f"{limit // 2**20} MiB a {what} may have", file=path)
+
+
+def open_checked(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> IO[str]:
+    """``path`` opened as UTF-8 text for reading as a stream (a byte-order mark dropped,
+    line endings left to the reader: ``newline=""``), after the checks of ``read_text``
+    that need no reading; decoding errors surface while reading."""
+    _checked_file(path, what, limit)
+    try:
+        return path.open("r", encoding="utf-8-sig", newline="")
+    except OSError as error:
+        raise InputError(f"cannot read the {what} ({error.strerror})", file=path) from None
+
+
+def read_text(path: Path, *, what: str = "file", limit: int = MAX_YAML_BYTES) -> str:
+    """The UTF-8 text of ``path`` (a leading byte-order mark dropped); an ``InputError``
+    for a missing file, a folder, a device or pipe, a file larger than ``limit`` bytes
+    (checked before reading), an unreadable file or bytes that are not UTF-8."""
+    _checked_file(path, what, limit)
     try:
         with path.open("rb") as handle:
             data = handle.read(limit + 1)
@@ -172,7 +190,12 @@ def load_yaml(path: str | Path, *, what: str = "file") -> dict:
     ``InputError`` naming the file (and the line)."""
     path = Path(path)
     text = read_text(path, what=what)
-    loader = _StrictLoader(text)
+    try:
+        loader = _StrictLoader(text)
+    except yaml.reader.ReaderError as error:  # a control character, found before parsing
+        line = text[:error.position].count("\n") + 1
+        raise InputError(f"not valid YAML (the control character {error.character:#06x} may "
+                         f"not appear in a YAML file)", file=path, where=f"line {line}") from None
     try:
         node = loader.get_single_node()
         if node is not None:
@@ -245,10 +268,21 @@ def mapping(value: Any, *, file: str | Path | None, where: str, hint: str = "") 
 
 
 def file_name(value: Any, *, file: str | Path | None, where: str) -> str:
-    """A file name given in a YAML file: non-empty text."""
+    """A file name given in a YAML file: non-empty text, short enough for a file system
+    and without NUL (else an ``InputError`` naming ``file`` and ``where``, the name cut)."""
     if not isinstance(value, str) or not value.strip():
         raise InputError(f"expected a file name, got {_describe(value)}", file=file, where=where)
-    return value.strip()
+    name = value.strip()
+    parts = re.split(r"[/\\]", name)
+    longest = max(len(part.encode("utf-8", "surrogatepass")) for part in parts)
+    if len(name) > MAX_PATH_CHARACTERS or longest > MAX_NAME_BYTES:
+        raise InputError(f"a file name of {len(name):,} characters ({cut(name, 40)}): too long for "
+                         f"a file (at most {MAX_NAME_BYTES} bytes per folder level, "
+                         f"{MAX_PATH_CHARACTERS} in all)", file=file, where=where)
+    if "\x00" in name:
+        raise InputError(f"a NUL character in the file name {cut(name, 40)}", file=file,
+                         where=where)
+    return name
 
 
 def resolved(path: Path) -> Path:

@@ -13,6 +13,9 @@ folder as a whole only while it holds exactly those files, unchanged
 calibrate), or one holding anything else, is refused unless the caller forces it, and a
 folder holding a dataset or job file robocal did not write there in the same verb is
 refused even then (see ``commands.arguments``).
+
+An interruption (Ctrl-C) that a library swallowed (a solver that catches the signal and
+carries on) is remembered by ``note_interrupt``; nothing is moved into place after it.
 """
 
 from __future__ import annotations
@@ -37,6 +40,29 @@ MAX_ENTRIES = 10_000  # files looked at before a folder is judged too large to r
 DATASET_KEYS = ("kind", "robots")  # top-level keys of dataset, job and fleet files
 STAGING_TAG = "robocal"
 STALE_AGE = 24 * 3600.0  # [s] staging left by a live process is removed after a day
+
+
+_interrupt = {"seen": False}
+
+
+def note_interrupt() -> None:
+    """Remember that the user asked to stop (called from the command line's handler)."""
+    _interrupt["seen"] = True
+
+
+def clear_interrupt() -> None:
+    """Forget an earlier interruption (each command-line run starts afresh)."""
+    _interrupt["seen"] = False
+
+
+def interrupted() -> bool:
+    """Whether an interruption was noted since the program started."""
+    return _interrupt["seen"]
+
+
+def _check_interrupted() -> None:
+    if _interrupt["seen"]:
+        raise KeyboardInterrupt
 
 
 def _staging_prefix(target: Path) -> str:
@@ -227,6 +253,7 @@ def atomic_directory(target: str | Path, *, verb: str) -> Iterator[Path]:
     try:
         yield staging
         (staging / MARKER).write_text(Marker(verb, folder_files(staging) or {}).text())
+        _check_interrupted()
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -257,6 +284,7 @@ def atomic_file(target: str | Path) -> Iterator[Path]:
     staging = Path(name)
     try:
         yield staging
+        _check_interrupted()
     except BaseException:
         staging.unlink(missing_ok=True)
         raise

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .checks import path_argument
 from .errors import InputError
 from .fields import (
     MAX_LENGTH,
@@ -227,7 +228,7 @@ def load_robot(path: str | Path, *, base_link: str | None = None,
     """Read a robot file (docs/formats.md#robot-file) or a URDF file (``.urdf``, or text
     that starts with ``<``); errors name the file and the key. ``base_link`` and
     ``tip_link`` choose a URDF's chain (default: its root to its single leaf)."""
-    path = Path(path)
+    path = path_argument(path, "path", what="a robot file path")
     from .urdf.description import is_urdf, read_description
 
     if is_urdf(path):

@@ -60,11 +60,11 @@ from typing import Any
 
 import numpy as np
 
-from .checks import choice, count, positive
+from .checks import choice, count, path_argument, positive
 from .datasets import KINDS, Dataset, load_dataset
 from .effects import EFFECTS, Effect, TrueWorld
 from .effects.motion import direction_column, is_direction_column
-from .errors import InputError
+from .errors import ArgumentError, InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
 from .measurement import MODELS
@@ -408,6 +408,16 @@ class TrueRobot:
 # ----------------------------------------------------------------------------- simulate
 
 
+MAX_ROWS = 1_000_000  # rows of a simulated table (a few hundred MB of CSV)
+
+
+def table_rows_of(kind: str, rows: int, sockets: int, touches: int) -> int:
+    """Rows of the table ``simulate`` writes for ``rows`` units of ``kind``: 4 touches
+    per bar placement, ``sockets * touches`` per artifact placement, else one per unit."""
+    per_unit = {"cross_bar": 4, "artifact_touches": sockets * touches}.get(kind, 1)
+    return rows * per_unit
+
+
 def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows: int = 100,
              noise: float = 0.0, geometric_errors=None, effects: Mapping | None = None,
              seed: int = 0, units: Units | None = None, mounted_error: float | None = None,
@@ -443,7 +453,12 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     noise = positive(noise, "noise", allow_zero=True)
     sockets = count(sockets, "sockets", minimum=2)
     touches = count(touches, "touches")
-    nominal = load_robot(robot) if isinstance(robot, (str, Path)) else robot
+    table_rows = table_rows_of(kind, rows, sockets, touches)
+    if table_rows > MAX_ROWS:
+        raise ArgumentError(f"{rows:,} units of {kind} make {table_rows:,} table rows, more than "
+                            f"the {MAX_ROWS:,} a simulated table may have", argument="rows")
+    nominal = robot if isinstance(robot, Robot) else load_robot(
+        path_argument(robot, "robot", what="a Robot or a robot file"))
     units = units or nominal.units
     out_dir = Path(out_dir)
     _check_out_dir(out_dir, force)

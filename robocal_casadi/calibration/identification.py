@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import difflib
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -26,6 +27,7 @@ from ..checks import choice, count, positive
 from ..datasets import DatasetBase
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
+from ..fields import cut
 from ..measurement import SphereLaserModel, model_for
 from ..results import (
     DOMINATED_SHARE,
@@ -310,6 +312,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     for dataset in datasets + validation:
         check_dataset(dataset)
     robot = datasets[0].robot
+    if parameters is not None:
+        parameters = parameter_names(parameters, robot.parameters().names, "parameters")
 
     nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
                            loss=loss)
@@ -347,7 +351,35 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         notes=geometric.notes + notes, method=method, loss=loss)
 
 
+def parameter_names(value, valid: Sequence[str], argument: str) -> tuple[str, ...]:
+    """``value`` (one name, or a list of names) as names from ``valid``; an unknown name
+    or a value that is not text is an ``ArgumentError`` naming it (with the closest valid
+    name as a hint). One string is one name, never a set of characters."""
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple, set, frozenset)):
+        raise ArgumentError(f"expected a parameter name or a list of names, got a "
+                            f"{type(value).__name__}", argument=argument)
+    out = []
+    for name in names:
+        if not isinstance(name, str):
+            raise ArgumentError(f"expected parameter names (text), got {cut(name)}",
+                                argument=argument)
+        if name not in valid:
+            close = difflib.get_close_matches(name, list(valid), n=1, cutoff=0.6)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ArgumentError(f"unknown parameter {cut(name)}{hint}; the robot's parameters "
+                                f"are {cut(list(valid), 120)}", argument=argument)
+        out.append(name)
+    if not out:
+        raise ArgumentError("no parameter names given: nothing could be fitted (give None "
+                            "for all of them)", argument=argument)
+    return tuple(dict.fromkeys(out))
+
+
 def _check_effects(effects: Sequence) -> None:
+    if not isinstance(effects, (list, tuple)):
+        raise ArgumentError(f"expected a list of Effect objects, got a {type(effects).__name__}",
+                            argument="effects")
     wrong = sorted({type(e).__name__ for e in effects if not isinstance(e, Effect)})
     if wrong:
         raise ArgumentError("expected Effect objects (robocal_casadi.effects), got "
@@ -397,9 +429,15 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
     path = nominal.datasets[0].path
     free = _free_mask(problem, identifiability)
     rows_needed = int(free.sum())
-    if problem.size <= rows_needed:
-        raise InputError(f"{problem.size} residuals cannot identify {rows_needed} unknowns; "
-                         f"add data", file=path)
+    # Repeated readings (a copied placement or reading) add rows but no information:
+    # the count that must exceed the unknowns is that of distinct readings' residuals.
+    distinct, repeated, units_of_data = duplicate_rows(problem)
+    size = int(distinct.sum())
+    if size <= rows_needed:
+        copies = (f" ({repeated} of {units_of_data} placements or readings repeat an earlier "
+                  f"one exactly and count once)") if repeated else ""
+        raise InputError(f"{size} residuals of distinct readings cannot identify {rows_needed} "
+                         f"unknowns{copies}; add data", file=path)
     geometric = solve(problem, nominal.solution.x, free, method=method, loss=loss,
                       max_iterations=max_iterations)
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target

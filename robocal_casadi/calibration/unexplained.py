@@ -19,8 +19,12 @@ model already fits; the drop of the residual sum of squares gives a likelihood-r
 statistic, compared with the chi-square quantile at a family-wise level ``ALPHA`` shared
 over all tests (Bonferroni). The strongest significant tests (distinct variables, at most
 ``COMBINED``) are then fitted together and judged by K-fold cross-validation over units
-of data (rows, or whole placements): the held-out mean square they remove is the
-structured part; what stays held out estimates the noise floor.
+of data (rows, or whole placements): the share of the held-out mean square they remove,
+applied to the fit's own mean square, is the structured part (so it never exceeds the fit
+RMS); what stays held out estimates the noise floor. Where the model alone predicts the
+held-out units far worse than a least-squares fit of its size should (too few units, each
+fold extrapolated), the comparison would measure that extrapolation, and nothing is
+reported.
 
 ``find`` returns None when nothing is significant, the cross-validation does not
 improve, or the structured part is below ``MIN_SHARE`` of the remaining mean square.
@@ -50,6 +54,7 @@ MIN_SPAN = {True: 1e-3, False: 1e-4}  # [rad] / [m]: a joint that moves less is 
 STEMS = ("theta", "d", "a", "alpha", "x", "y", "z", "roll", "pitch", "yaw")  # DH or URDF
 PAIR_GAIN = 1.25  # a pair's statistic over the better of its two variables alone
 LISTED = 0.25  # variables listed down to this fraction of the strongest statistic
+CV_SLACK = 3.0  # held-out error of the model alone, over what a sound fold split gives
 
 
 @dataclass(frozen=True)
@@ -76,12 +81,13 @@ class StructureTest:
 class Unexplained:
     """A structured residual the model does not explain.
 
-    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS), ``share``
-    its fraction of the remaining mean square, ``variables`` the variables it follows,
-    strongest first, ``parameters`` the geometric parameter that varies with each (the
-    likeliest carrier, not a diagnosis), ``noise_floor`` [m] the held-out RMS once the
-    structure is fitted. ``curve`` holds per data row the strongest variable's value
-    (SI, or the column's own unit) and the RMS [m] of the row's residual entries before
+    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS; at most the
+    fit RMS), ``share`` its fraction of the remaining mean square, ``variables`` the
+    variables it follows, strongest first, ``parameters`` the geometric parameter that
+    varies with each (the likeliest carrier, not a diagnosis), ``noise_floor`` [m] the
+    held-out RMS once the structure is fitted. ``curve`` holds per data row the strongest
+    variable's value (SI, or the column's own unit) and the RMS [m] of the row's residual
+    entries before
     and after removing the structure, for a plot.
     """
 
@@ -305,17 +311,39 @@ def find(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0) -> Unexplai
     sse1 = grams.held_out_sse(list(range(U.shape[1] + X.shape[1])))
     if not (np.isfinite(sse0) and np.isfinite(sse1)) or sse1 >= sse0:
         return None
-    errors = n_errors * scale
-    structured = (sse0 - sse1) / errors
+    if not _cross_validation_holds(sse0, rss0, n, U.shape[1], fold):
+        return None
     share = (sse0 - sse1) / sse0
     if share < MIN_SHARE:
         return None
+    # The structured part is the share of what the fit leaves (its mean square over the
+    # per-measurement errors), so it can never exceed the fit RMS it is part of.
+    fit_ms = float(r_all @ r_all) / n_errors
     ordered, carriers = _ranking(significant)
     fitted = X @ np.linalg.lstsq(X, r_perp, rcond=None)[0]
     curve = _curve(problem, chosen[0].variable, entries, rows, r, r - fitted)
-    return Unexplained(rms=math.sqrt(structured), share=float(share),
+    return Unexplained(rms=math.sqrt(share * fit_ms), share=float(share),
                        variables=tuple(ordered[:6]), parameters=tuple(carriers[:6]),
-                       noise_floor=math.sqrt(sse1 / errors), tests=tuple(tests), curve=curve)
+                       noise_floor=math.sqrt(sse1 / (n_errors * scale)), tests=tuple(tests),
+                       curve=curve)
+
+
+def _cross_validation_holds(sse0: float, rss0: float, n: int, p: int, fold: np.ndarray) -> bool:
+    """Whether the model's own held-out error ``sse0`` is what a linear fit of ``p``
+    columns to ``n`` entries should give against its in-sample ``rss0``.
+
+    For least squares with noise, the in-sample sum of squares is about ``(1 - p/n)`` of
+    the noise's and a held-out one about ``1 / (1 - p/n_train)`` times it. With few units
+    of data (a dozen bar placements) a fold left out is extrapolated and its error is
+    orders of magnitude above that: the comparison then measures the extrapolation, not
+    structure in the residual, and nothing is reported. ``CV_SLACK`` allows for the
+    spread of the ratio and for a real structure inflating ``sse0``.
+    """
+    smallest_train = n - int(np.max(np.bincount(fold[fold >= 0]))) if np.any(fold >= 0) else 0
+    if smallest_train <= p or n <= p:
+        return False
+    expected = 1.0 / ((1.0 - p / n) * (1.0 - p / smallest_train))
+    return sse0 <= CV_SLACK * expected * rss0
 
 
 def _ranking(significant: list[StructureTest]) -> tuple[list[str], list[str]]:

@@ -33,6 +33,7 @@ import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ..calibration import METHODS
 from ..errors import InputError
@@ -102,9 +103,10 @@ def _only_run(folder: Path) -> Iterator[None]:
         os.close(handle)
 
 
-def _prepare_out(out: Path, force: bool) -> None:
+def _prepare_out(out: Path, force: bool) -> list[Path]:
     """The fleet folder is kept between runs (robots are replaced one by one), so it may
-    be new, empty, or an earlier fleet run's; any other folder needs --force."""
+    be new, empty, or an earlier fleet run's; any other folder needs --force. Returns what
+    it created (the folder, the marker) and the lock file to come, for ``_undo``."""
     if str(out).strip() == "":
         raise InputError("expected a folder name", where="--out")
     if out.exists() and not out.is_dir():
@@ -116,9 +118,28 @@ def _prepare_out(out: Path, force: bool) -> None:
             f"robocal {marker.verb or '(an earlier version)'} wrote"
         raise InputError(f"{out} is a folder {by} and it is not empty; name a new folder (or "
                          "give --force to write the fleet's results into it)", where="--out")
+    created = [] if out.exists() else [out]
     out.mkdir(parents=True, exist_ok=True)
     if marker is None or marker.verb != "fleet":
         (out / MARKER).write_text(Marker("fleet").text())
+        created.append(out / MARKER)
+    if not (out / LOCK).exists():
+        created.append(out / LOCK)
+    return created
+
+
+def _undo(out: Path, created: list[Path]) -> None:
+    """Remove what ``_prepare_out`` and the lock added when the run wrote nothing else
+    (a scheduler that cannot be reached, an interruption before the first robot)."""
+    made = {p.name for p in created if p != out}
+    if any(entry.name not in made for entry in out.iterdir()):
+        return
+    for path in created:
+        if path != out:
+            path.unlink(missing_ok=True)
+    if out in created:
+        with contextlib.suppress(OSError):
+            out.rmdir()
 
 
 def _apart(out: Path, previous: Path | None) -> None:
@@ -167,11 +188,10 @@ def _settings(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from ..fleet import load_fleet
-    from ..fleet import summarise as compare
-    from ..fleet.engine import require_engine, run_fleet
-    from ..fleet.page import render
-    from ..output import json_safe as _clean
+    from ..fleet.engine import check_address, require_engine
 
+    if args.scheduler is not None:
+        check_address(args.scheduler)
     if args.workers is not None:
         positive_count(args.workers, "--workers")
         if args.scheduler is not None:
@@ -183,7 +203,34 @@ def run(args: argparse.Namespace) -> int:
     previous = _previous(args.previous, fleet)  # read now: a robot may replace it below
     settings = _settings(args)
     require_engine()  # before the output folder is made
-    _prepare_out(args.out, args.force)
+    created = _prepare_out(args.out, args.force)
+    try:
+        outcomes, summary = _run_locked(args, fleet, settings, previous)
+    except BaseException:
+        _undo(args.out, created)
+        raise
+    print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
+          f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
+    for outcome in summary.failed:
+        print(f"failed: {outcome.name}: {outcome.error}")
+    for reason in summary.reasons():
+        print(f"stands out: {reason['robot']}: {reason['reason']}")
+    print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
+    summarise(args, robots=len(outcomes), calibrated=summary.count("calibrated"),
+              unchanged=summary.count("unchanged"), failed=summary.count("failed"),
+              failures={o.name: o.error for o in summary.failed},
+              stand_out=[dict(r) for r in summary.reasons()], out=str(args.out))
+    sys.stdout.flush()
+    return 1 if summary.failed else 0
+
+
+def _run_locked(args: argparse.Namespace, fleet, settings, previous) -> tuple[list, Any]:
+    """Calibrate every robot into ``args.out`` under its lock; write the fleet's files."""
+    from ..fleet import summarise as compare
+    from ..fleet.engine import run_fleet
+    from ..fleet.page import render
+    from ..output import json_safe as _clean
+
     with _only_run(args.out):
         failed = 0
         with Progress("fleet", total=len(fleet.robots)) as bar:
@@ -203,16 +250,4 @@ def run(args: argparse.Namespace) -> int:
             staging.write_text(json.dumps(_clean(summary.to_json()), indent=1) + "\n")
         with atomic_file(args.out / "fleet.html") as staging:
             staging.write_text(render(summary))
-    print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
-          f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
-    for outcome in summary.failed:
-        print(f"failed: {outcome.name}: {outcome.error}")
-    for reason in summary.reasons():
-        print(f"stands out: {reason['robot']}: {reason['reason']}")
-    print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
-    summarise(args, robots=len(outcomes), calibrated=summary.count("calibrated"),
-              unchanged=summary.count("unchanged"), failed=summary.count("failed"),
-              failures={o.name: o.error for o in summary.failed},
-              stand_out=[dict(r) for r in summary.reasons()], out=str(args.out))
-    sys.stdout.flush()
-    return 1 if summary.failed else 0
+    return outcomes, summary

@@ -39,7 +39,7 @@ from ..examples import ROBOTS
 from ..fields import check_magnitude
 from ..measurement import MODELS, TrackerModel
 from ..robot import Robot, load_robot
-from ..simulate import READINGS, simulate
+from ..simulate import MAX_ROWS, READINGS, simulate, table_rows_of
 from ..units import Units, parse_units
 from .arguments import add_force, output_folder, seed
 from .console import summarise
@@ -141,6 +141,13 @@ def _check_options(args: argparse.Namespace, robot: Robot) -> None:
                          where="--touches")
     if args.rows < 1:
         raise InputError(f"expected at least 1, got {args.rows}", where="--rows")
+    for option, value in (("--sockets", args.sockets), ("--touches", args.touches)):
+        if value > MAX_ROWS:
+            raise InputError(f"at most {MAX_ROWS:,}, got {value:,}", where=option)
+    table_rows = table_rows_of(args.kind, args.rows, args.sockets, args.touches)
+    if table_rows > MAX_ROWS:
+        raise InputError(f"{args.rows:,} would make a table of {table_rows:,} rows; at most "
+                         f"{MAX_ROWS:,} rows are simulated", where="--rows")
 
 
 def parse_effect_options(options: list[str], robot: Robot) -> dict:

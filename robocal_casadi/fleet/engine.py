@@ -10,16 +10,36 @@ files and the output folder under the same paths.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import re
+import signal
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from ..errors import InputError
+from ..fields import cut
+from ..output import note_interrupt
 from .robot_task import RobotOutcome, Settings, calibrate_robot
 from .spec import Fleet
 
-CONNECT_TIMEOUT = 30.0  # [s] to reach an existing scheduler
+CONNECT_TIMEOUT = 5.0  # [s] to reach an existing scheduler (a live one answers in ms)
+PROTOCOLS = ("tcp", "tls", "ucx", "ws", "wss")  # Dask's address schemes
+_ADDRESS = re.compile(r"(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:]+\]|[A-Za-z0-9._-]+)"
+                      r"(?::(?P<port>\d{1,5}))?")
+
+
+def check_address(address: str) -> None:
+    """Refuse a scheduler address that is not ``[scheme://]host[:port]`` with a Dask
+    scheme and a port in 1..65535 (``InputError`` naming ``--scheduler``), before any
+    connection is tried."""
+    match = _ADDRESS.fullmatch(address.strip())
+    if match is None or (match["scheme"] or "tcp") not in PROTOCOLS or (
+            match["port"] is not None and not 0 < int(match["port"]) < 65536):
+        raise InputError(f"expected an address like tcp://HOST:PORT (schemes "
+                         f"{', '.join(PROTOCOLS)}), got {cut(address)}", where="--scheduler")
 
 
 def machine_cores() -> int:
@@ -44,6 +64,7 @@ def _client(scheduler: str | None, workers: int | None):
     require_engine()
     from dask.distributed import Client, LocalCluster
     if scheduler is not None:
+        check_address(scheduler)
         try:
             return Client(scheduler, timeout=CONNECT_TIMEOUT), None
         except (OSError, TimeoutError, ValueError) as error:
@@ -53,14 +74,42 @@ def _client(scheduler: str | None, workers: int | None):
     # One single-threaded process per core: a calibration is one busy thread, and
     # processes keep each worker's compiled functions and memory apart. The scheduler's
     # status page goes to a free port on this machine only (Dask's usual 8787 may be taken).
-    cluster = LocalCluster(n_workers=workers or machine_cores(), threads_per_worker=1,
-                           processes=True, dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
+    with _interrupt_deferred() as seen:
+        try:
+            cluster = LocalCluster(n_workers=workers or machine_cores(), threads_per_worker=1,
+                                   processes=True, dashboard_address="127.0.0.1:0",
+                                   silence_logs=logging.ERROR)
+        except Exception:
+            if seen:  # a worker stopped by the same Ctrl-C while it started
+                raise KeyboardInterrupt from None
+            raise
     try:
+        if seen:
+            raise KeyboardInterrupt
         return Client(cluster), cluster
     except BaseException:
         cluster.close()
         raise
+
+
+@contextlib.contextmanager
+def _interrupt_deferred() -> Iterator[list[int]]:
+    """Note Ctrl-C inside (in the yielded list) instead of raising it: a cluster stopped
+    half-way through its start cannot be closed, and Dask would complain at exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    seen: list[int] = []
+
+    def note(number: int, frame) -> None:
+        seen.append(number)
+        note_interrupt()
+
+    previous = signal.signal(signal.SIGINT, note)
+    try:
+        yield seen
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_tasks(fleet: Fleet, out: Path, settings: Settings, *, scheduler: str | None = None,
