@@ -327,8 +327,10 @@ class _Screening:
         Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
         self.schemes = list(schemes)
-        self.grams = [FoldGrams(Z, scheme.fold, total) for scheme in self.schemes]
         self.base = list(range(len(self.free_index)))
+        # Every fit adds a candidate's few columns to the free ones: factored once per fold.
+        self.grams = [FoldGrams(Z, scheme.fold, total, base=self.base)
+                      for scheme in self.schemes]
         self.held_out_before = self.held_out(self.base)
         self.cv_before = self._cv(self.held_out_before)
         self.r_perp = self.project(r)
