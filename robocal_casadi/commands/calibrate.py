@@ -26,6 +26,7 @@ from ..errors import InputError
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import PROFILES, ProfileCost, profile_parameters
+from ..progress import reports_stages, stage
 from ..results import CalibrationResult
 from ..robot import save_robot
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
@@ -81,13 +82,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(report.html.j2, blocks.html.j2, brand.html.j2, report.css)")
 
 
+@reports_stages(default=False)
 def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
                   pdf: bool = False, keep: tuple[str, ...] = (), info=None,
-                  templates: Path | None = None) -> None:
+                  templates: Path | None = None, progress: bool = False) -> None:
     """Write ``result.json``, ``robot_calibrated.yaml`` and the report into ``out``
     atomically (``info``: the report's customer fields, ``templates``: a folder of report
     templates); the files named in ``keep`` that ``out`` already holds are carried over
-    into the new folder."""
+    into the new folder; ``progress``: the report's stage on a terminal."""
+    del progress  # read by ``reports_stages``
     with atomic_directory(out) as staging:
         for name in keep:
             if (out / name).is_file() and not (out / name).is_symlink():
@@ -98,8 +101,9 @@ def write_outputs(result: CalibrationResult, out: Path, *, report: bool = True,
         if report:
             from ..report import write_report
 
-            write_report(result, staging / "report.html", pdf=pdf, info=info,
-                         templates=templates)
+            with stage("report"):
+                write_report(result, staging / "report.html", pdf=pdf, info=info,
+                             templates=templates)
 
 
 def summary(result: CalibrationResult) -> str:
@@ -226,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
         result = profiled(datasets, validation, args.profile, options)
     result = replace(result, delivered=geometry_only(result, datasets, validation))
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
-                  templates=args.report_templates)
+                  templates=args.report_templates, progress=options["progress"])
     print(summary(result))
     print(f"wrote {args.out / 'result.json'}, robot_calibrated.yaml"
           + (", effects_calibrated.yaml" if (args.out / "effects_calibrated.yaml").is_file()
