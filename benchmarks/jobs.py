@@ -98,7 +98,7 @@ def one(case: str, profile: bool, keep: Path | None = None) -> dict:
     folder = Path(tempfile.mkdtemp(prefix=f"robocal-jobs-{case}-"))
     dataset = _dataset(case, folder)
     out = keep / case if keep is not None else folder / "out"
-    profiler = cProfile.Profile() if profile else None
+    profiler = cProfile.Profile(time.process_time) if profile else None
     cpu, wall = time.process_time(), time.perf_counter()
     if profiler is not None:
         profiler.enable()
