@@ -75,7 +75,7 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
     return point, derivatives
 
 
-COMPILE_ROWS = 2000  # from this many rows on, the per-row derivatives are compiled to C
+COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
 
 
 def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
