@@ -55,6 +55,7 @@ docs/formats.md#result-file (for tracker data the 3-D point error), as ``Problem
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Iterator, Mapping, Sequence
@@ -84,6 +85,12 @@ THERMAL_COLUMNS = ("temperature", "time")
 
 
 # ----------------------------------------------------------------------------- results
+
+
+@functools.cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    """The field names of a dataclass, in order (looked up once: read on every access)."""
+    return tuple(f.name for f in fields(cls))
 
 
 @dataclass(frozen=True)
@@ -127,7 +134,7 @@ class CandidateTest(Mapping):
 
     @classmethod
     def _keys(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in fields(cls))
+        return _field_names(cls)
 
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "

@@ -171,13 +171,17 @@ class _BaseFold:
 
     ``shared``/``own``: the base columns with and without weight in the training rows;
     ``solved`` = ``Gt[shared, shared]^-1 Gt[shared, :]`` (None when ill-conditioned);
-    ``own_inverse``: pseudo-inverse of the held-out Gram of the ``own`` columns.
+    ``own_inverse``: pseudo-inverse of the held-out Gram of the ``own`` columns;
+    ``held_shared`` = ``Gf[shared, shared]``, ``held_own`` = ``Gf[own, shared]`` (copies
+    read by every fit).
     """
 
     shared: np.ndarray
     own: np.ndarray
     solved: np.ndarray | None
     own_inverse: np.ndarray
+    held_shared: np.ndarray
+    held_own: np.ndarray
 
 
 class FoldGrams:
@@ -239,7 +243,8 @@ class FoldGrams:
                     solved = vectors @ ((vectors.T @ Gt[shared, :]) / eigenvalues[:, None])
                 own_inverse = np.linalg.pinv(Gf[np.ix_(own, own)], rcond=LSTSQ_RCOND) \
                     if own.size else np.zeros((0, 0))
-                out.append(_BaseFold(shared, own, solved, own_inverse))
+                out.append(_BaseFold(shared, own, solved, own_inverse,
+                                     Gf[np.ix_(shared, shared)], Gf[np.ix_(own, shared)]))
             self._base_folds = out
         return self._base_folds
 
@@ -249,28 +254,39 @@ class FoldGrams:
         if fit.solved is None:
             return None
         r = self.r
-        Gt = self.total - Gf
-        if extra.size and self._local(Gt, extra).any():
+        if extra.size and self._local_extra(Gf, extra).any():
             return None
         delta_base = fit.solved[:, r]
         delta_extra = np.zeros(0)
         if extra.size:
+            # Training Gram entries of the added columns only: total minus held out.
+            train_extra = self.total[np.ix_(extra, extra)] - Gf[np.ix_(extra, extra)]
+            train_cross = self.total[np.ix_(extra, fit.shared)] - Gf[np.ix_(extra, fit.shared)]
+            train_r = self.total[extra, r] - Gf[extra, r]
             coupled = fit.solved[:, extra]  # Gt[shared, shared]^-1 Gt[shared, extra]
-            schur = Gt[np.ix_(extra, extra)] - Gt[np.ix_(extra, fit.shared)] @ coupled
+            schur = train_extra - train_cross @ coupled
             schur = 0.5 * (schur + schur.T)
-            scale = max(float(np.max(np.diag(Gt)[extra])), 1e-300)
+            scale = max(float(np.max(np.diag(train_extra))), 1e-300)
             if np.linalg.eigvalsh(schur)[0] <= scale / BORDERED_CONDITION:
                 return None
-            delta_extra = np.linalg.solve(
-                schur, Gt[extra, r] - Gt[np.ix_(extra, fit.shared)] @ delta_base)
+            delta_extra = np.linalg.solve(schur, train_r - train_cross @ delta_base)
             delta_base = delta_base - coupled @ delta_extra
-        shared = np.concatenate([fit.shared, extra])
-        delta = np.concatenate([delta_base, delta_extra])
-        sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
+        # |r_f - Z_f delta|^2 on the held-out rows, by blocks (base, extra).
+        held_cross = Gf[np.ix_(extra, fit.shared)]
+        sse = (Gf[r, r] - 2 * (delta_base @ Gf[fit.shared, r] + delta_extra @ Gf[extra, r])
+               + delta_base @ fit.held_shared @ delta_base
+               + 2 * delta_extra @ held_cross @ delta_base
+               + delta_extra @ Gf[np.ix_(extra, extra)] @ delta_extra)
         if fit.own.size:
-            v = Gf[fit.own, r] - Gf[np.ix_(fit.own, shared)] @ delta
+            v = Gf[fit.own, r] - fit.held_own @ delta_base - Gf[np.ix_(fit.own, extra)] \
+                @ delta_extra
             sse -= v @ fit.own_inverse @ v
         return max(float(sse), 0.0)
+
+    def _local_extra(self, Gf: np.ndarray, extra: np.ndarray) -> np.ndarray:
+        """``_local`` for a few columns, without forming the training Gram."""
+        train = np.diag(self.total)[extra] - np.diag(Gf)[extra]
+        return train <= 1e-12 * np.maximum(np.diag(self.total)[extra], 1e-300)
 
     def held_out_sse(self, columns: Sequence[int]) -> float:
         """Sum over folds of the held-out squared residual after fitting ``columns``.
