@@ -55,6 +55,7 @@ docs/formats.md#result-file (for tracker data the 3-D point error), as ``Problem
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Iterator, Mapping, Sequence
@@ -64,7 +65,7 @@ import numpy as np
 
 from ..effects import EFFECTS
 from ..effects.base import Effect
-from ..progress import Progress
+from ..progress import note, reports_stages, stage
 from ..results import EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
@@ -84,6 +85,12 @@ THERMAL_COLUMNS = ("temperature", "time")
 
 
 # ----------------------------------------------------------------------------- results
+
+
+@functools.cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    """The field names of a dataclass, in order (looked up once: read on every access)."""
+    return tuple(f.name for f in fields(cls))
 
 
 @dataclass(frozen=True)
@@ -127,7 +134,7 @@ class CandidateTest(Mapping):
 
     @classmethod
     def _keys(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in fields(cls))
+        return _field_names(cls)
 
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "
@@ -327,8 +334,10 @@ class _Screening:
         Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
         self.schemes = list(schemes)
-        self.grams = [FoldGrams(Z, scheme.fold, total) for scheme in self.schemes]
         self.base = list(range(len(self.free_index)))
+        # Every fit adds a candidate's few columns to the free ones: factored once per fold.
+        self.grams = [FoldGrams(Z, scheme.fold, total, base=self.base)
+                      for scheme in self.schemes]
         self.held_out_before = self.held_out(self.base)
         self.cv_before = self._cv(self.held_out_before)
         self.r_perp = self.project(r)
@@ -458,6 +467,7 @@ class _Step:
     bic_drop: float
 
 
+@reports_stages(default=True)
 def run(problem: Problem, geometric: Solution, identifiability: Identifiability | None = None,
         *, method: Method = "lm", loss: Loss = "linear", folds: int = FOLDS,
         bic_threshold: float = BIC_THRESHOLD, max_rounds: int = MAX_ROUNDS, seed: int = 0,
@@ -468,9 +478,10 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     ``geometric.free``. ``method``/``loss`` go to ``solver.solve`` for the refits.
     ``available_columns``, when given, are the extra columns the model must be able to
     use elsewhere (e.g. in every validation dataset): an effect that reads a column
-    missing there is not offered.
+    missing there is not offered. ``progress`` shows each round, screening and refit
+    with its elapsed time on standard error when it is a terminal.
     """
-    del identifiability
+    del identifiability, progress  # progress: read by ``reports_stages``
     start = time.perf_counter()
     extras = _joined_extras(problem)
     if available_columns is not None:
@@ -483,22 +494,25 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     if not candidates or not any(model.uses_robot for model in problem.models):
         return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
 
-    big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
+    with stage(f"diagnosis set-up ({len(candidates)} candidates)"):
+        big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
+        x = embed(problem, geometric.x, big)
+        n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
+        schemes = fold_schemes(big, folds, seed)
+        r, J = _residual_and_jacobian(big, x)
     effect_of = {c: next(e for e in candidate_effects if set(c.names) <= set(e.parameter_names()))
                  for c in candidates}
-    x = embed(problem, geometric.x, big)
     free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
-    n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
-    schemes = fold_schemes(big, folds, seed)
     remaining = list(candidates)
-    r, J = _residual_and_jacobian(big, x)
     rounds = 0
-    with Progress("diagnosis", total=max_rounds, force=False) as bar:
-        for rounds in range(1, max_rounds + 1):
-            if progress:
-                bar.update(rounds - 1, f"{len(steps)} effect(s) added")
-            screening = _Screening(big, r, J, free, remaining, schemes, n_errors)
-            screens = [screening.screen(c) for c in remaining]
+    for rounds in range(1, max_rounds + 1):
+        with stage(f"diagnosis round {rounds} ({len(steps)} effect(s) added)"):
+            with stage(f"screening {len(remaining)} candidates"):
+                screening = _Screening(big, r, J, free, remaining, schemes, n_errors)
+                screens = []
+                for k, candidate in enumerate(remaining):
+                    note(f"{k + 1}/{len(remaining)} {_label(candidate)}")
+                    screens.append(screening.screen(candidate))
             decisions: dict[int, str] = {}
             for s in screens:
                 decisions[id(s)] = s.decision or screening.verdict(
@@ -523,12 +537,13 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
                     continue
                 trial_free = free | _mask_of(big, s.kept)
-                solution = solve(big, x, trial_free, method=method, loss=loss)
-                r_new, J_new = _residual_and_jacobian(big, solution.x)
+                with stage(f"refit with {_label(s.candidate)}"):
+                    solution = solve(big, x, trial_free, method=method, loss=loss)
+                    r_new, J_new = _residual_and_jacobian(big, solution.x)
+                    # The refit's own held-out numbers, on the same folds.
+                    refit = _Screening(big, r_new, J_new, trial_free, [], schemes, n_errors)
                 rss_new = float(r_new @ r_new)
                 bic = screening.bic_drop(rss_new, len(s.kept))
-                # The refit's own held-out numbers, on the same folds.
-                refit = _Screening(big, r_new, J_new, trial_free, [], schemes, n_errors)
                 numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
                                   refit.held_out_before)
                 verdict = screening.verdict(bic, refit.held_out_before, bic_threshold)
@@ -570,9 +585,10 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     if not steps:
         return Diagnosis((), tuple(tested), problem, geometric, rounds,
                          time.perf_counter() - start)
-    final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
-    groups = _groups(steps)
-    evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
+    with stage("diagnosis: the final model and the evidence of each effect"):
+        final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
+        groups = _groups(steps)
+        evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
     # An effect added early can stand in for one found later (a coupling taking part of a
     # gear-ratio error before the gear ratio is in): each must still pay its way with the
     # others in the model, or it goes, the weakest first.
@@ -589,9 +605,11 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         x[taken_out] = 0.0
         free = free & ~taken_out
         steps = [step for step in steps if step not in dropped]
-        final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
-        groups = _groups(steps)
-        evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
+        with stage(f"diagnosis: the model without {_label(dropped[0].candidate)}"):
+            final, solution, effects = _final(problem, big, x, free, steps, extras, method,
+                                              loss)
+            groups = _groups(steps)
+            evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
     findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)

@@ -157,19 +157,136 @@ def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
     return schemes
 
 
+LSTSQ_RCOND = 1e-13  # relative singular value below which a fold's normal equations are cut
+# A fold's training Gram of the base columns is solved once by its eigenvectors when its
+# eigenvalues span less than this ratio; a few added columns are then a bordered solve.
+# Beyond it (nearly dependent columns on the training part) every fit is the full
+# truncated least-squares solve instead, whose cut-off then matters.
+BORDERED_CONDITION = 1e10
+
+
+@dataclass(frozen=True)
+class _BaseFold:
+    """One fold's fit of the base columns, reused for every fit that adds a few columns.
+
+    ``shared``/``own``: the base columns with and without weight in the training rows;
+    ``solved`` = ``Gt[shared, shared]^-1 Gt[shared, :]`` (None when ill-conditioned);
+    ``own_inverse``: pseudo-inverse of the held-out Gram of the ``own`` columns;
+    ``held_shared`` = ``Gf[shared, shared]``, ``held_own`` = ``Gf[own, shared]`` (copies
+    read by every fit).
+    """
+
+    shared: np.ndarray
+    own: np.ndarray
+    solved: np.ndarray | None
+    own_inverse: np.ndarray
+    held_shared: np.ndarray
+    held_own: np.ndarray
+
+
 class FoldGrams:
     """Per-fold Gram matrices of ``Z = [columns, r]`` for linear cross-validation.
 
     ``fold`` numbers the rows of ``Z`` (-1: always trained on); ``total`` may pass
     ``Z.T @ Z`` when several schemes share one ``Z``. The last column of ``Z`` is the
     residual [m]; the others are the linearised unknowns (any scaling).
+
+    ``base`` (column indices) names columns most fits share: each fold's fit of them is
+    factored once, and a fit of ``base`` plus a few more columns adds only their
+    bordered (Schur complement) solve. Same numbers as the full solve, to rounding, as
+    long as the training Gram is well conditioned; where it is not, the full solve runs.
     """
 
-    def __init__(self, Z: np.ndarray, fold: np.ndarray, total: np.ndarray | None = None):
+    def __init__(self, Z: np.ndarray, fold: np.ndarray, total: np.ndarray | None = None,
+                 base: Sequence[int] | None = None):
         self.count = int(fold.max()) + 1 if fold.size and fold.max() >= 0 else 0
         self.parts = [Z[fold == f].T @ Z[fold == f] for f in range(self.count)]
         self.total = Z.T @ Z if total is None else total
         self.r = Z.shape[1] - 1
+        self.base = None if base is None else np.asarray(base, dtype=int)
+        self._base_folds: list[_BaseFold] | None = None
+
+    def _local(self, Gt: np.ndarray, S: np.ndarray) -> np.ndarray:
+        """Which of the columns ``S`` have no weight in the training rows ``Gt``."""
+        return np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
+
+    def _fold_sse(self, Gf: np.ndarray, S: np.ndarray) -> float:
+        """Held-out squared residual of one fold after fitting ``S``: the full solve.
+
+        Columns with no weight in the fold's training rows (that fold's own placement)
+        are fitted on its held-out rows instead.
+        """
+        r = self.r
+        Gt = self.total - Gf
+        local = self._local(Gt, S)
+        shared, own = S[~local], S[local]
+        delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r],
+                                rcond=LSTSQ_RCOND)[0]
+        sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
+        if own.size:
+            v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
+            sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=LSTSQ_RCOND)[0]
+        return max(float(sse), 0.0)
+
+    def _prepared(self) -> list[_BaseFold]:
+        """Each fold's factored fit of ``base`` (computed on first use)."""
+        if self._base_folds is None:
+            assert self.base is not None
+            out = []
+            for Gf in self.parts:
+                Gt = self.total - Gf
+                local = self._local(Gt, self.base)
+                shared, own = self.base[~local], self.base[local]
+                eigenvalues, vectors = np.linalg.eigh(Gt[np.ix_(shared, shared)])
+                solved = None
+                if not shared.size or eigenvalues[0] > eigenvalues[-1] / BORDERED_CONDITION:
+                    solved = vectors @ ((vectors.T @ Gt[shared, :]) / eigenvalues[:, None])
+                own_inverse = np.linalg.pinv(Gf[np.ix_(own, own)], rcond=LSTSQ_RCOND) \
+                    if own.size else np.zeros((0, 0))
+                out.append(_BaseFold(shared, own, solved, own_inverse,
+                                     Gf[np.ix_(shared, shared)], Gf[np.ix_(own, shared)]))
+            self._base_folds = out
+        return self._base_folds
+
+    def _bordered_sse(self, Gf: np.ndarray, fit: _BaseFold, extra: np.ndarray) -> float | None:
+        """Held-out squared residual of one fold after fitting ``base`` + ``extra``, from
+        the base's factored fit; None when the full solve must decide."""
+        if fit.solved is None:
+            return None
+        r = self.r
+        if extra.size and self._local_extra(Gf, extra).any():
+            return None
+        delta_base = fit.solved[:, r]
+        delta_extra = np.zeros(0)
+        if extra.size:
+            # Training Gram entries of the added columns only: total minus held out.
+            train_extra = self.total[np.ix_(extra, extra)] - Gf[np.ix_(extra, extra)]
+            train_cross = self.total[np.ix_(extra, fit.shared)] - Gf[np.ix_(extra, fit.shared)]
+            train_r = self.total[extra, r] - Gf[extra, r]
+            coupled = fit.solved[:, extra]  # Gt[shared, shared]^-1 Gt[shared, extra]
+            schur = train_extra - train_cross @ coupled
+            schur = 0.5 * (schur + schur.T)
+            scale = max(float(np.max(np.diag(train_extra))), 1e-300)
+            if np.linalg.eigvalsh(schur)[0] <= scale / BORDERED_CONDITION:
+                return None
+            delta_extra = np.linalg.solve(schur, train_r - train_cross @ delta_base)
+            delta_base = delta_base - coupled @ delta_extra
+        # |r_f - Z_f delta|^2 on the held-out rows, by blocks (base, extra).
+        held_cross = Gf[np.ix_(extra, fit.shared)]
+        sse = (Gf[r, r] - 2 * (delta_base @ Gf[fit.shared, r] + delta_extra @ Gf[extra, r])
+               + delta_base @ fit.held_shared @ delta_base
+               + 2 * delta_extra @ held_cross @ delta_base
+               + delta_extra @ Gf[np.ix_(extra, extra)] @ delta_extra)
+        if fit.own.size:
+            v = Gf[fit.own, r] - fit.held_own @ delta_base - Gf[np.ix_(fit.own, extra)] \
+                @ delta_extra
+            sse -= v @ fit.own_inverse @ v
+        return max(float(sse), 0.0)
+
+    def _local_extra(self, Gf: np.ndarray, extra: np.ndarray) -> np.ndarray:
+        """``_local`` for a few columns, without forming the training Gram."""
+        train = np.diag(self.total)[extra] - np.diag(Gf)[extra]
+        return train <= 1e-12 * np.maximum(np.diag(self.total)[extra], 1e-300)
 
     def held_out_sse(self, columns: Sequence[int]) -> float:
         """Sum over folds of the held-out squared residual after fitting ``columns``.
@@ -180,16 +297,12 @@ class FoldGrams:
         if not self.count:
             return float("nan")
         S = np.asarray(columns, dtype=int)
-        r = self.r
+        extra = None
+        if self.base is not None and len(S) >= len(self.base) \
+                and np.array_equal(S[:len(self.base)], self.base):
+            extra = S[len(self.base):]
         total = 0.0
-        for Gf in self.parts:
-            Gt = self.total - Gf
-            local = np.diag(Gt)[S] <= 1e-12 * np.maximum(np.diag(self.total)[S], 1e-300)
-            shared, own = S[~local], S[local]
-            delta = np.linalg.lstsq(Gt[np.ix_(shared, shared)], Gt[shared, r], rcond=1e-13)[0]
-            sse = Gf[r, r] - 2 * delta @ Gf[shared, r] + delta @ Gf[np.ix_(shared, shared)] @ delta
-            if own.size:
-                v = Gf[own, r] - Gf[np.ix_(own, shared)] @ delta
-                sse -= v @ np.linalg.lstsq(Gf[np.ix_(own, own)], v, rcond=1e-13)[0]
-            total += max(float(sse), 0.0)
+        for f, Gf in enumerate(self.parts):
+            sse = None if extra is None else self._bordered_sse(Gf, self._prepared()[f], extra)
+            total += self._fold_sse(Gf, S) if sse is None else sse
         return total

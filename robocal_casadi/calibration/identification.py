@@ -29,6 +29,7 @@ from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..fields import cut
 from ..measurement import SphereLaserModel, model_for
+from ..progress import reports_stages, stage
 from ..results import (
     DOMINATED_SHARE,
     CalibrationResult,
@@ -115,15 +116,18 @@ def analyse_identifiability(problem: Problem, x: np.ndarray,
                                   for m in problem.models}))
     absorbed = "; ".join(sorted({getattr(m, "absorbed_reason", "absorbed by the placement")
                                  for m in problem.models}))
-    jacobian = problem.jacobian(x)
-    check_finite(problem.models, problem.residual(x), jacobian, "the fitted placement")
-    return analyse(jacobian, names, candidate_index, placement,
-                   invisible_reason=invisible, absorbed_reason=absorbed, tolerance=tolerance)
+    with stage("identifiability"):
+        jacobian = problem.jacobian(x)
+        check_finite(problem.models, problem.residual(x), jacobian, "the fitted placement")
+        return analyse(jacobian, names, candidate_index, placement,
+                       invisible_reason=invisible, absorbed_reason=absorbed,
+                       tolerance=tolerance)
 
 
 def find_unexplained(problem: Problem, x: np.ndarray, free: np.ndarray):
     """The structured residual ``problem`` leaves at ``x``, or None (see ``unexplained``)."""
-    return unexplained.find(problem, x, free)
+    with stage("unexplained test"):
+        return unexplained.find(problem, x, free)
 
 
 def _datasets(value, argument: str) -> list:
@@ -265,6 +269,7 @@ class Validation:
     spheres: tuple[SphereEstimate, ...] = ()
 
 
+@reports_stages(default=False)
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
               diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
               select_growth: float | None = None, max_iterations: int = 200,
@@ -295,7 +300,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
     a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
     restricts the robot parameters that may be fitted, e.g. to a controller's set
-    (``profiles``); the others are held at nominal. Default: all of them.
+    (``profiles``); the others are held at nominal. Default: all of them. ``progress``
+    shows each stage (fits, identifiability, diagnosis rounds and refits, the
+    unexplained test) with its elapsed time on standard error when it is a terminal.
     """
     method = choice(method, METHODS, "method")
     rule = choice(rule, RULES, "rule")
@@ -398,8 +405,9 @@ def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Ef
         open_ = problem.mask("robot", "effects", "mounted")
         candidates = tuple(n for i, n in enumerate(problem.unknowns.names)
                            if open_[i] and (n not in robot_names or n in allowed))
-    nominal = solve(problem, problem.initial(), problem.mask("placement"), method=method,
-                    loss=loss)
+    with stage("nominal fit"):
+        nominal = solve(problem, problem.initial(), problem.mask("placement"), method=method,
+                        loss=loss)
     identifiability = analyse_identifiability(problem, nominal.x, candidates)
     selection = None
     if select_growth is not None and identifiability.identifiable:
@@ -438,8 +446,9 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
                   f"one exactly and count once)") if repeated else ""
         raise InputError(f"{size} residuals of distinct readings cannot identify {rows_needed} "
                          f"unknowns{copies}; add data", file=path)
-    geometric = solve(problem, nominal.solution.x, free, method=method, loss=loss,
-                      max_iterations=max_iterations)
+    with stage("identification"):
+        geometric = solve(problem, nominal.solution.x, free, method=method, loss=loss,
+                          max_iterations=max_iterations)
     # Dependencies seen at the nominal geometry can be artefacts of its symmetry (a target
     # exactly on the flange axis makes d5 and alpha5 act alike); judge again at the
     # estimate and, where more parameters turn out identifiable, solve once more.
@@ -447,8 +456,9 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
     if set(revised.identifiable) > set(identifiability.identifiable):
         identifiability = revised
         free = _free_mask(problem, identifiability)
-        geometric = solve(problem, geometric.x, free, method=method, loss=loss,
-                          max_iterations=max_iterations)
+        with stage("identification"):
+            geometric = solve(problem, geometric.x, free, method=method, loss=loss,
+                              max_iterations=max_iterations)
     # A fit wandering along a flat valley neither converges nor means anything: say why.
     _check_determined(problem, geometric, path)
     if geometric.status != "converged":
@@ -617,9 +627,10 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
     # rounding level would only crawl on.
     decrease = max(CONVERGED_DECREASE, 2.0 * SETTLED_DECREASE / max(problem.size, 1))
     for _ in range(SIGMA_ITERATIONS):
-        solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
-                         method=method, loss=loss, max_iterations=max_iterations,
-                         decrease=decrease)
+        with stage("identification with the tolerance prior"):
+            solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
+                             method=method, loss=loss, max_iterations=max_iterations,
+                             decrease=decrease)
         x = solution.x
         r = problem.residual(x)
         statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,
@@ -761,9 +772,10 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
     stages = []
     for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
         values = {} if x is None else _values(stage_problem, x)
-        val_problem, x_val = evaluate(robot, validation, stage_problem.effects, values,
-                                      kinematics=problem.kinematics,
-                                      label_prefix="validation:")
+        with stage("validation"):
+            val_problem, x_val = evaluate(robot, validation, stage_problem.effects, values,
+                                          kinematics=problem.kinematics,
+                                          label_prefix="validation:")
         stages.append((val_problem, x_val))
     errors = [p.errors(x) for p, x in stages]
     summary = RmsSummary(*(_rms(e) for e in errors))

@@ -30,6 +30,7 @@ from ..effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import ProfileCost, profile_parameters
+from ..progress import reports_stages, stage
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult
@@ -107,7 +108,8 @@ def deliver(result: CalibrationResult, datasets: Sequence,
             validation: Sequence = ()) -> CalibrationResult:
     """``result`` with its ``delivery`` chosen: ``robot_calibrated`` the delivered geometry,
     ``recommended`` and its reason updated when doing nothing is better."""
-    delivery = choose(result, datasets, validation)
+    with stage("delivery: the geometry a controller runs"):
+        delivery = choose(result, datasets, validation)
     recommendation = result.recommendation
     if delivery.refused:
         recommendation = delivery.reason
@@ -115,11 +117,14 @@ def deliver(result: CalibrationResult, datasets: Sequence,
                    recommended=delivery.recommended, recommendation=recommendation)
 
 
+@reports_stages(default=False)
 def run_job(datasets: Sequence, validation: Sequence = (), options: JobOptions = JobOptions(),
             out: Path | None = None, report: ReportOptions = ReportOptions(), *,
-            verb: str = "calibrate") -> JobOutcome:
+            verb: str = "calibrate", progress: bool = False) -> JobOutcome:
     """The whole job; with ``out``, the files written there, the folder's marker naming
-    ``verb`` (see the module docstring)."""
+    ``verb`` (see the module docstring). ``progress``: every stage on a terminal (the
+    calibration's own stages with ``options.progress``)."""
+    del progress  # read by ``reports_stages``
     result = calibrate_job(datasets, validation, options)
     if out is None:
         return JobOutcome(measured(result, datasets, validation), None)
@@ -215,15 +220,17 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
                 shutil.copy2(out / name, staging / name)
         save_robot(result.robot_calibrated, staging / ROBOT_FILE)
         save_effects(result, staging)
-        result = measured(result, datasets, validation, staging / ROBOT_FILE, staging)
+        with stage("figures from the written files"):
+            result = measured(result, datasets, validation, staging / ROBOT_FILE, staging)
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2)
                                              + "\n")
         write_errors_csv(result, staging)
         if report.report:
             from ..report import write_report
 
-            write_report(result, staging / "report.html", pdf=report.pdf, info=report.info,
-                         templates=report.templates)
+            with stage("report"):
+                write_report(result, staging / "report.html", pdf=report.pdf,
+                             info=report.info, templates=report.templates)
         written = tuple(sorted(p.name for p in staging.iterdir()))
     return JobOutcome(result, out, written)
 

@@ -75,7 +75,7 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
     return point, derivatives
 
 
-COMPILE_ROWS = 2000  # from this many rows on, the per-row derivatives are compiled to C
+COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
 
 
 def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
@@ -211,6 +211,7 @@ class Problem:
         self._row = _row_function(self.kinematics, self.effects, self.columns)
         self._maps: dict[tuple[int, int], ca.Function] = {}
         self._separable_functions: dict[int, SeparableResidual | None] = {}
+        self._data_cache: dict[int, tuple] = {}
         self._x0 = self._initial(start or {})
 
     def __repr__(self) -> str:
@@ -241,6 +242,18 @@ class Problem:
         return np.concatenate(parts) if parts else np.zeros(0)
 
     def _data(self, model: MeasurementModel):
+        """``(Q dof x N, extras columns x N, payload_com 3)`` of ``model``'s rows, built once
+        per dataset (read-only: every residual and Jacobian evaluation reads them)."""
+        cached = self._data_cache.get(id(model))
+        if cached is not None and cached[0] is model.dataset:
+            return cached[1]
+        data = self._build_data(model)
+        for array in data:
+            array.flags.writeable = False
+        self._data_cache[id(model)] = (model.dataset, data)
+        return data
+
+    def _build_data(self, model: MeasurementModel):
         dataset = model.dataset
         n = dataset.rows
         extras = np.zeros((len(self.columns), n))
@@ -251,8 +264,9 @@ class Problem:
                 extras[i] = direction_values(dataset, column)
             elif column != "payload":
                 raise InputError(f"effect needs a {column!r} column", file=dataset.data_path)
-        payload_com = dataset.payload_com if dataset.payload_com is not None else np.zeros(3)
-        return dataset.joints.T, extras, payload_com
+        payload_com = np.array(dataset.payload_com if dataset.payload_com is not None
+                               else np.zeros(3), dtype=float)
+        return np.array(dataset.joints.T, dtype=float), extras, payload_com
 
     def _mapped(self, which: int, rows: int) -> ca.Function:
         key = (which, rows)

@@ -241,7 +241,8 @@ def run(args: argparse.Namespace) -> int:
                          rule=args.rule, profile=args.profile, progress=sys.stderr.isatty())
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
-    outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate")
+    outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate",
+                      progress=options.progress)
     result = outcome.result
     print(summary(result, diagnosed=not args.no_diagnose))
     written = [name for name in outcome.written if not name.startswith(".")]

@@ -82,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
             render = find_chromium() is not None
         outcome = run_job(fit, validation,
                           JobOptions(diagnose=not args.no_diagnose, progress=sys.stderr.isatty()),
-                          out, ReportOptions(keep=() if render else (SCREENSHOT,)), verb="demo")
+                          out, ReportOptions(keep=() if render else (SCREENSHOT,)), verb="demo",
+                          progress=sys.stderr.isatty())
         result = outcome.result
         print(summary(result, diagnosed=not args.no_diagnose))
         done[name] = {**summary_fields(result, diagnosed=not args.no_diagnose),
