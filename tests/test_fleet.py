@@ -112,13 +112,22 @@ def test_fleet_result_equals_a_single_calibrate_run(first_run, fleet_files):
                         direct.fit.rms_final / dataset.units.length_scale, rel_tol=1e-9)
 
 
-def _without_times(value):
-    """``value`` (parsed JSON) without wall-clock figures (``seconds``)."""
-    if isinstance(value, dict):
-        return {k: _without_times(v) for k, v in value.items() if k != "seconds"}
-    if isinstance(value, list):
-        return [_without_times(v) for v in value]
-    return value
+def _same(a, b, where: str = "result") -> None:
+    """``a`` and ``b`` (parsed JSON) equal key by key, wall-clock figures (``seconds``)
+    aside; numbers to 1e-12 relative: a worker process runs its linear algebra on one
+    thread, the command on several, and sums in another order round differently."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and set(a) - {"seconds"} == set(b) - {"seconds"}, where
+        for key in set(a) - {"seconds"}:
+            _same(a[key], b[key], f"{where}.{key}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), where
+        for k, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{where}[{k}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-300), f"{where}: {a} != {b}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
 
 
 def test_fleet_result_file_is_the_calibrate_verbs_key_by_key(first_run, fleet_files, tmp_path):
@@ -129,7 +138,7 @@ def test_fleet_result_file_is_the_calibrate_verbs_key_by_key(first_run, fleet_fi
     fleet = json.loads((out / "r1" / "result.json").read_text())
     direct = json.loads((single / "result.json").read_text())
     assert {"delivered", "recommended", "predicted_accuracy"} <= set(fleet)
-    assert _without_times(fleet) == _without_times(direct)
+    _same(fleet, direct)
 
 
 def test_fleet_flags_the_robot_with_outlying_compliance(first_run):

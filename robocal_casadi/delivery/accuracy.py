@@ -104,8 +104,8 @@ def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
     kinematics = Kinematics(delivered)
     G, positions = _point_jacobians(kinematics, Q, np.asarray(point, dtype=float))
     names = tuple(kinematics.registry.names) + tuple(point_names)
-    P = _without_rigid_motion(positions)
-    per_pose = _parameter_error(result, kinematics, names, G[:, :len(names)], P)
+    PG = _without_rigid_motion(_rigid_basis(positions), G[:, :len(names)])
+    per_pose = _parameter_error(result, kinematics, names, PG)
     unexplained = 0.0 if result.unexplained is None else float(result.unexplained.rms)
     s2 = unexplained**2 + structured**2
     errors = np.sqrt(np.clip(per_pose, 0.0, None) + s2)
@@ -133,29 +133,32 @@ def _point_jacobians(kinematics: Kinematics, Q: np.ndarray,
     return G.reshape(3 * count, width), np.asarray(positions).T
 
 
-def _without_rigid_motion(positions: np.ndarray) -> np.ndarray:
-    """Projection (3N x 3N) removing every small rigid motion of the point set."""
+def _rigid_basis(positions: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (3N x 6) of the small rigid motions of the point set: three
+    translations and three rotations about its centroid."""
     centred = positions - positions.mean(axis=0)
     blocks = []
     for point in centred:
         x, y, z = point
         skew = np.array([[0.0, z, -y], [-z, 0.0, x], [y, -x, 0.0]])  # -[p]x: d p / d rotation
         blocks.append(np.hstack([np.eye(3), skew]))
-    R = np.vstack(blocks)
-    Qr, _ = np.linalg.qr(R)
-    return np.eye(len(R)) - Qr @ Qr.T
+    return np.linalg.qr(np.vstack(blocks))[0]
 
 
-def _parameter_error(result, kinematics: Kinematics, names: Sequence[str], G: np.ndarray,
-                     P: np.ndarray) -> np.ndarray:
+def _without_rigid_motion(basis: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``G`` with its rigid-motion part (``basis``, orthonormal) removed."""
+    return G - basis @ (basis.T @ G)
+
+
+def _parameter_error(result, kinematics: Kinematics, names: Sequence[str],
+                     PG: np.ndarray) -> np.ndarray:
     """Expected squared error [m^2] per pose from the parameters' errors (module
-    docstring); ``G``'s columns are ``names``; the rigid motion removed by ``P``."""
+    docstring); ``PG``'s columns (3N rows, the rigid motion removed) are ``names``."""
     registry = kinematics.registry
-    count = len(G) // 3
+    count = len(PG) // 3
     column = {name: k for k, name in enumerate(names)}
     kept = [k for k, n in enumerate(result.covariance_names) if n in column]
     fitted = [column[result.covariance_names[k]] for k in kept]
-    PG = P @ G
     per_pose = np.zeros(count)
     if fitted:
         block = PG[:, fitted]
@@ -165,7 +168,7 @@ def _parameter_error(result, kinematics: Kinematics, names: Sequence[str], G: np
     # Parameters held at nominal by an exact dependency moved nothing the fit could not
     # take up; those held because the data barely see them keep their tolerance.
     held = [n for n in result.identifiability.practical if n in registry]
-    basis = np.linalg.qr(PG[:, fitted])[0] if fitted else np.zeros((len(G), 0))
+    basis = np.linalg.qr(PG[:, fitted])[0] if fitted else np.zeros((len(PG), 0))
     for name in held:
         left = PG[:, column[name]] - basis @ (basis.T @ PG[:, column[name]])
         tolerance = tolerance_of(name, registry.quantity(name), result.robot_nominal)
