@@ -302,3 +302,26 @@ def json_safe(value):
     if isinstance(value, (list, tuple)):
         return [json_safe(v) for v in value]
     return value
+
+
+def resolved_path(path: Path) -> Path:
+    """``path`` with links resolved; as written (absolute) where that fails."""
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):  # a symlink loop: compare the names as written
+        return Path(os.path.abspath(path))
+
+
+def not_replacing_inputs(folder: Path, inputs, option: str = "--out") -> None:
+    """Refuse an output folder that is, or holds, one of the inputs (files or folders the
+    run reads): replacing the folder as a whole would delete them."""
+    from .errors import InputError
+
+    root = resolved_path(Path(folder))
+    for item in inputs:
+        if item is None:
+            continue
+        resolved = resolved_path(Path(item))
+        if resolved == root or root in resolved.parents:
+            raise InputError(f"{folder} holds the input {item}; the output folder is replaced "
+                             "as a whole, so choose another one", where=option)

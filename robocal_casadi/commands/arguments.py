@@ -24,7 +24,8 @@ import stat
 from pathlib import Path
 
 from ..errors import InputError
-from ..output import replace_refusal
+from ..output import not_replacing_inputs, replace_refusal
+from ..output import resolved_path as _resolved
 
 
 def _nearest_existing(path: Path) -> Path | None:
@@ -63,13 +64,6 @@ def _same_file(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     except (OSError, ValueError):
         return False
-
-
-def _resolved(path: Path) -> Path:
-    try:
-        return path.resolve()
-    except (OSError, RuntimeError):  # a symlink loop: compare the names as written
-        return Path(os.path.abspath(path))
 
 
 def output_file(path: str | Path, option: str = "--out", *, inputs=()) -> Path:
@@ -185,15 +179,3 @@ def seed(text: str) -> int:
                                          f"{text[:40]}")
     return value
 
-
-def not_replacing_inputs(folder: Path, inputs, option: str = "--out") -> None:
-    """Refuse an output folder that is, or holds, one of the inputs (files or folders the
-    run reads): replacing the folder as a whole would delete them."""
-    root = _resolved(Path(folder))
-    for item in inputs:
-        if item is None:
-            continue
-        resolved = _resolved(Path(item))
-        if resolved == root or root in resolved.parents:
-            raise InputError(f"{folder} holds the input {item}; the output folder is replaced "
-                             "as a whole, so choose another one", where=option)

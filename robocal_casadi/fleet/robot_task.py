@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import InputError, RobocalError
-from ..output import atomic_file, replace_refusal, written_by_robocal
+from ..output import atomic_file, not_replacing_inputs, replace_refusal, written_by_robocal
 from .spec import FleetRobot
 
 if TYPE_CHECKING:
@@ -275,7 +275,6 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
 def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, validation,
                files: list[tuple[str, Path]], digest: str) -> dict:
     from ..calibration.job import JobOptions, ReportOptions, calibrate_job, write
-    from ..commands.arguments import not_replacing_inputs
 
     if folder.exists():
         refusal = replace_refusal(folder, "fleet", also=(RECORD,)) if folder.is_dir() else \
