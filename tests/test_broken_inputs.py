@@ -926,7 +926,7 @@ def test_a_read_only_output_folder_is_found_before_the_work(templates, tmp_path,
     def no_work(*args, **kwargs):
         raise AssertionError("the calibration ran although its output cannot be written")
 
-    monkeypatch.setattr(calibrate_verb, "calibrate", no_work)
+    monkeypatch.setattr(calibrate_verb, "run_job", no_work)
     locked = _read_only_folder(tmp_path)
     folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
     assert main(argv("calibrate", folder, locked / "robocal-result")) == 2
