@@ -980,11 +980,11 @@ def test_repeated_validate_reaches_the_calibration(templates, tmp_path, capsys, 
 
     seen = {}
 
-    def record(datasets, validation, **kwargs):
+    def record(datasets, validation, *args, **kwargs):
         seen["validation"] = [d.path.name for d in validation]
         raise calibrate_verb.InputError("stop here")
 
-    monkeypatch.setattr(calibrate_verb, "calibrate", record)
+    monkeypatch.setattr(calibrate_verb, "run_job", record)
     names = []
     for k in range(3):
         copy = Path(shutil.copytree(templates / "tracker", tmp_path / f"v{k}"))

@@ -37,9 +37,11 @@ from ..robot import Robot
 
 GEOMETRY_ONLY = ("geometric", "final_geometry", "projected")
 DOING_NOTHING = ("nominal", "instrument_only")
-# A calibration must beat doing nothing by more than this share of the held-out RMS to
-# be recommended: below it the two are the same within what one held-out set can tell.
-MARGIN = 0.0
+# Held-out RMS values closer than this [m] (or this share of them) are a tie, and a tie
+# never refuses a calibration: equal models (data without error, a robot on its drawing)
+# differ only in the last digits of their sums.
+TIE = 1e-9
+TIE_SHARE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,7 @@ def choose(result, datasets: Sequence, validation: Sequence = ()) -> Delivery:
     candidates = tuple(geometry) + tuple(nothing)
     if calibrated is not None and scores:
         name, rms = min(scores.items(), key=lambda item: item[1])
-        if rms <= calibrated * (1.0 - MARGIN):
+        if rms < calibrated - max(TIE, TIE_SHARE * calibrated):
             reason = (f"the {basis} show the calibrated robot no better than the "
                       f"{name.replace('_', ' ')} one ({_length(result, calibrated)} against "
                       f"{_length(result, rms)} RMS): robot_calibrated.yaml holds the nominal "
