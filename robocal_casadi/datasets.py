@@ -150,9 +150,10 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
         if value is not None:
             changes[name] = np.asarray(value)[mask]
     # the table's lines, unless the rows were changed in memory after reading
-    lines = dataset.lines
-    changes["lines"] = None if lines is None or len(lines) != len(mask) else \
-        np.asarray(lines)[mask]
+    if hasattr(dataset, "lines"):
+        lines = dataset.lines
+        changes["lines"] = None if lines is None or len(lines) != len(mask) else \
+            np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)
