@@ -412,10 +412,11 @@ MAX_ROWS = 1_000_000  # rows of a simulated table (a few hundred MB of CSV)
 
 
 def table_rows_of(kind: str, rows: int, sockets: int, touches: int) -> int:
-    """Rows of the table ``simulate`` writes for ``rows`` units of ``kind``: 4 touches
-    per bar placement, ``sockets * touches`` per artifact placement, else one per unit."""
-    per_unit = {"cross_bar": 4, "artifact_touches": sockets * touches}.get(kind, 1)
-    return rows * per_unit
+    """Rows of the table ``simulate`` writes for ``rows`` units of ``kind`` (the
+    measurement model's ``table_rows_per_unit``)."""
+    from .measurement import MODELS
+
+    return rows * MODELS[kind].table_rows_per_unit(sockets, touches)
 
 
 def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows: int = 100,

@@ -111,11 +111,15 @@ def test_degenerate_validation_table_is_refused_too(valid, tmp_path, capsys):
 
 
 def test_the_unmodified_templates_calibrate(valid, tmp_path, capsys):
-    """The breakage above, not the templates, causes the refusals."""
+    """The breakage above, not the templates, causes the refusals. The templates' robot
+    is on its drawing, so the job may rightly find calibrating no better than doing
+    nothing (status 3, written and said); what it must not do is refuse the data (2)."""
     for template in ("bar", "art", "tracker"):
         out = tmp_path / template
-        assert main(["calibrate", str(valid / template / "dataset.yaml"), "--out", str(out),
-                     "--no-diagnose", "--no-report"]) == 0, capsys.readouterr().err
+        status = main(["calibrate", str(valid / template / "dataset.yaml"), "--out", str(out),
+                       "--no-diagnose", "--no-report"])
+        assert status in (0, 3), capsys.readouterr().err
+        assert (out / "result.json").is_file()
 
 
 def test_non_finite_jacobian_is_a_solver_error_not_a_crash():

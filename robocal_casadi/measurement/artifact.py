@@ -44,6 +44,10 @@ class ArtifactModel(MeasurementModel):
     table = "touches.csv"
     reach = "sockets"
     unit_name = "placements"
+
+    @classmethod
+    def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
+        return sockets * touches
     error_title = "artifact error"
     placement_shared = False
     # placements differ in information more than tracker readings: with 16 candidates per
@@ -274,6 +278,10 @@ class CrossBarModel(ArtifactModel):
 
     kind = "cross_bar"
     error_title = "bar error"
+
+    @classmethod
+    def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
+        return 4  # the four arm ends, touched once per placement
     cross = True
     size_key = "bar.length"
     invisible_reason = ("bar data carry no absolute position: a rigid motion of all touched "

@@ -51,6 +51,12 @@ class MeasurementModel(ABC):
     placed artifact) or ``"beam"`` (the laser aimed at a surface)."""
     unit_name: ClassVar[str] = "readings"
     """What one planned candidate (and one simulated ``--rows``) is, plural."""
+
+    @classmethod
+    def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
+        """Rows of a simulated table per unit (``unit_name``): one reading a row; an
+        artifact placement has ``sockets`` sockets touched ``touches`` times each."""
+        return 1
     error_title: ClassVar[str]
     """What one entry of ``errors`` is called in the report."""
     measured_columns: ClassVar[tuple[str, ...]] = ()
