@@ -9,8 +9,10 @@ one joint's gear train turns with another. Both joints revolute, 1-based. Parame
 result.json lists ``joints: [j]`` with these parameters. One effect may hold several
 pairs (``joints`` and ``drivers`` side by side).
 
-Plausible on real robots: each coefficient below about 0.05 deg (8.7e-4 rad), the size
-of the periodic errors of gear trains.
+Plausible on real robots, by the coupled joint's drive: each amplitude below about
+0.05 deg (8.7e-4 rad) for gear trains, the size of their periodic errors; 0.2 deg for
+belts and 0.5 deg for cables, whose routing over the pulleys of the joints they pass
+changes their length with those joints' angles.
 """
 
 from __future__ import annotations
@@ -27,9 +29,15 @@ from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import column
+from .drives import per_drive
 
-AMPLITUDE = Plausible(math.radians(0.05), basis="coupling through gear trains stays below "
-                      "about 0.05 deg")
+AMPLITUDE = per_drive(
+    Plausible(math.radians(0.05), basis="coupling through gear trains stays below about "
+              "0.05 deg"),
+    belt=Plausible(math.radians(0.2), basis="belts routed through other joints: below about "
+                   "0.2 deg"),
+    cable=Plausible(math.radians(0.5), basis="cables routed over other joints' pulleys: below "
+                    "about 0.5 deg"))
 
 
 class JointCoupling(Effect):
@@ -77,12 +85,12 @@ class JointCoupling(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{t}{j}_q{k}" for j, k in self.pairs for t in ("sin", "cos"))
 
-    def plausible(self, parameter: str) -> Plausible:
-        return AMPLITUDE
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return AMPLITUDE[drive]
 
-    def _check_amplitudes(self, values) -> tuple:
+    def _check_amplitudes(self, values, robot=None) -> tuple:
         return amplitude_check(self, [(f"sin{j}_q{k}", f"cos{j}_q{k}") for j, k in self.pairs],
-                               values, AMPLITUDE)
+                               values, robot)
 
     def _check(self, robot: Robot) -> None:
         for j, k in self.pairs:
