@@ -25,7 +25,7 @@ import numpy as np
 
 from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
 from .effects.coupling import JointCoupling
-from .effects.motion import is_direction_column, with_directions
+from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
 from .kinematics import Kinematics
@@ -121,7 +121,7 @@ class EffectModel:
         motion (backlash) follow from the order of the rows where not given."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         extras = dict(extras or {})
-        if any(is_direction_column(c) for c in self.columns()):
+        if any(is_derived_column(c) for c in self.columns()):
             extras = with_directions(Q, extras)
         missing = [c for c in self.columns() if c not in extras]
         if missing:
@@ -153,8 +153,8 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
             payload |= bool(entry.get("payload", False))
             effect: Effect = JointCompliance(joints, robot=robot,
                                              payload=entry.get("payload", False))
-        elif name == "joint_coupling":
-            effect = JointCoupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
+        elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
+            effect = EFFECTS[name](joints, drivers=[int(d) for d in entry.get("drivers", ())])
         elif name == "thermal_drift":
             effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
                                   reference_value=float(entry["reference"]))
@@ -221,7 +221,7 @@ def row_values(model: EffectModel, table, *, payload: float | None = None,
     options = {"payload": payload, "temperature": temperature}
     out: dict[str, np.ndarray] = {}
     for name in model.columns():
-        if is_direction_column(name) and not table.has(name):
+        if is_derived_column(name) and not table.has(name):
             continue  # from the order of the rows (``EffectModel.tool_poses``)
         if table.has(name):
             if options.get(name) is not None:

@@ -162,7 +162,9 @@ class Effect(ABC):
     simulated entry) is: ``joint``, ``pair`` (a joint and the joint driving it) or
     ``column`` (one data column, no joints); ``revolute_only``: whether the joints must be
     revolute; ``drives``: the drives of the joints diagnosis looks for it on (backlash on
-    geared joints, friction hysteresis on the others); ``simulation_default``: the true
+    geared joints, friction hysteresis on the others); ``tracker_only``: whether the
+    simulator injects it only into data taken at any configuration (its truth needs the
+    whole table in order, or shifts the measured point); ``simulation_default``: the true
     values of one entry [unit] the simulator uses when none are given, in
     ``parameter_names`` order; ``formula``: the relation in one line, as the terminal
     shows it (``q_true = (1 + s) q_read``).
@@ -180,6 +182,7 @@ class Effect(ABC):
     per: ClassVar[str] = "joint"
     revolute_only: ClassVar[bool] = False
     drives: ClassVar[tuple[str, ...]] = DRIVES
+    tracker_only: ClassVar[bool] = False
     simulation_default: ClassVar[tuple[float, ...]]
     formula: ClassVar[str]
 
@@ -336,7 +339,7 @@ class Effect(ABC):
         for c in columns:
             if c in extras:
                 values.append(np.broadcast_to(np.asarray(extras[c], dtype=float), (n,)))
-            elif c == "payload" or c.startswith("direction_"):
+            elif c == "payload" or c.startswith(("direction_", "travel_")):
                 values.append(np.zeros(n))
             else:
                 raise InputError(f"{self.name} needs a {c!r} column", where=c)
@@ -406,6 +409,13 @@ class Effect(ABC):
         recovers the simulated truth checks ``delta``.
         """
         return np.zeros(np.atleast_2d(Q).shape)
+
+    def simulated_shift(self, world: TrueWorld, Q, extras: Mapping[str, np.ndarray],
+                        values: Mapping[str, float]) -> np.ndarray:
+        """The true shift (N x 3) [m], world frame, of the whole arm at true joints ``Q``
+        (N x dof), for the simulator; zero unless the effect moves points directly (link
+        deflection). The estimator's ``delta`` writes it as ``dp`` on ``base_x..z``."""
+        return np.zeros((len(np.atleast_2d(Q)), 3))
 
     def simulated_dp(self, world: TrueWorld, p: np.ndarray,
                      extras: Mapping[str, float | None],

@@ -53,22 +53,23 @@ class JointCoupling(Effect):
     revolute_only = True
     simulation_default = (2e-4, 1e-4)
     formula = "q_true_J = q_read_J + s sin q_K + c cos q_K (joint K drives joint J)"
+    own_joint = "joint_cyclic"  # what a joint driving itself would be
 
     def __init__(self, joints: tuple[int, ...], drivers: Sequence[int] = ()):
         super().__init__(joints)
         self.drivers = tuple(int(k) for k in drivers)
         if len(self.drivers) != len(self.joints):
-            raise InputError(f"joint_coupling: {len(self.joints)} coupled joint(s) but "
+            raise InputError(f"{self.name}: {len(self.joints)} coupled joint(s) but "
                              f"{len(self.drivers)} driving joint(s); give one driver per joint",
                              where="effects")
         pairs = self.pairs
         if len(set(pairs)) != len(pairs):
-            raise InputError(f"joint_coupling: a pair is listed twice in {list(pairs)}",
+            raise InputError(f"{self.name}: a pair is listed twice in {list(pairs)}",
                              where="effects")
         for j, k in pairs:
             if j == k:
-                raise InputError(f"joint_coupling: joint {j} cannot drive itself (that is "
-                                 "joint_cyclic)", where="effects")
+                raise InputError(f"{self.name}: joint {j} cannot drive itself (that is "
+                                 f"{self.own_joint})", where="effects")
 
     @property
     def pairs(self) -> tuple[tuple[int, int], ...]:
@@ -96,11 +97,11 @@ class JointCoupling(Effect):
         for j, k in self.pairs:
             for joint in (j, k):
                 if not 1 <= joint <= robot.dof:
-                    raise InputError(f"joint_coupling: joint {joint} does not exist; the robot "
+                    raise InputError(f"{self.name}: joint {joint} does not exist; the robot "
                                      f"{robot.name!r} has joints 1..{robot.dof}", where="effects")
                 if not robot.joints[joint - 1].revolute:
-                    raise InputError(f"joint_coupling: joint {joint} is prismatic; the coupling "
-                                     "is periodic in joint angles and needs revolute joints",
+                    raise InputError(f"{self.name}: joint {joint} is prismatic; the coupling "
+                                     "is between joint angles and needs revolute joints",
                                      where="effects")
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
@@ -145,7 +146,8 @@ class JointCoupling(Effect):
         for joint in (j, k):
             cls._check_simulated_joint(joint, robot, where)
         if j == k:
-            raise InputError(f"joint {j} cannot drive itself (that is joint_cyclic)", where=where)
+            raise InputError(f"joint {j} cannot drive itself (that is {cls.own_joint})",
+                             where=where)
         return (j, k)
 
     @classmethod

@@ -1,0 +1,191 @@
+"""Link deflection: a link bending under the weight it carries, as a shift of its end.
+
+A link held at its root and loaded at its end by a weight ``m g`` bends like a
+cantilever (the elastostatic link model): its end moves along the part of the load
+perpendicular to the link, by an amount proportional to the bending moment
+``M = m |L| |g_perp|`` at the root. Everything beyond the link moves with its end:
+
+    delta_i = (f_i payload + f_i_m) |L_i| g_perp_i           [m], world frame
+    g_perp_i = g - (g . L_i) L_i / |L_i|^2                    [m/s^2]
+
+``L_i`` [m] is link i's vector in the world frame, from the axis of joint i to the axis
+of joint i + 1 (the link joint i moves; the origins of the frames on those axes, of the
+chain at the row's readings and geometry), ``g`` the robot's gravity [m/s^2], ``payload``
+the row's payload column [kg] (0 without one), ``f_i`` [m/(N m)] the link's deflection
+per unit bending moment (``L^2 / (3 E I)`` for a uniform beam loaded at its end) and
+``f_i_m`` [m kg/(N m)] that times the effective mass of the arm beyond the link (its own
+weight, lumped, since where the masses sit along the link is not known). Parameters
+``f{i}`` (only with a payload column) and ``f{i}_m``, link i 1-based; a link shorter than
+``MIN_LENGTH`` has nothing to bend and is not a candidate (for a modified-DH or URDF
+chain the last link ends at the flange, so it is none).
+
+The deflection enters the kinematics as a shift of the base's translation (``base_x``,
+``base_y``, ``base_z``), which moves every point of the arm by ``delta`` in the world: the
+slope of the bent link is left out (it turns the arm beyond by about ``1.5 delta / |L|``,
+second order against the shift for the short tools of light arms).
+
+Unlike joint compliance, which turns the arm about a joint axis by an angle that follows
+the joint's gravity torque (and so the whole configuration beyond the joint), the
+deflection shifts the arm along the load, and only link i's own elevation sets its size.
+
+Plausible on real robots: ``f_i`` positive, below 1e-4 m/(N m) (a light aluminium link
+of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms 1e-8 .. 1e-7);
+``f_i_m`` positive, below 1e-3 m kg/(N m) (that compliance times an effective mass of
+some tens of kilograms beyond the link). The same for every drive: the link bends, not
+the joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from ..errors import InputError
+from ..kinematics import Kinematics, symbolic_frames
+from ..robot import Robot
+from ..units import Units
+from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
+from .checks import column
+
+MIN_LENGTH = 0.1  # [m] links shorter than this are not candidates
+PER_MOMENT = Plausible(1e-4, sign=+1, basis="link bending of robot arms: below 1e-4 m/(N m)")
+OWN_WEIGHT = Plausible(1e-3, sign=+1, basis="link bending times the arm's weight beyond the "
+                       "link: below 1e-3 m kg/(N m)")
+SHIFT = ("base_x", "base_y", "base_z")
+
+
+def link_ends(robot: Robot, frames: list) -> list[tuple[Any, Any]]:
+    """(root, end) origins [m] of each link i = 1..n from the chain's world ``frames``
+    (``symbolic_frames`` layout, CasADi or numpy 4x4): the points where joint i's and
+    joint i + 1's axes cross their frames; the last link ends at the flange."""
+    n = robot.dof
+    if robot.convention == "dh":  # joint k turns about z of frame k - 1
+        axes = [frames[k - 1] for k in range(1, n + 1)] + [frames[n]]
+    else:  # mdh and urdf: joint k turns about its own frame k
+        axes = [frames[k] for k in range(1, n + 1)] + [frames[n]]
+    return [(axes[i][:3, 3], axes[i + 1][:3, 3]) for i in range(n)]
+
+
+def link_lengths(robot: Robot) -> list[float]:
+    """Each link's length [m] (nominal geometry; it does not depend on the readings)."""
+    frames = Kinematics(robot).joint_frames(np.zeros(robot.dof), robot.parameter_vector())
+    ends = link_ends(robot, [np.asarray(T) for T in frames])
+    return [float(np.linalg.norm(end - root)) for root, end in ends]
+
+
+class LinkDeflection(Effect):
+    """The end of each link in ``joints`` (link i, the one joint i moves) sags along the
+    load perpendicular to it; see the module docstring."""
+
+    name = "link_deflection"
+    title = "Link deflection"
+    unit = "m/(N m)"
+    typical = 1e-6
+    sentence = "{joints} bend under the weight they carry ({values})"
+    plot_variable = "joint"
+    simulation_default = (2e-6, 2e-5)
+    tracker_only = True
+    formula = ("the arm beyond link i shifts by (f payload + f_m) |L| g_perp, g_perp the part of\n"
+               "      gravity perpendicular to the link (tracker data only)")
+
+    def __init__(self, joints: tuple[int, ...], payload: bool = True):
+        super().__init__(joints)
+        self.payload = bool(payload)
+
+    def __repr__(self) -> str:
+        return f"LinkDeflection(links={list(self.joints)}, payload={self.payload})"
+
+    @property
+    def label(self) -> str:
+        return f"{self.name}[link {', '.join(str(j) for j in self.joints)}]"
+
+    def parameter_names(self) -> tuple[str, ...]:
+        names: list[str] = []
+        for i in self.joints:
+            names += ([f"f{i}"] if self.payload else []) + [f"f{i}_m"]
+        return tuple(names)
+
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return OWN_WEIGHT if parameter.endswith("_m") else PER_MOMENT
+
+    def parameter_unit(self, parameter: str) -> str:
+        return "m kg/(N m)" if parameter.endswith("_m") else self.unit
+
+    @classmethod
+    def create(cls, joints, robot: Robot | None = None,
+               extras: Mapping[str, Any] | None = None, **options) -> LinkDeflection:
+        """The payload term where the data have a ``payload`` column."""
+        return cls(tuple(joints), payload="payload" in (extras or {}))
+
+    @classmethod
+    def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[LinkDeflection, ...]:
+        """One per link at least ``MIN_LENGTH`` long (nominal geometry)."""
+        return tuple(cls.create((i,), robot, extras)
+                     for i, length in enumerate(link_lengths(robot), 1) if length >= MIN_LENGTH)
+
+    def _check(self, robot: Robot) -> None:
+        lengths = link_lengths(robot)
+        for i in self.joints:
+            if not 1 <= i <= robot.dof:
+                raise InputError(f"{self.name}: link {i} does not exist; the robot "
+                                 f"{robot.name!r} has links 1..{robot.dof}", where="effects")
+            if lengths[i - 1] < 1e-6:
+                raise InputError(f"{self.name}: link {i} has no length (its joint axes cross); "
+                                 "it has nothing to bend", where="effects")
+
+    @classmethod
+    def for_simulation(cls, keys) -> LinkDeflection:
+        return cls(tuple(int(k) for k in keys), payload=True)
+
+    def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, ca.SX]:
+        robot = row.robot
+        self._check(robot)
+        ends = link_ends(robot, symbolic_frames(robot, row.registry, row.q, row.p))
+        g = ca.DM(robot.gravity)
+        payload = row.extras.get("payload", 0.0)
+        shift = ca.SX.zeros(3)
+        k = 0
+        for i in self.joints:
+            root, end = ends[i - 1]
+            link = end - root
+            length2 = ca.dot(link, link)
+            perpendicular = g - ca.dot(g, link) * link / length2
+            load: ca.SX | float = 0
+            if self.payload:
+                load = theta[k] * payload
+                k += 1
+            load = load + theta[k]
+            k += 1
+            shift += load * ca.sqrt(length2) * perpendicular
+        entries = {row.registry.index(name): shift[c] for c, name in enumerate(SHIFT)}
+        return ca.SX.zeros(robot.dof), column(entries, len(row.registry))
+
+    def describe(self, values, units: Units) -> str:
+        parts = ", ".join(f"{k} = {v:.3g} {self.parameter_unit(k)}" for k, v in values.items())
+        links = joint_list(self.joints).replace("joint", "link")
+        return self.sentence.format(joints=links, values=parts)
+
+    def check_simulation(self, robot: Robot, values) -> None:
+        super().check_simulation(robot, values)
+        self._check(robot)
+
+    def simulated_shift(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
+        """The true shift (N x 3) [m], world frame, of everything beyond the links at true
+        joints ``Q`` (N x dof), from the true robot's frames and the rows' ``payload``."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        kinematics = Kinematics(world.robot)
+        payload = np.asarray(extras.get("payload", np.zeros(len(Q))), dtype=float)
+        g = np.asarray(world.robot.gravity, dtype=float)
+        out = np.zeros((len(Q), 3))
+        for r, q in enumerate(Q):
+            frames = [np.asarray(T) for T in kinematics.joint_frames(q, kinematics.nominal)]
+            ends = link_ends(world.robot, frames)
+            for i in self.joints:
+                root, end = ends[i - 1]
+                u = (end - root) / np.linalg.norm(end - root)
+                load = values.get(f"f{i}", 0.0) * payload[r] + values[f"f{i}_m"]
+                out[r] += load * np.linalg.norm(end - root) * (g - (g @ u) * u)
+        return out
