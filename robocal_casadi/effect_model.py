@@ -25,6 +25,7 @@ import numpy as np
 
 from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
 from .effects.coupling import JointCoupling
+from .effects.deflection import LinkDeflection
 from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
@@ -53,6 +54,8 @@ def effects_to_dict(result) -> dict | None:
             entry["reference"] = float(effect.constants()[0])
         if isinstance(effect, JointCompliance):
             entry["payload"] = bool(effect.payload or payload_in_data)
+        if isinstance(effect, LinkDeflection):
+            entry["payload"] = effect.payload
         if isinstance(effect, JointCoupling):
             entry["drivers"] = [int(d) for d in effect.drivers]
         entries.append(entry)
@@ -88,7 +91,7 @@ class EffectModel:
         names: list[str] = []
         for effect in self.effects:
             needed = list(effect.required_columns())
-            if isinstance(effect, JointCompliance):
+            if isinstance(effect, JointCompliance) or getattr(effect, "payload", False):
                 needed.append("payload")
             names += [n for n in needed if n not in names]
         return tuple(names)
@@ -155,6 +158,9 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
                                              payload=entry.get("payload", False))
         elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
             effect = EFFECTS[name](joints, drivers=[int(d) for d in entry.get("drivers", ())])
+        elif name == "link_deflection":
+            payload |= bool(entry.get("payload", True))
+            effect = LinkDeflection(joints, payload=bool(entry.get("payload", True)))
         elif name == "thermal_drift":
             effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
                                   reference_value=float(entry["reference"]))
