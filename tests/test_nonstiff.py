@@ -214,8 +214,8 @@ def test_cable_driven_arm_is_named_effect_by_effect(tmp_path):
 def test_bending_link_is_not_named_compliance(tmp_path):
     """The upper arm bends under payload and its own weight: named link deflection of link
     2 (or left unexplained), never joint compliance."""
-    result = _fit_and_held_out(tmp_path, ROBOT, {"link_deflection": {2: (3e-6, 4e-5)}},
-                               (0.0, 20.0))
+    result = _fit_and_held_out(tmp_path, ROBOT,
+                               {"link_deflection": {2: (3e-6, 4e-5, 0.0, 0.0)}}, (0.0, 20.0))
     names = [e.name for e in result.effects]
     assert "joint_compliance" not in names
     assert names == ["link_deflection"] or result.unexplained is not None, names
@@ -235,14 +235,14 @@ def test_calibrated_effects_file_applies_the_new_effects_as_the_truth_does(tmp_p
     robot = replace(ROBOT, joints=tuple(replace(j, drive=d) for j, d in zip(
         ROBOT.joints, ["cable", "gear", "gear", "gear", "gear", "gear"])))
     spec = {"transmission_coupling": {"3@2": 4e-3}, "hysteresis": {1: 2e-3},
-            "link_deflection": {2: (3e-6, 4e-5)}}
+            "link_deflection": {2: (3e-6, 4e-5, 1e-6, 5e-6)}}
     content = {"units": {"length": "m", "angle": "rad"}, "payload_com": [0.0, 0.0, 0.0],
                "effects": [
                    {"name": "transmission_coupling", "joints": [3], "drivers": [2],
                     "parameters": {"r3_q2": 4e-3}},
                    {"name": "hysteresis", "joints": [1], "parameters": {"h1": 2e-3}},
                    {"name": "link_deflection", "joints": [2], "payload": True,
-                    "parameters": {"f2": 3e-6, "f2_m": 4e-5}}]}
+                    "parameters": {"f2": 3e-6, "f2_m": 4e-5, "v2": 1e-6, "v2_m": 5e-6}}]}
     (tmp_path / "effects_calibrated.yaml").write_text(yaml.safe_dump(content))
     model = load_effects(tmp_path, robot)
     rng = np.random.default_rng(5)

@@ -3,9 +3,13 @@
 A link held at its root and loaded at its end by a weight ``m g`` bends like a
 cantilever (the elastostatic link model): its end moves along the part of the load
 perpendicular to the link, by an amount proportional to the bending moment
-``M = m |L| |g_perp|`` at the root. Everything beyond the link moves with its end:
+``M = m |L| |g_perp|`` at the root. Where the bending also lowers the end along gravity
+(a yielding joint housing or bearing under the moment, a link whose sag is measured
+vertically) the end moves down in proportion to the same moment. Everything beyond the
+link moves with its end:
 
-    delta_i = (f_i payload + f_i_m) |L_i| g_perp_i           [m], world frame
+    delta_i = (f_i payload + f_i_m) |L_i| g_perp_i
+            + (v_i payload + v_i_m) |L_i| |g_perp_i| g / |g|      [m], world frame
     g_perp_i = g - (g . L_i) L_i / |L_i|^2                    [m/s^2]
 
 ``L_i`` [m] is link i's vector in the world frame, from the axis of joint i to the axis
@@ -14,8 +18,11 @@ chain at the row's readings and geometry), ``g`` the robot's gravity [m/s^2], ``
 the row's payload column [kg] (0 without one), ``f_i`` [m/(N m)] the link's deflection
 per unit bending moment (``L^2 / (3 E I)`` for a uniform beam loaded at its end) and
 ``f_i_m`` [m kg/(N m)] that times the effective mass of the arm beyond the link (its own
-weight, lumped, since where the masses sit along the link is not known). Parameters
-``f{i}`` (only with a payload column) and ``f{i}_m``, link i 1-based; a link shorter than
+weight, lumped, since where the masses sit along the link is not known); ``v_i``,
+``v_i_m`` the same for the sag along gravity. ``|g_perp|`` is taken as
+``sqrt(|g_perp|^2 + (1e-9 |g|)^2)``, smooth where a link points along gravity. Parameters
+``f{i}``, ``v{i}`` (only with a payload column), ``f{i}_m`` and ``v{i}_m``, link i
+1-based; a link shorter than
 ``MIN_LENGTH`` has nothing to bend and is not a candidate (for a modified-DH or URDF
 chain the last link ends at the flange, so it is none).
 
@@ -28,11 +35,11 @@ Unlike joint compliance, which turns the arm about a joint axis by an angle that
 the joint's gravity torque (and so the whole configuration beyond the joint), the
 deflection shifts the arm along the load, and only link i's own elevation sets its size.
 
-Plausible on real robots: ``f_i`` positive, below 1e-4 m/(N m) (a light aluminium link
-of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms 1e-8 .. 1e-7);
-``f_i_m`` positive, below 1e-3 m kg/(N m) (that compliance times an effective mass of
-some tens of kilograms beyond the link). The same for every drive: the link bends, not
-the joint.
+Plausible on real robots: ``f_i`` and ``v_i`` positive, below 1e-4 m/(N m) (a light
+aluminium link of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms
+1e-8 .. 1e-7); ``f_i_m`` and ``v_i_m`` positive, below 1e-3 m kg/(N m) (that compliance
+times an effective mass of some tens of kilograms beyond the link). The same for every
+drive: the link bends, not the joint.
 """
 
 from __future__ import annotations
@@ -51,6 +58,7 @@ from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import column
 
 MIN_LENGTH = 0.1  # [m] links shorter than this are not candidates
+SMOOTH = 1e-9  # of |g|: keeps |g_perp| smooth where a link points along gravity
 PER_MOMENT = Plausible(1e-4, sign=+1, basis="link bending of robot arms: below 1e-4 m/(N m)")
 OWN_WEIGHT = Plausible(1e-3, sign=+1, basis="link bending times the arm's weight beyond the "
                        "link: below 1e-3 m kg/(N m)")
@@ -86,10 +94,11 @@ class LinkDeflection(Effect):
     typical = 1e-6
     sentence = "{joints} bend under the weight they carry ({values})"
     plot_variable = "joint"
-    simulation_default = (2e-6, 2e-5)
+    simulation_default = (2e-6, 2e-5, 1e-6, 1e-5)
     tracker_only = True
-    formula = ("the arm beyond link i shifts by (f payload + f_m) |L| g_perp, g_perp the part of\n"
-               "      gravity perpendicular to the link (tracker data only)")
+    formula = ("the arm beyond link i shifts by (f payload + f_m) |L| g_perp + (v payload + v_m)"
+               "\n      |L| |g_perp| g/|g|, g_perp the part of gravity perpendicular to the link "
+               "(tracker data only)")
 
     def __init__(self, joints: tuple[int, ...], payload: bool = True):
         super().__init__(joints)
@@ -105,7 +114,8 @@ class LinkDeflection(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         names: list[str] = []
         for i in self.joints:
-            names += ([f"f{i}"] if self.payload else []) + [f"f{i}_m"]
+            for stem in ("f", "v"):
+                names += ([f"{stem}{i}"] if self.payload else []) + [f"{stem}{i}_m"]
         return tuple(names)
 
     def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
@@ -145,6 +155,8 @@ class LinkDeflection(Effect):
         self._check(robot)
         ends = link_ends(robot, symbolic_frames(robot, row.registry, row.q, row.p))
         g = ca.DM(robot.gravity)
+        down = g / float(np.linalg.norm(robot.gravity))
+        smooth2 = float(SMOOTH * np.linalg.norm(robot.gravity)) ** 2
         payload = row.extras.get("payload", 0.0)
         shift = ca.SX.zeros(3)
         k = 0
@@ -153,13 +165,16 @@ class LinkDeflection(Effect):
             link = end - root
             length2 = ca.dot(link, link)
             perpendicular = g - ca.dot(g, link) * link / length2
-            load: ca.SX | float = 0
-            if self.payload:
-                load = theta[k] * payload
+            moment_arm = ca.sqrt(length2)  # bending moment per unit load [m]
+            for direction in (perpendicular,
+                              ca.sqrt(ca.dot(perpendicular, perpendicular) + smooth2) * down):
+                load: ca.SX | float = 0
+                if self.payload:
+                    load = theta[k] * payload
+                    k += 1
+                load = load + theta[k]
                 k += 1
-            load = load + theta[k]
-            k += 1
-            shift += load * ca.sqrt(length2) * perpendicular
+                shift += load * moment_arm * direction
         entries = {row.registry.index(name): shift[c] for c, name in enumerate(SHIFT)}
         return ca.SX.zeros(robot.dof), column(entries, len(row.registry))
 
@@ -179,13 +194,18 @@ class LinkDeflection(Effect):
         kinematics = Kinematics(world.robot)
         payload = np.asarray(extras.get("payload", np.zeros(len(Q))), dtype=float)
         g = np.asarray(world.robot.gravity, dtype=float)
+        size = np.linalg.norm(g)
         out = np.zeros((len(Q), 3))
         for r, q in enumerate(Q):
             frames = [np.asarray(T) for T in kinematics.joint_frames(q, kinematics.nominal)]
             ends = link_ends(world.robot, frames)
             for i in self.joints:
                 root, end = ends[i - 1]
-                u = (end - root) / np.linalg.norm(end - root)
-                load = values.get(f"f{i}", 0.0) * payload[r] + values[f"f{i}_m"]
-                out[r] += load * np.linalg.norm(end - root) * (g - (g @ u) * u)
+                length = np.linalg.norm(end - root)
+                u = (end - root) / length
+                across = g - (g @ u) * u
+                sag = np.hypot(np.linalg.norm(across), SMOOTH * size) * g / size
+                bend = values.get(f"f{i}", 0.0) * payload[r] + values[f"f{i}_m"]
+                drop = values.get(f"v{i}", 0.0) * payload[r] + values[f"v{i}_m"]
+                out[r] += length * (bend * across + drop * sag)
         return out
