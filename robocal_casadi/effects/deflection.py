@@ -35,10 +35,13 @@ Unlike joint compliance, which turns the arm about a joint axis by an angle that
 the joint's gravity torque (and so the whole configuration beyond the joint), the
 deflection shifts the arm along the load, and only link i's own elevation sets its size.
 
-Plausible on real robots: ``f_i`` and ``v_i`` positive, below 1e-4 m/(N m) (a light
+Plausible on real robots: ``f_i`` and ``v_i`` positive, 1e-8 .. 1e-4 m/(N m) (a light
 aluminium link of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms
-1e-8 .. 1e-7); ``f_i_m`` and ``v_i_m`` positive, below 1e-3 m kg/(N m) (that compliance
-times an effective mass of some tens of kilograms beyond the link). The same for every
+1e-8 .. 1e-7); ``|f_i_m|`` and ``|v_i_m|`` below 1e-3 m kg/(N m) (that compliance times
+an effective mass of some tens of kilograms beyond the link), of either sign: the part
+of the arm's own bend that the geometry can imitate (a constant, a joint offset) is the
+geometry's, and what is left of the lumped term may come out either way, as compliance's
+lumped terms do. The same for every
 drive: the link bends, not the joint.
 """
 
@@ -59,9 +62,9 @@ from .checks import column
 
 MIN_LENGTH = 0.1  # [m] links shorter than this are not candidates
 SMOOTH = 1e-9  # of |g|: keeps |g_perp| smooth where a link points along gravity
-PER_MOMENT = Plausible(1e-4, sign=+1, basis="link bending of robot arms: below 1e-4 m/(N m)")
-OWN_WEIGHT = Plausible(1e-3, sign=+1, basis="link bending times the arm's weight beyond the "
-                       "link: below 1e-3 m kg/(N m)")
+PER_MOMENT = Plausible(1e-4, 1e-8, +1, "link bending of robot arms: 1e-8 .. 1e-4 m/(N m)")
+OWN_WEIGHT = Plausible(1e-3, basis="link bending times the arm's weight beyond the link: "
+                       "below 1e-3 m kg/(N m)")
 SHIFT = ("base_x", "base_y", "base_z")
 
 
