@@ -157,7 +157,8 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
             effect: Effect = JointCompliance(joints, robot=robot,
                                              payload=entry.get("payload", False))
         elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
-            effect = EFFECTS[name](joints, drivers=[int(d) for d in entry.get("drivers", ())])
+            coupling: type[JointCoupling] = EFFECTS[name]  # type: ignore[assignment]
+            effect = coupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
         elif name == "link_deflection":
             payload |= bool(entry.get("payload", True))
             effect = LinkDeflection(joints, payload=bool(entry.get("payload", True)))

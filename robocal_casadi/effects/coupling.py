@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -51,7 +51,7 @@ class JointCoupling(Effect):
     plot_variable = "driver"
     per = "pair"
     revolute_only = True
-    simulation_default = (2e-4, 1e-4)
+    simulation_default: ClassVar[tuple[float, ...]] = (2e-4, 1e-4)
     formula = "q_true_J = q_read_J + s sin q_K + c cos q_K (joint K drives joint J)"
     own_joint = "joint_cyclic"  # what a joint driving itself would be
 

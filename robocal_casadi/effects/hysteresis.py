@@ -68,8 +68,9 @@ class Hysteresis(Effect):
     drives = ("cable", "belt", "harmonic", "direct")
     simulation_default = (1e-3,)
     tracker_only = True
-    formula = ("q_true = q_read - (h / 2) d (1 - 2 exp(-s / w)), d the direction of motion and "
-               "s the travel since it last changed (row order), w the drive's transition angle")
+    formula = ("q_true = q_read - (h / 2) d (1 - 2 exp(-s / w)), d the direction of motion and\n"
+               "      s the travel since it last changed (row order), w the drive's transition "
+               "angle (tracker data only)")
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"h{j}" for j in self.joints)
