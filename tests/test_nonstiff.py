@@ -259,3 +259,17 @@ def test_calibrated_effects_file_applies_the_new_effects_as_the_truth_does(tmp_p
     assert np.abs(ours - truth).max() < 2e-5
     plain = world.kinematics.tool_poses(Q)[:, :3, 3]
     assert np.abs(plain - truth).max() > 50 * 2e-5
+
+
+def test_a_link_bends_along_its_load():
+    """Either direction of the bend alone may come out slightly negative (the one the data
+    do not show); their sum, the sag of a horizontal link under a payload, may not."""
+    from robocal_casadi.effects import LinkDeflection
+
+    effect = LinkDeflection((2,))
+    assert effect.implausibility({"f2": -8e-8, "v2": 2e-6, "f2_m": 1e-6, "v2_m": -1e-6}) == ""
+    assert effect.implausibility({"f2": 3e-6, "v2": -1e-8}) == ""
+    (finding,) = effect.check_plausible({"f2": -3e-6, "v2": 1e-6})
+    assert finding.parameter == "f2+v2" and "rise" in finding.message
+    assert "1e-4" in effect.implausibility({"f2": 2e-3, "v2": 0.0}) or \
+        "0.0001" in effect.implausibility({"f2": 2e-3, "v2": 0.0})

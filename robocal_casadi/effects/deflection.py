@@ -35,18 +35,21 @@ Unlike joint compliance, which turns the arm about a joint axis by an angle that
 the joint's gravity torque (and so the whole configuration beyond the joint), the
 deflection shifts the arm along the load, and only link i's own elevation sets its size.
 
-Plausible on real robots: ``f_i`` and ``v_i`` positive, 1e-8 .. 1e-4 m/(N m) (a light
-aluminium link of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms
-1e-8 .. 1e-7); ``|f_i_m|`` and ``|v_i_m|`` below 1e-3 m kg/(N m) (that compliance times
-an effective mass of some tens of kilograms beyond the link), of either sign: the part
-of the arm's own bend that the geometry can imitate (a constant, a joint offset) is the
-geometry's, and what is left of the lumped term may come out either way, as compliance's
-lumped terms do. The same for every
-drive: the link bends, not the joint.
+Plausible on real robots: ``|f_i|`` and ``|v_i|`` below 1e-4 m/(N m) (a light aluminium
+link of 0.4 m and 80 mm diameter has about 1e-6, cast links of industrial arms 1e-8 ..
+1e-7), and their sum positive: with the link horizontal the payload's sag is ``(f_i +
+v_i) payload |L| |g|`` and a link bends along its load (either part alone, the one the
+bend does not have, may come out slightly negative); ``|f_i_m|`` and ``|v_i_m|`` below
+1e-3 m kg/(N m) (that compliance times an effective mass of some tens of kilograms beyond
+the link), of either sign: the part of the arm's own bend that the geometry can imitate
+(a constant, a joint offset) is the geometry's, and what is left of the lumped term may
+come out either way, as compliance's lumped terms do. The same for every drive: the link
+bends, not the joint.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -57,12 +60,14 @@ from ..errors import InputError
 from ..kinematics import Kinematics, symbolic_frames
 from ..robot import Robot
 from ..units import Units
-from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
+from .base import Effect, Implausible, Plausible, RowContext, TrueWorld, joint_list
 from .checks import column
 
 MIN_LENGTH = 0.1  # [m] links shorter than this are not candidates
 SMOOTH = 1e-9  # of |g|: keeps |g_perp| smooth where a link points along gravity
-PER_MOMENT = Plausible(1e-4, 1e-8, +1, "link bending of robot arms: 1e-8 .. 1e-4 m/(N m)")
+PER_MOMENT = Plausible(1e-4, basis="link bending of robot arms: below 1e-4 m/(N m)")
+SAG = Plausible(1e-4, sign=+1, basis="a link bends along its load: under a payload at "
+                "horizontal its end goes down")
 OWN_WEIGHT = Plausible(1e-3, basis="link bending times the arm's weight beyond the link: "
                        "below 1e-3 m kg/(N m)")
 SHIFT = ("base_x", "base_y", "base_z")
@@ -123,6 +128,22 @@ class LinkDeflection(Effect):
 
     def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
         return OWN_WEIGHT if parameter.endswith("_m") else PER_MOMENT
+
+    def parameter_joint(self, parameter: str) -> int | None:
+        return None  # the link bends, whatever drives its joint
+
+    def _check_amplitudes(self, values, robot=None) -> tuple[Implausible, ...]:
+        """The payload's sag at a horizontal link, ``f_i + v_i``, must be positive."""
+        out = []
+        for i in self.joints:
+            if f"f{i}" not in values and f"v{i}" not in values:
+                continue
+            sag = float(values.get(f"f{i}", 0.0)) + float(values.get(f"v{i}", 0.0))
+            if sag < 0:
+                out.append(Implausible(f"f{i}+v{i}", sag, self.unit, SAG, math.inf,
+                                       f"f{i} + v{i} = {sag:.3g} {self.unit} is negative: link "
+                                       f"{i} would rise under a payload ({SAG.basis})"))
+        return tuple(out)
 
     def parameter_unit(self, parameter: str) -> str:
         return "m kg/(N m)" if parameter.endswith("_m") else self.unit
