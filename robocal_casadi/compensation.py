@@ -271,7 +271,7 @@ def _with_effects(kinematics: Kinematics, effects, extras: dict, targets: np.nda
     for _ in range(EFFECT_ROUNDS):
         if rows.size == 0:
             break
-        if any(c.startswith("direction_q") for c in effects.columns()):
+        if any(c.startswith(("direction_q", "travel_q")) for c in effects.columns()):
             # backlash: the directions of motion along the whole path of solutions
             from .effects.motion import with_directions
 

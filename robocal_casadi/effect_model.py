@@ -25,7 +25,8 @@ import numpy as np
 
 from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
 from .effects.coupling import JointCoupling
-from .effects.motion import is_direction_column, with_directions
+from .effects.deflection import LinkDeflection
+from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
 from .kinematics import Kinematics
@@ -53,6 +54,8 @@ def effects_to_dict(result) -> dict | None:
             entry["reference"] = float(effect.constants()[0])
         if isinstance(effect, JointCompliance):
             entry["payload"] = bool(effect.payload or payload_in_data)
+        if isinstance(effect, LinkDeflection):
+            entry["payload"] = effect.payload
         if isinstance(effect, JointCoupling):
             entry["drivers"] = [int(d) for d in effect.drivers]
         entries.append(entry)
@@ -92,7 +95,7 @@ class EffectModel:
         names: list[str] = []
         for effect in self.effects:
             needed = list(effect.required_columns())
-            if isinstance(effect, JointCompliance):
+            if isinstance(effect, JointCompliance) or getattr(effect, "payload", False):
                 needed.append("payload")
             names += [n for n in needed if n not in names]
         return tuple(names)
@@ -125,7 +128,7 @@ class EffectModel:
         motion (backlash) follow from the order of the rows where not given."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         extras = dict(extras or {})
-        if any(is_direction_column(c) for c in self.columns()):
+        if any(is_derived_column(c) for c in self.columns()):
             extras = with_directions(Q, extras)
         missing = [c for c in self.columns() if c not in extras]
         if missing:
@@ -158,8 +161,12 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
             payload |= bool(entry.get("payload", False))
             effect: Effect = JointCompliance(joints, robot=robot,
                                              payload=entry.get("payload", False))
-        elif name == "joint_coupling":
-            effect = JointCoupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
+        elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
+            coupling: type[JointCoupling] = EFFECTS[name]  # type: ignore[assignment]
+            effect = coupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
+        elif name == "link_deflection":
+            payload |= bool(entry.get("payload", True))
+            effect = LinkDeflection(joints, payload=bool(entry.get("payload", True)))
         elif name == "thermal_drift":
             effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
                                   reference_value=float(entry["reference"]))
@@ -220,7 +227,7 @@ def row_values(model: EffectModel, table, *, payload: float | None = None,
     options = {"payload": payload, "temperature": temperature}
     out: dict[str, np.ndarray] = {}
     for name in model.columns():
-        if is_direction_column(name) and not table.has(name):
+        if is_derived_column(name) and not table.has(name):
             continue  # from the order of the rows (``EffectModel.tool_poses``)
         if table.has(name):
             if options.get(name) is not None:

@@ -47,8 +47,13 @@ from .transforms import pose_from_xyz_rpy
 from .units import SI, Units, units_of
 
 JOINT_TYPES = ("revolute", "prismatic")
+# How a joint's motor turns it (docs/formats.md#robot-file); the plausible sizes of the
+# effects the DH model lacks depend on it (docs/methods.md#drives).
+DRIVES = ("gear", "harmonic", "cycloid", "belt", "cable", "direct")
+DEFAULT_DRIVE = "gear"
 CONVENTIONS = ("dh", "mdh", "urdf")
-JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com", "tolerance"}
+JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com", "tolerance",
+              "drive"}
 ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity", "tolerance")
 JOINT_TOLERANCE_KEYS = {"theta": "angle", "d": "length", "a": "length", "alpha": "angle",
                         "beta": "angle"}
@@ -58,7 +63,8 @@ TOLERANCE_KEYS = {"length": ("dh_length", "length"), "angle": ("dh_angle", "angl
                   "tool_xyz": ("tool_xyz", "length"), "tool_rpy": ("tool_rpy", "angle"),
                   "instrument": ("instrument_length", "length"),
                   "direction": ("instrument_direction", "angle")}
-URDF_JOINT_KEYS = {"name", "child", "type", "xyz", "rpy", "axis", "limits", "mass", "com"}
+URDF_JOINT_KEYS = {"name", "child", "type", "xyz", "rpy", "axis", "limits", "mass", "com",
+                   "drive"}
 URDF_ROBOT_KEYS = ROBOT_KEYS + ("flange", "urdf")
 MAX_MASS = 1e5  # kg, a link heavier than this is a typo
 MAX_GRAVITY = 1e3  # m/s^2
@@ -84,6 +90,7 @@ class Joint:
     mass: float | None = None
     com: tuple[float, float, float] | None = None  # [m], in the link's own frame
     has_beta: bool = False  # the file gave a beta; written back even when zero
+    drive: str = DEFAULT_DRIVE  # one of DRIVES
 
     @property
     def revolute(self) -> bool:
@@ -121,6 +128,7 @@ class UrdfJoint:
     name: str = ""
     child: str = ""
     has_beta: bool = False  # a URDF joint has no Hayati beta
+    drive: str = DEFAULT_DRIVE  # one of DRIVES
 
     @property
     def revolute(self) -> bool:
@@ -179,6 +187,10 @@ class Robot:
     def has_inertia(self) -> bool:
         """True when every joint carries ``mass`` and ``com``."""
         return all(j.mass is not None and j.com is not None for j in self.joints)
+
+    def drive(self, joint: int) -> str:
+        """The drive of joint ``joint`` (1-based): one of ``DRIVES``."""
+        return str(getattr(self.joints[joint - 1], "drive", DEFAULT_DRIVE))
 
     def reach(self) -> float:
         """An upper bound [m] on how far the flange can be from the joint-1 frame: the sum
@@ -419,8 +431,20 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str,
                          file=file, where=f"{where}.{lacking}")
     return Joint(
         type=joint_type, beta=beta, limits=limits, mass=mass, com=com,  # type: ignore[arg-type]
-        has_beta=raw.get("beta") is not None, **values,
+        has_beta=raw.get("beta") is not None, drive=_drive(raw, file=file, where=where),
+        **values,
     )
+
+
+def _drive(raw: dict, *, file, where: str) -> str:
+    """A joint's ``drive`` (default ``gear``), one of ``DRIVES``."""
+    drive = raw.get("drive")
+    if drive is None:
+        return DEFAULT_DRIVE
+    if not isinstance(drive, str) or drive not in DRIVES:
+        raise InputError(f"unknown drive {cut(drive)}; expected one of {list(DRIVES)}",
+                         file=file, where=f"{where}.drive")
+    return drive
 
 
 def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
@@ -443,7 +467,7 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
                              f"{sorted(URDF_JOINT_KEYS)}", file=file, where=where)
         dh_like = _joint_from_dict(
             {"type": raw.get("type", "revolute"), "theta": 0, "d": 0, "a": 0, "alpha": 0,
-             **{k: raw[k] for k in ("limits", "mass", "com") if k in raw}},
+             **{k: raw[k] for k in ("limits", "mass", "com", "drive") if k in raw}},
             units, file=file, where=where, urdf=True)
         origin = _frame_from_dict({k: raw[k] for k in ("xyz", "rpy") if k in raw}, units,
                                   file=file, where=where)
@@ -453,7 +477,7 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
         joints.append(UrdfJoint(
             type=dh_like.type, origin=origin,
             axis=tuple(float(v) for v in axis / np.linalg.norm(axis)),  # type: ignore[arg-type]
-            limits=dh_like.limits, mass=dh_like.mass, com=dh_like.com,
+            limits=dh_like.limits, mass=dh_like.mass, com=dh_like.com, drive=dh_like.drive,
             name=str(raw.get("name", f"joint_{i + 1}")), child=str(raw.get("child", ""))))
     source = None
     if content.get("urdf") is not None:
@@ -536,6 +560,8 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
             entry["mass"] = joint.mass
         if joint.com is not None:
             entry["com"] = [to_file_units(c, L) for c in joint.com]
+        if joint.drive != DEFAULT_DRIVE:
+            entry["drive"] = joint.drive
         own = {stem: to_file_units(robot.tolerance[f"{stem}{i}"], units.scale(kind))
                for stem, kind in JOINT_TOLERANCE_KEYS.items()
                if f"{stem}{i}" in robot.tolerance}
@@ -585,6 +611,8 @@ def _urdf_robot_to_dict(robot: Robot, units: Units) -> dict:
         if joint.mass is not None:
             entry["mass"] = joint.mass
             entry["com"] = [to_file_units(c, L) for c in joint.com]
+        if joint.drive != DEFAULT_DRIVE:
+            entry["drive"] = joint.drive
         joints.append(entry)
     content: dict[str, Any] = {"name": robot.name, "convention": "urdf",
                                "units": units.as_dict(), "joints": joints,

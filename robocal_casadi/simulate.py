@@ -29,6 +29,15 @@ with, per joint j (1-based) named in an effect:
 * ``backlash``: ``dq_j = -(b_j / 2) direction_j`` [rad], ``direction_j`` the sign of the
   change of joint j's reading from the previous row written (the last direction where it
   did not change, 0 on the first row);
+* ``hysteresis``: ``dq_j = -(h_j / 2) direction_j (1 - 2 exp(-travel_j / w_j))`` [rad],
+  ``travel_j`` how far joint j's reading has moved since its direction last changed,
+  ``w_j`` the transition angle of the joint's drive (tracker data only: the other kinds
+  solve readings row by row, without the travel);
+* ``transmission_coupling`` (a share of joint k's motion reaches joint j):
+  ``dq_j = r q_k``;
+* ``link_deflection`` (link i): the measured point shifts by
+  ``(f payload + f_m) |L_i| g_perp`` [m] in the world, ``L_i`` the link at the true joints
+  and geometry, ``g_perp`` gravity's part perpendicular to it (tracker data only);
 * ``thermal_drift``: every DH length ``d_i``, ``a_i`` of the true robot becomes
   ``L (1 + k (T - T_ref))``, ``k`` [1/K], ``T`` the row's ``temperature`` [C], ``T_ref``
   the simulator's ``reference_temperature`` (written to the truth file).
@@ -63,7 +72,7 @@ import numpy as np
 from .checks import choice, count, path_argument, positive
 from .datasets import KINDS, Dataset, load_dataset
 from .effects import EFFECTS, Effect, TrueWorld
-from .effects.motion import direction_column, is_direction_column
+from .effects.motion import direction_column, is_direction_column, travel_column
 from .errors import ArgumentError, InputError
 from .ik import inverse_kinematics, random_joints
 from .kinematics import Kinematics
@@ -285,6 +294,25 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
     return TrueEffects(tuple(entries))
 
 
+def travels_in_order(Q_read: np.ndarray) -> np.ndarray:
+    """The simulator's travel (N x dof) [rad or m] of each joint's reading since its direction
+    of motion last changed, in written order (0 at the start; a row that does not move the
+    joint keeps the travel before it)."""
+    Q_read = np.atleast_2d(Q_read)
+    directions = directions_in_order(Q_read)
+    out = np.zeros(Q_read.shape)
+    for i in range(1, len(Q_read)):
+        for j in range(Q_read.shape[1]):
+            step = abs(Q_read[i, j] - Q_read[i - 1, j])
+            if step == 0:
+                out[i, j] = out[i - 1, j]
+            elif directions[i, j] != directions[i - 1, j]:
+                out[i, j] = step
+            else:
+                out[i, j] = out[i - 1, j] + step
+    return out
+
+
 def directions_in_order(Q_read: np.ndarray) -> np.ndarray:
     """The simulator's directions of motion (N x dof) of readings in written order: the sign
     of each row's change from the row before, the previous direction where nothing
@@ -335,14 +363,18 @@ class TrueRobot:
         return out
 
     def joint_delta(self, Q_read: np.ndarray, payload: np.ndarray,
-                    directions: np.ndarray | None = None) -> np.ndarray:
+                    directions: np.ndarray | None = None,
+                    travels: np.ndarray | None = None) -> np.ndarray:
         """``sum dq(q_read)`` (N x dof) [rad or m] of the joint effects; ``directions``
-        (N x dof) of motion for backlash (0 where None)."""
+        (N x dof) of motion for backlash and hysteresis (0 where None), ``travels`` (N x dof)
+        since the last reversal for hysteresis (0 where None)."""
         Q_read = np.atleast_2d(Q_read)
         directions = np.zeros(Q_read.shape) if directions is None else np.atleast_2d(directions)
+        travels = np.zeros(Q_read.shape) if travels is None else np.atleast_2d(travels)
         extras = {"payload": np.broadcast_to(np.asarray(payload, dtype=float), (len(Q_read),))}
         for j in range(1, self.robot.dof + 1):
             extras[direction_column(j)] = directions[:, j - 1]
+            extras[travel_column(j)] = travels[:, j - 1]
         dq = np.zeros_like(Q_read)
         for effect, values in self.effects.entries:
             dq += effect.simulated_dq(self.world, Q_read, extras, values)
@@ -351,7 +383,8 @@ class TrueRobot:
     def true_joints(self, Q_read: np.ndarray, payload: np.ndarray) -> np.ndarray:
         """``q_true = q_read + dq(q_read)`` (N x dof), ``Q_read`` in the order written."""
         Q_read = np.atleast_2d(np.asarray(Q_read, dtype=float))
-        return Q_read + self.joint_delta(Q_read, payload, directions_in_order(Q_read))
+        return Q_read + self.joint_delta(Q_read, payload, directions_in_order(Q_read),
+                                         travels_in_order(Q_read))
 
     def readings(self, q_true: np.ndarray, payload: float,
                  direction: np.ndarray | None = None) -> np.ndarray:
@@ -396,6 +429,15 @@ class TrueRobot:
             out[i], last = q, direction
         return out
 
+
+    def shift(self, Q_true: np.ndarray, payloads) -> np.ndarray:
+        """The effects' true shift (N x 3) [m], world frame, of the arm at true joints."""
+        Q_true = np.atleast_2d(np.asarray(Q_true, dtype=float))
+        extras = {"payload": np.broadcast_to(np.asarray(payloads, dtype=float), (len(Q_true),))}
+        out = np.zeros((len(Q_true), 3))
+        for effect, values in self.effects.entries:
+            out += effect.simulated_shift(self.world, Q_true, extras, values)
+        return out
 
     def flange_poses(self, Q_true: np.ndarray, temperatures: np.ndarray | None) -> np.ndarray:
         """True world flange poses (N x 4 x 4) [m]."""
@@ -473,6 +515,10 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     if mounted_error is None:
         mounted_error = length_std
     true_effects = parse_effects(effects, nominal)
+    for effect, _ in true_effects.entries:
+        if effect.tracker_only and MODELS[kind].reach != "configuration":
+            raise InputError(f"{effect.name} is simulated for data taken at any configuration "
+                             f"(tracker_points), not for {kind}", where=f"effects.{effect.name}")
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
     if temperature is None and true_effects.get("thermal_drift") is not None:
@@ -659,7 +705,7 @@ def _tracker(setup: _Setup) -> _Generated:
     Q_true = world.true_joints(Q_read, np.array(payloads))
     poses = world.flange_poses(Q_true, None if setup.temperature is None else
                                np.array(temperatures))
-    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3]
+    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(Q_true, payloads)
     T_instrument_world = invert(T_world_instrument)
     measured = p_world @ T_instrument_world[:3, :3].T + T_instrument_world[:3, 3]
     measured = measured + rng.normal(0.0, setup.noise, measured.shape)

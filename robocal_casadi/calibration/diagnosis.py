@@ -25,7 +25,8 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
    must drop, and no single scheme may grow it by more than ``EXTRAPOLATION_TOLERANCE``:
    an effect that only fits the region it was fitted in (a periodic term bending to the
    shape of a residual over a short range of its joint) fails here.
-5. Plausible? The estimate must lie in the range real robots show (``_implausible``):
+5. Plausible? The estimate must lie in the range real robots with the joint's drive show
+   (``_implausible``, ``Robot.drive``, effects.drives); for gear trains:
    a compliance is positive and below 1e-4 rad/Nm, a periodic error below about 0.05 deg,
    a gear-ratio error below 0.2%, a thermal coefficient that of a metal. An estimate
    outside stands in for something the library does not name; it is reported, not added.
@@ -435,9 +436,10 @@ class _Screening:
         return float(np.clip(1.0 - extra / alone, 0.0, 1.0))
 
 
-def _implausible(effect: Effect, values: dict[str, float]) -> str:
-    """'' when ``values`` (SI) are what real robots show for ``effect``, else why not."""
-    return effect.implausibility(values) or ""
+def _implausible(effect: Effect, values: dict[str, float], robot=None) -> str:
+    """'' when ``values`` (SI) are what real robots with ``robot``'s drives show for
+    ``effect``, else why not."""
+    return effect.implausibility(values, robot) or ""
 
 
 def _label(candidate: _Candidate) -> str:
@@ -518,7 +520,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 decisions[id(s)] = s.decision or screening.verdict(
                     s.bic_drop, s.held_out, bic_threshold)
                 if not decisions[id(s)]:
-                    reason = _implausible(effect_of[s.candidate], dict(s.values))
+                    reason = _implausible(effect_of[s.candidate], dict(s.values), big.robot)
                     if reason:
                         decisions[id(s)] = f"implausible ({reason}): stands in for something else"
             passing = sorted((s for s in screens if not decisions[id(s)]),
@@ -549,7 +551,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 verdict = screening.verdict(bic, refit.held_out_before, bic_threshold)
                 if not verdict:
                     values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
-                    reason = _implausible(effect_of[s.candidate], values)
+                    reason = _implausible(effect_of[s.candidate], values, big.robot)
                     if reason:
                         verdict = (f"implausible after refit ({reason}): stands in for "
                                    f"something else")

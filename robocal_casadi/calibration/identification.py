@@ -59,6 +59,7 @@ from .prior import (
 from .problem import Problem
 from .selection import Selection, select_by_condition
 from .solver import CONVERGED_DECREASE, LOSSES, METHODS, Loss, Method, Solution, solve
+from .start_state import settle_start
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
 
@@ -770,10 +771,14 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
     fitted again on the held-out data.
     """
     stages = []
+    # the side of the play each joint starts the held-out tables on is theirs, like the
+    # placement (start_state)
+    settled = settle_start(robot, validation, final_problem.effects,
+                           _values(final_problem, x_final), problem.kinematics)
     for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
         values = {} if x is None else _values(stage_problem, x)
         with stage("validation"):
-            val_problem, x_val = evaluate(robot, validation, stage_problem.effects, values,
+            val_problem, x_val = evaluate(robot, settled, stage_problem.effects, values,
                                           kinematics=problem.kinematics,
                                           label_prefix="validation:")
         stages.append((val_problem, x_val))
@@ -786,7 +791,7 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
         residuals.append(DatasetResiduals(
             label=model.label, kind=dataset.kind, errors_nominal=errors[0][k],
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
-            joints=dataset.joints, extras=dict(dataset.extras),
+            joints=dataset.joints, extras=dict(validation[k].extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
             frame=model.component_frame, lines=dataset.lines))
     validation_problem, x_validation = stages[-1]

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..codegen import BatchFunction
 from ..effects.base import Effect, RowContext
-from ..effects.motion import direction_values, is_direction_column
+from ..effects.motion import direction_values, is_derived_column
 from ..errors import InputError
 from ..kinematics import Kinematics
 from ..measurement.base import MeasurementModel
@@ -260,7 +260,7 @@ class Problem:
         for i, column in enumerate(self.columns):
             if column in dataset.extras:
                 extras[i] = np.asarray(dataset.extras[column], dtype=float)
-            elif is_direction_column(column):  # derived from the full table's row order
+            elif is_derived_column(column):  # derived from the full table's row order
                 extras[i] = direction_values(dataset, column)
             elif column != "payload":
                 raise InputError(f"effect needs a {column!r} column", file=dataset.data_path)

@@ -20,13 +20,17 @@ from .base import Contribution, Effect, Implausible, Plausible, RowContext, True
 from .compliance import JointCompliance
 from .coupling import JointCoupling
 from .cyclic import JointCyclic
+from .deflection import LinkDeflection
 from .gravity import GravityModel, gravity_torque
+from .hysteresis import Hysteresis
 from .motion import direction_column, directions_of_motion, with_directions
 from .scale import JointScale
 from .thermal import ThermalDrift
+from .transmission import TransmissionCoupling
 
 REGISTERED: tuple[type[Effect], ...] = (JointCompliance, JointCyclic, JointScale, ThermalDrift,
-                                        JointCoupling, Backlash)
+                                        JointCoupling, TransmissionCoupling, Backlash, Hysteresis,
+                                        LinkDeflection)
 EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in REGISTERED}
 
 
@@ -58,8 +62,10 @@ def make_effect(name: str, joints=(), robot: Robot | None = None,
                                      **options)
 
 
-__all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Implausible",
-           "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "Plausible",
-           "REGISTERED", "RowContext", "ThermalDrift", "TrueWorld", "direction_column",
-           "directions_of_motion", "effect_class", "effect_title", "gravity_torque",
-           "joint_list", "make_effect", "with_directions"]
+__all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Hysteresis",
+           "Implausible",
+           "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LinkDeflection",
+           "Plausible",
+           "REGISTERED", "RowContext", "ThermalDrift", "TransmissionCoupling", "TrueWorld",
+           "direction_column", "directions_of_motion", "effect_class", "effect_title",
+           "gravity_torque", "joint_list", "make_effect", "with_directions"]

@@ -11,8 +11,11 @@ trails it by half the play in the direction of motion, so moving up it stands ``
 below the reading and moving down ``b/2`` above. Rows of unknown direction sit in the
 middle of the play.
 
-Plausible on real robots: ``0 <= b_j <= 0.1 deg`` (1.7e-3 rad); precision gears
-(cycloidal, harmonic drives) have a few arc minutes at most.
+Plausible on real robots, by the joint's drive: ``0 <= b_j <= 0.1 deg`` (1.7e-3 rad) for
+gear trains, 0.05 deg for cycloidal reducers (a few arc minutes of lost motion), 0.2 deg
+for toothed belts; strain-wave gears, preloaded cables and direct drives have no play to
+speak of (0.02 deg). Diagnosis looks for backlash on geared joints (gear, cycloid) only;
+on the others a direction-dependent error is friction ``hysteresis``.
 """
 
 from __future__ import annotations
@@ -25,9 +28,18 @@ import numpy as np
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import check_joints, column
+from .drives import per_drive
 from .motion import direction_column
 
-PLAY = Plausible(math.radians(0.1), sign=+1, basis="gear play of robot joints: 0 .. 0.1 deg")
+PLAY = per_drive(
+    Plausible(math.radians(0.1), sign=+1, basis="gear play of robot joints: 0 .. 0.1 deg"),
+    cycloid=Plausible(math.radians(0.05), sign=+1,
+                      basis="lost motion of cycloidal reducers: a few arc minutes"),
+    belt=Plausible(math.radians(0.2), sign=+1, basis="toothed belts: up to about 0.2 deg"),
+    harmonic=Plausible(math.radians(0.02), sign=+1,
+                       basis="strain-wave gears have no play, about 1 arc minute at most"),
+    cable=Plausible(math.radians(0.02), sign=+1, basis="preloaded cables have no play"),
+    direct=Plausible(math.radians(0.02), sign=+1, basis="a direct drive has no gear play"))
 
 
 class Backlash(Effect):
@@ -40,14 +52,15 @@ class Backlash(Effect):
     sentence = "backlash: {values}"
     plot_variable = "direction"
     revolute_only = True
+    drives = ("gear", "cycloid")
     simulation_default = (5e-4,)
     formula = "q_true = q_read - (b / 2) direction, the direction of motion from the row order"
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"b{j}" for j in self.joints)
 
-    def plausible(self, parameter: str) -> Plausible:
-        return PLAY
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return PLAY[drive]
 
     def required_columns(self) -> tuple[str, ...]:
         return tuple(direction_column(j) for j in self.joints)

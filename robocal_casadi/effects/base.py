@@ -20,8 +20,9 @@ it in ``effects/__init__.py``'s registry; everything else reads the class:
 
 * ``name`` (result.json), ``title`` (report heading), ``unit`` (of the parameters),
   ``sentence`` (template of ``describe``), ``plot_variable`` (what to plot it against);
-* ``plausible(parameter)`` (the range seen on real robots, for refusing absurd
-  estimates), ``typical`` (a typical size, for judging whether data see it);
+* ``plausible(parameter, drive)`` (the range seen on real robots with that kind of drive,
+  ``drives``; for refusing absurd estimates), ``typical`` (a typical size, for judging
+  whether data see it); ``drives`` (the drives the effect is looked for on);
 * ``candidates`` / ``merged`` (the units diagnosis tests one by one, and one effect
   holding several of them), ``create`` (one effect from a result's joints);
 * ``simulation_default`` and ``simulated_dq`` / ``simulated_dp``: the truth for the
@@ -31,6 +32,7 @@ it in ``effects/__init__.py``'s registry; everything else reads the class:
 from __future__ import annotations
 
 import math
+import re
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -41,7 +43,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..parameters import ParameterRegistry
-from ..robot import Robot
+from ..robot import DEFAULT_DRIVE, DRIVES, Robot
 from ..units import Units
 
 
@@ -105,11 +107,13 @@ class Implausible:
 
 
 def amplitude_check(effect: Effect, pairs, values: Mapping[str, float],
-                    limits: Plausible) -> tuple[Implausible, ...]:
+                    robot: Robot | None = None) -> tuple[Implausible, ...]:
     """``Implausible`` for each (sine, cosine) parameter pair whose amplitude
-    ``hypot(sine, cosine)`` exceeds ``limits.maximum``, named ``sine/cosine``."""
+    ``hypot(sine, cosine)`` exceeds the sine's largest plausible magnitude on its joint's
+    drive (gear without ``robot``), named ``sine/cosine``."""
     out = []
     for sine, cosine in pairs:
+        limits = effect.plausible_on(sine, robot)
         if sine not in values and cosine not in values:
             continue
         amplitude = math.hypot(float(values.get(sine, 0.0)), float(values.get(cosine, 0.0)))
@@ -157,9 +161,13 @@ class Effect(ABC):
     error is plotted against (``PLOT_VARIABLES``); ``per``: what one candidate (and one
     simulated entry) is: ``joint``, ``pair`` (a joint and the joint driving it) or
     ``column`` (one data column, no joints); ``revolute_only``: whether the joints must be
-    revolute; ``simulation_default``: the true values of one entry [unit] the simulator
-    uses when none are given, in ``parameter_names`` order; ``formula``: the relation in
-    one line, as the terminal shows it (``q_true = (1 + s) q_read``).
+    revolute; ``drives``: the drives of the joints diagnosis looks for it on (backlash on
+    geared joints, friction hysteresis on the others); ``tracker_only``: whether the
+    simulator injects it only into data taken at any configuration (its truth needs the
+    whole table in order, or shifts the measured point); ``simulation_default``: the true
+    values of one entry [unit] the simulator uses when none are given, in
+    ``parameter_names`` order; ``formula``: the relation in one line, as the terminal
+    shows it (``q_true = (1 + s) q_read``).
     """
 
     PLOT_VARIABLES: ClassVar[tuple[str, ...]] = ("joint", "torque", "driver", "direction",
@@ -173,6 +181,8 @@ class Effect(ABC):
     plot_variable: ClassVar[str]
     per: ClassVar[str] = "joint"
     revolute_only: ClassVar[bool] = False
+    drives: ClassVar[tuple[str, ...]] = DRIVES
+    tracker_only: ClassVar[bool] = False
     simulation_default: ClassVar[tuple[float, ...]]
     formula: ClassVar[str]
 
@@ -197,11 +207,28 @@ class Effect(ABC):
         return ParameterRegistry(names, ("none",) * len(names))
 
     @abstractmethod
-    def plausible(self, parameter: str) -> Plausible:
-        """The range of ``parameter`` (one of ``parameter_names``) on real robots."""
+    def plausible(self, parameter: str, drive: str = DEFAULT_DRIVE) -> Plausible:
+        """The range of ``parameter`` (one of ``parameter_names``) on real robots whose
+        joint has a ``drive`` (``robot.DRIVES``; effects.drives)."""
 
-    def check_plausible(self, values: Mapping[str, float]) -> tuple[Implausible, ...]:
-        """Every estimate in ``values`` (name -> value, SI) outside its plausible range.
+    def parameter_joint(self, parameter: str) -> int | None:
+        """The joint (1-based) whose drive sets ``parameter``'s range, None for none: by
+        default the first number in the name (``b2``, ``c3_h4x``, ``sin2_q5``)."""
+        found = re.match(r"[A-Za-z]+(\d+)", parameter)
+        return int(found.group(1)) if found else None
+
+    def plausible_on(self, parameter: str, robot: Robot | None = None) -> Plausible:
+        """``plausible`` for the drive of ``parameter``'s joint on ``robot`` (gear without)."""
+        joint = self.parameter_joint(parameter)
+        drive = DEFAULT_DRIVE
+        if robot is not None and joint is not None and 1 <= joint <= robot.dof:
+            drive = robot.drive(joint)
+        return self.plausible(parameter, drive)
+
+    def check_plausible(self, values: Mapping[str, float],
+                        robot: Robot | None = None) -> tuple[Implausible, ...]:
+        """Every estimate in ``values`` (name -> value, SI) outside its plausible range on
+        ``robot``'s drives (gear drives without ``robot``).
 
         Empty when all are plausible; each entry says in words which parameter is
         outside, its value, the range and by what factor.
@@ -209,7 +236,7 @@ class Effect(ABC):
         out = []
         for parameter, value in values.items():
             value = float(value)
-            limits = self.plausible(parameter)
+            limits = self.plausible_on(parameter, robot)
             unit = self.parameter_unit(parameter)
             magnitude = abs(value)
             if not math.isfinite(value):
@@ -233,21 +260,23 @@ class Effect(ABC):
                                        f"{parameter} = {value:.3g} {unit} is {factor:.3g} times "
                                        f"smaller than the smallest seen on real robots, "
                                        f"{limits.minimum:.3g} {unit} ({limits.basis})"))
-        return tuple(out) + self._check_amplitudes(values)
+        return tuple(out) + self._check_amplitudes(values, robot)
 
-    def _check_amplitudes(self, values: Mapping[str, float]) -> tuple[Implausible, ...]:
+    def _check_amplitudes(self, values: Mapping[str, float],
+                          robot: Robot | None = None) -> tuple[Implausible, ...]:
         """Ranges on combinations of parameters (e.g. the amplitude of a sine and cosine
         pair); none by default."""
         return ()
 
-    def implausibility(self, values: Mapping[str, float]) -> str:
-        """'' when no estimate in ``values`` is absurd, else why, in words.
+    def implausibility(self, values: Mapping[str, float], robot: Robot | None = None) -> str:
+        """'' when no estimate in ``values`` is absurd on ``robot``'s drives, else why, in
+        words.
 
         Absurd means beyond the largest magnitude or of the wrong sign; a value smaller
         than real robots show is weak, not absurd, and is left to the evidence tests
         (``check_plausible`` reports it too).
         """
-        return "; ".join(f.message for f in self.check_plausible(values)
+        return "; ".join(f.message for f in self.check_plausible(values, robot)
                          if f.value == 0 or abs(f.value) > f.plausible.minimum)
 
     def parameter_unit(self, parameter: str) -> str:
@@ -310,7 +339,7 @@ class Effect(ABC):
         for c in columns:
             if c in extras:
                 values.append(np.broadcast_to(np.asarray(extras[c], dtype=float), (n,)))
-            elif c == "payload" or c.startswith("direction_"):
+            elif c == "payload" or c.startswith(("direction_", "travel_")):
                 values.append(np.zeros(n))
             else:
                 raise InputError(f"{self.name} needs a {c!r} column", where=c)
@@ -351,9 +380,10 @@ class Effect(ABC):
     @classmethod
     def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[Effect, ...]:
         """The units diagnosis tests one at a time: by default one effect per joint
-        (revolute joints only where ``revolute_only``)."""
+        (revolute joints only where ``revolute_only``) whose drive is one of ``drives``."""
         return tuple(cls.create((j,), robot, extras) for j in range(1, robot.dof + 1)
-                     if robot.joints[j - 1].revolute or not cls.revolute_only)
+                     if (robot.joints[j - 1].revolute or not cls.revolute_only)
+                     and robot.drive(j) in cls.drives)
 
     @classmethod
     def merged(cls, units: Sequence[Effect], robot: Robot,
@@ -379,6 +409,13 @@ class Effect(ABC):
         recovers the simulated truth checks ``delta``.
         """
         return np.zeros(np.atleast_2d(Q).shape)
+
+    def simulated_shift(self, world: TrueWorld, Q, extras: Mapping[str, np.ndarray],
+                        values: Mapping[str, float]) -> np.ndarray:
+        """The true shift (N x 3) [m], world frame, of the whole arm at true joints ``Q``
+        (N x dof), for the simulator; zero unless the effect moves points directly (link
+        deflection). The estimator's ``delta`` writes it as ``dp`` on ``base_x..z``."""
+        return np.zeros((len(np.atleast_2d(Q)), 3))
 
     def simulated_dp(self, world: TrueWorld, p: np.ndarray,
                      extras: Mapping[str, float | None],
@@ -426,7 +463,7 @@ class Effect(ABC):
         """Refuse simulated values the effect cannot have (a wrong sign) or a robot it cannot
         act on; ``InputError`` naming the effect."""
         for parameter, value in values.items():
-            sign = self.plausible(parameter).sign
+            sign = self.plausible_on(parameter, robot).sign
             if sign and value * sign < 0:
                 raise InputError(f"{parameter} must not be {'negative' if sign > 0 else 'positive'}"
                                  f", got {value:g}", where=f"effects.{self.name}")

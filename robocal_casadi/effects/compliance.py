@@ -26,15 +26,19 @@ each column whose part outside the span of the ones before it exceeds 1e-6 of it
 norm. ``c{j}`` itself appears only with a ``payload`` column (``payload=True``), where the
 known payload mass makes it separable.
 
-Plausible values on real robots: ``c_j`` positive, about 1e-7 .. 1e-4 rad/Nm (large
-arms are stiff, light collaborative arms soft). A lumped term ``c_j h_k`` or ``c_j m_k``
+Plausible values on real robots: ``c_j`` positive, about 1e-7 .. 1e-4 rad/Nm for gear
+trains and cycloidal reducers (large arms are stiff, light collaborative arms soft),
+1e-6 .. 1e-3 rad/Nm for strain-wave gears and belts (small strain-wave gears have
+torsional stiffnesses of a few thousand Nm/rad), 1e-6 .. 1e-2 rad/Nm for cables and
+direct drives (a cable-driven joint holds a few hundred to a few thousand Nm/rad; a
+direct drive only what its servo loop gives). A lumped term ``c_j h_k`` or ``c_j m_k``
 is the compliance times a first moment [kg m] or a mass [kg] of one link, and either
 may have any sign (it depends on where the link's centre of mass lies in its frame).
-Its magnitude is at most the largest compliance times the largest first moment or mass
-a link of an industrial arm carries: 1e-4 rad/Nm x 500 kg m = 5e-2 for a moment term,
-1e-4 rad/Nm x 1000 kg = 1e-1 for a mass term (a 1000 kg link whose compliance is 1e-4
-would be far softer than any real arm; the bound is deliberately wide, it refuses only
-what no arm does).
+Its magnitude is at most the largest compliance of the drive times the largest first
+moment or mass a link of an industrial arm carries; for gear trains: 1e-4 rad/Nm x
+500 kg m = 5e-2 for a moment term, 1e-4 rad/Nm x 1000 kg = 1e-1 for a mass term (a
+1000 kg link whose compliance is 1e-4 would be far softer than any real arm; the bound is
+deliberately wide, it refuses only what no arm does).
 """
 
 from __future__ import annotations
@@ -51,6 +55,7 @@ from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import check_joints, column
+from .drives import per_drive, scaled
 from .gravity import (
     FIRST_MOMENT_COMPONENTS,
     first_moment_basis,
@@ -60,11 +65,21 @@ from .gravity import (
 
 SAMPLES = 96
 INDEPENDENCE = 1e-6
-COMPLIANCE = Plausible(1e-4, 1e-7, +1, "joint stiffness of industrial and collaborative "
-                       "arms: 1e-7 .. 1e-4 rad/Nm")
-MOMENT_TERM = Plausible(5e-2, basis="compliance 1e-4 rad/Nm times a link first moment of "
-                        "500 kg m at most")
-MASS_TERM = Plausible(1e-1, basis="compliance 1e-4 rad/Nm times a link mass of 1000 kg at most")
+COMPLIANCE = per_drive(
+    Plausible(1e-4, 1e-7, +1, "joint stiffness of industrial and collaborative arms: "
+              "1e-7 .. 1e-4 rad/Nm"),
+    harmonic=Plausible(1e-3, 1e-6, +1, "strain-wave gears: 1e-6 .. 1e-3 rad/Nm"),
+    belt=Plausible(1e-3, 1e-6, +1, "belt drives: 1e-6 .. 1e-3 rad/Nm"),
+    cable=Plausible(1e-2, 1e-6, +1, "cable drives: 1e-6 .. 1e-2 rad/Nm"),
+    direct=Plausible(1e-2, 1e-6, +1, "direct drives, held by the servo loop: "
+                     "1e-6 .. 1e-2 rad/Nm"))
+_SOFTER = {drive: COMPLIANCE[drive].maximum / COMPLIANCE["gear"].maximum for drive in COMPLIANCE}
+MOMENT_TERM = scaled(per_drive(Plausible(5e-2, basis="compliance 1e-4 rad/Nm times a link "
+                                         "first moment of 500 kg m at most")),
+                     _SOFTER, "times the drive's larger compliance")
+MASS_TERM = scaled(per_drive(Plausible(1e-1, basis="compliance 1e-4 rad/Nm times a link mass "
+                                       "of 1000 kg at most")),
+                   _SOFTER, "times the drive's larger compliance")
 
 
 @lru_cache(maxsize=16)
@@ -171,12 +186,12 @@ class JointCompliance(Effect):
         """Lumped without link masses; the payload term where the data has ``payload``."""
         return cls(tuple(joints), robot=robot, payload="payload" in (extras or {}))
 
-    def plausible(self, parameter: str) -> Plausible:
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
         if "_m" in parameter:
-            return MASS_TERM
+            return MASS_TERM[drive]
         if "_h" in parameter:
-            return MOMENT_TERM
-        return COMPLIANCE
+            return MOMENT_TERM[drive]
+        return COMPLIANCE[drive]
 
     def parameter_unit(self, parameter: str) -> str:
         if "_m" in parameter:

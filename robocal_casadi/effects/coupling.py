@@ -9,15 +9,17 @@ one joint's gear train turns with another. Both joints revolute, 1-based. Parame
 result.json lists ``joints: [j]`` with these parameters. One effect may hold several
 pairs (``joints`` and ``drivers`` side by side).
 
-Plausible on real robots: each coefficient below about 0.05 deg (8.7e-4 rad), the size
-of the periodic errors of gear trains.
+Plausible on real robots, by the coupled joint's drive: each amplitude below about
+0.05 deg (8.7e-4 rad) for gear trains, the size of their periodic errors; 0.2 deg for
+belts and 0.5 deg for cables, whose routing over the pulleys of the joints they pass
+changes their length with those joints' angles.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
@@ -27,9 +29,15 @@ from ..robot import Robot
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import column
+from .drives import per_drive
 
-AMPLITUDE = Plausible(math.radians(0.05), basis="coupling through gear trains stays below "
-                      "about 0.05 deg")
+AMPLITUDE = per_drive(
+    Plausible(math.radians(0.05), basis="coupling through gear trains stays below about "
+              "0.05 deg"),
+    belt=Plausible(math.radians(0.2), basis="belts routed through other joints: below about "
+                   "0.2 deg"),
+    cable=Plausible(math.radians(0.5), basis="cables routed over other joints' pulleys: below "
+                    "about 0.5 deg"))
 
 
 class JointCoupling(Effect):
@@ -43,24 +51,25 @@ class JointCoupling(Effect):
     plot_variable = "driver"
     per = "pair"
     revolute_only = True
-    simulation_default = (2e-4, 1e-4)
+    simulation_default: ClassVar[tuple[float, ...]] = (2e-4, 1e-4)
     formula = "q_true_J = q_read_J + s sin q_K + c cos q_K (joint K drives joint J)"
+    own_joint = "joint_cyclic"  # what a joint driving itself would be
 
     def __init__(self, joints: tuple[int, ...], drivers: Sequence[int] = ()):
         super().__init__(joints)
         self.drivers = tuple(int(k) for k in drivers)
         if len(self.drivers) != len(self.joints):
-            raise InputError(f"joint_coupling: {len(self.joints)} coupled joint(s) but "
+            raise InputError(f"{self.name}: {len(self.joints)} coupled joint(s) but "
                              f"{len(self.drivers)} driving joint(s); give one driver per joint",
                              where="effects")
         pairs = self.pairs
         if len(set(pairs)) != len(pairs):
-            raise InputError(f"joint_coupling: a pair is listed twice in {list(pairs)}",
+            raise InputError(f"{self.name}: a pair is listed twice in {list(pairs)}",
                              where="effects")
         for j, k in pairs:
             if j == k:
-                raise InputError(f"joint_coupling: joint {j} cannot drive itself (that is "
-                                 "joint_cyclic)", where="effects")
+                raise InputError(f"{self.name}: joint {j} cannot drive itself (that is "
+                                 f"{self.own_joint})", where="effects")
 
     @property
     def pairs(self) -> tuple[tuple[int, int], ...]:
@@ -77,22 +86,22 @@ class JointCoupling(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{t}{j}_q{k}" for j, k in self.pairs for t in ("sin", "cos"))
 
-    def plausible(self, parameter: str) -> Plausible:
-        return AMPLITUDE
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return AMPLITUDE[drive]
 
-    def _check_amplitudes(self, values) -> tuple:
+    def _check_amplitudes(self, values, robot=None) -> tuple:
         return amplitude_check(self, [(f"sin{j}_q{k}", f"cos{j}_q{k}") for j, k in self.pairs],
-                               values, AMPLITUDE)
+                               values, robot)
 
     def _check(self, robot: Robot) -> None:
         for j, k in self.pairs:
             for joint in (j, k):
                 if not 1 <= joint <= robot.dof:
-                    raise InputError(f"joint_coupling: joint {joint} does not exist; the robot "
+                    raise InputError(f"{self.name}: joint {joint} does not exist; the robot "
                                      f"{robot.name!r} has joints 1..{robot.dof}", where="effects")
                 if not robot.joints[joint - 1].revolute:
-                    raise InputError(f"joint_coupling: joint {joint} is prismatic; the coupling "
-                                     "is periodic in joint angles and needs revolute joints",
+                    raise InputError(f"{self.name}: joint {joint} is prismatic; the coupling "
+                                     "is between joint angles and needs revolute joints",
                                      where="effects")
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
@@ -137,7 +146,8 @@ class JointCoupling(Effect):
         for joint in (j, k):
             cls._check_simulated_joint(joint, robot, where)
         if j == k:
-            raise InputError(f"joint {j} cannot drive itself (that is joint_cyclic)", where=where)
+            raise InputError(f"joint {j} cannot drive itself (that is {cls.own_joint})",
+                             where=where)
         return (j, k)
 
     @classmethod

@@ -6,9 +6,11 @@ Parameters ``a1_{j}, b1_{j}, a2_{j}, b2_{j}`` [rad] per revolute joint j (1-base
 space. Over a small range of q_j the cosine terms look like a constant, which the joint's
 ``theta`` offset already holds; diagnosis checks each column against the geometry.
 
-Plausible on real robots: each coefficient below about 0.05 deg (8.7e-4 rad); the
-periodic errors of gears and encoders of industrial arms are a few arc seconds to a few
-hundredths of a degree.
+Plausible on real robots, by the joint's drive: each amplitude below about 0.05 deg
+(8.7e-4 rad) for gear trains and strain-wave gears (the periodic errors of gears and
+encoders of industrial arms are a few arc seconds to a few hundredths of a degree),
+0.02 deg for direct drives (the encoder's alone), 0.2 deg for belts and 0.5 deg for
+cables (eccentric pulleys and capstans, the cable's lay on its drum).
 """
 
 from __future__ import annotations
@@ -21,10 +23,17 @@ import numpy as np
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import check_joints, column
+from .drives import per_drive
 
 HARMONICS = ("a1", "b1", "a2", "b2")
-AMPLITUDE = Plausible(math.radians(0.05), basis="periodic gear and encoder errors stay "
-                      "below about 0.05 deg")
+AMPLITUDE = per_drive(
+    Plausible(math.radians(0.05), basis="periodic gear and encoder errors stay below about "
+              "0.05 deg"),
+    direct=Plausible(math.radians(0.02), basis="a direct drive's periodic error is its "
+                     "encoder's: below about 0.02 deg"),
+    belt=Plausible(math.radians(0.2), basis="eccentric belt pulleys: below about 0.2 deg"),
+    cable=Plausible(math.radians(0.5), basis="eccentric capstans and pulleys, the cable's "
+                    "lay: below about 0.5 deg"))
 
 
 class JointCyclic(Effect):
@@ -43,12 +52,16 @@ class JointCyclic(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{h}_{j}" for j in self.joints for h in HARMONICS)
 
-    def plausible(self, parameter: str) -> Plausible:
-        return AMPLITUDE
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return AMPLITUDE[drive]
 
-    def _check_amplitudes(self, values) -> tuple:
+    def parameter_joint(self, parameter: str) -> int | None:
+        """The joint after the underscore (``a1_3`` -> 3)."""
+        return int(parameter.split("/")[0].split("_")[1])
+
+    def _check_amplitudes(self, values, robot=None) -> tuple:
         return amplitude_check(self, [(f"a{h}_{j}", f"b{h}_{j}") for j in self.joints
-                                      for h in (1, 2)], values, AMPLITUDE)
+                                      for h in (1, 2)], values, robot)
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot, revolute_only=True)

@@ -14,8 +14,17 @@ of it. A dataset cut down to some of its rows (data selection) carries the direc
 its full table in ``extras``; cross-validation and the placement refits of validation use
 the same per-row values as the fit.
 
-Per-row inputs derived here are named ``direction_q{j}`` (1-based) and travel with the
-data columns of ``extras``.
+A second derived input, the travel of joint j's reading since its direction of motion
+last changed (friction ``hysteresis`` follows it), is ``travel_q{j}`` [rad or m]:
+
+    travel_q{j}[i] = |q_j[i] - q_j[i-1]|                    where the direction changed
+                   = travel_q{j}[i-1] + |q_j[i] - q_j[i-1]|  where it did not
+                   = travel_q{j}[i-1]                        where the reading did not change
+
+0 on the first row; the first motion counts as a change of direction.
+
+Per-row inputs derived here are named ``direction_q{j}`` and ``travel_q{j}`` (1-based)
+and travel with the data columns of ``extras``.
 """
 
 from __future__ import annotations
@@ -25,6 +34,7 @@ from collections.abc import Mapping
 import numpy as np
 
 PREFIX = "direction_q"
+TRAVEL = "travel_q"
 
 
 def direction_column(joint: int) -> str:
@@ -32,8 +42,20 @@ def direction_column(joint: int) -> str:
     return f"{PREFIX}{int(joint)}"
 
 
+def travel_column(joint: int) -> str:
+    """The name of joint ``joint``'s (1-based) travel since its last reversal:
+    ``travel_q{joint}``."""
+    return f"{TRAVEL}{int(joint)}"
+
+
 def is_direction_column(column: str) -> bool:
     return column.startswith(PREFIX) and column[len(PREFIX):].isdigit()
+
+
+def is_derived_column(column: str) -> bool:
+    """Whether ``column`` is an input derived from the row order (direction or travel)."""
+    return is_direction_column(column) or (column.startswith(TRAVEL)
+                                           and column[len(TRAVEL):].isdigit())
 
 
 def directions_of_motion(Q) -> np.ndarray:
@@ -51,23 +73,41 @@ def directions_of_motion(Q) -> np.ndarray:
     return out
 
 
+def travel_since_reversal(Q) -> np.ndarray:
+    """Travel (N x dof) [rad or m] of readings ``Q`` (N x dof) since each joint's direction
+    of motion last changed, in row order; see the module docstring."""
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    directions = directions_of_motion(Q)
+    out = np.zeros(Q.shape)
+    for i in range(1, len(Q)):
+        step = np.abs(Q[i] - Q[i - 1])
+        reversed_ = directions[i] != directions[i - 1]
+        out[i] = np.where(step == 0, out[i - 1], np.where(reversed_, step, out[i - 1] + step))
+    return out
+
+
 def with_directions(joints, extras: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """``extras`` plus ``direction_q1..n`` of the full table ``joints`` (N x dof), where
-    ``extras`` does not hold them already (a table cut down keeps its own)."""
+    """``extras`` plus ``direction_q1..n`` and ``travel_q1..n`` of the full table ``joints``
+    (N x dof), where ``extras`` does not hold them already (a table cut down keeps its
+    own)."""
     out = dict(extras)
     if joints is None:
         return out
     directions = directions_of_motion(joints)
+    travel = travel_since_reversal(joints)
     for j in range(1, directions.shape[1] + 1):
         out.setdefault(direction_column(j), directions[:, j - 1])
+        out.setdefault(travel_column(j), travel[:, j - 1])
     return out
 
 
 def direction_values(dataset, column: str) -> np.ndarray:
-    """The per-row values of the derived input ``column`` for ``dataset`` (N,)."""
+    """The per-row values of the derived input ``column`` (direction or travel) for
+    ``dataset`` (N,)."""
     if column in dataset.extras:
         return np.asarray(dataset.extras[column], dtype=float)
-    joint = int(column[len(PREFIX):])
     if dataset.joints is None:
         return np.zeros(0)
-    return directions_of_motion(dataset.joints)[:, joint - 1]
+    if is_direction_column(column):
+        return directions_of_motion(dataset.joints)[:, int(column[len(PREFIX):]) - 1]
+    return travel_since_reversal(dataset.joints)[:, int(column[len(TRAVEL):]) - 1]

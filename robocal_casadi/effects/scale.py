@@ -4,8 +4,11 @@
 
 Parameters ``s{j}``, one per joint in ``joints`` (1-based).
 
-Plausible on real robots: ``|s_j|`` below about 0.2 % (2e-3); gear ratios and encoder
-resolutions are known far better, and a larger value points at a wrong model.
+Plausible on real robots, by the joint's drive: ``|s_j|`` below about 0.2 % (2e-3) for
+gears (gear ratios and encoder resolutions are known far better, and a larger value
+points at a wrong model), 0.1 % for direct drives, 1 % for toothed belts (pulley pitch
+diameters and belt stretch) and 3 % for cables (capstan radius tolerances, the cable's
+own diameter and its stretch set the effective radius).
 """
 
 from __future__ import annotations
@@ -16,8 +19,13 @@ import numpy as np
 from ..units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import check_joints, column
+from .drives import per_drive
 
-RATIO = Plausible(2e-3, basis="gear-ratio errors stay below about 0.2 %")
+RATIO = per_drive(
+    Plausible(2e-3, basis="gear-ratio errors stay below about 0.2 %"),
+    direct=Plausible(1e-3, basis="a direct drive's ratio is its encoder's: below 0.1 %"),
+    belt=Plausible(1e-2, basis="belt pulley diameters and stretch: below about 1 %"),
+    cable=Plausible(3e-2, basis="capstan radii, cable diameter and stretch: below about 3 %"))
 
 
 class JointScale(Effect):
@@ -35,8 +43,8 @@ class JointScale(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"s{j}" for j in self.joints)
 
-    def plausible(self, parameter: str) -> Plausible:
-        return RATIO
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        return RATIO[drive]
 
     def delta(self, row: RowContext, theta: ca.SX) -> tuple[ca.SX, None]:
         check_joints(self, row.robot)

@@ -77,7 +77,8 @@ class ThermalDrift(Effect):
     def parameter_names(self) -> tuple[str, ...]:
         return (COLUMNS[self.column][0],)
 
-    def plausible(self, parameter: str) -> Plausible:
+    def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
+        """The same for every drive: thermal growth is the links'."""
         return PLAUSIBLE[parameter]
 
     @classmethod

@@ -125,7 +125,7 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
         a = float(T[0, 3] * np.cos(theta) + T[1, 3] * np.sin(theta))
         alpha = float(np.arctan2(T[2, 1], T[2, 2]))
         joints.append(Joint(source.type, theta, d, a, alpha, limits=source.limits,
-                            has_beta=parallel[i]))
+                            has_beta=parallel[i], drive=source.drive))
     dh = Robot(name=robot.name, convention="dh", joints=tuple(joints), base=frame_of(frames[0]),
                tool=frame_of(invert(frames[-1]) @ tip), gravity=robot.gravity,
                has_base=True, has_tool=True, has_gravity=robot.has_gravity)
