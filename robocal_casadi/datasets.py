@@ -78,6 +78,14 @@ class DatasetBase:
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read
+    lines: np.ndarray | None = field(default=None, repr=False)  # table line of each reading
+
+    def line(self, reading: int) -> int:
+        """The data table's line (1-based, header on line 1) of reading ``reading``
+        (0-based; a row of the table, or one laser reading of a pendant table)."""
+        if self.lines is not None and reading < len(self.lines):
+            return int(self.lines[reading])
+        return reading + 2
 
     @property
     def rows(self) -> int:
@@ -143,7 +151,7 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
     # the directions of motion belong to the full table's order: computed before cutting
     extras = with_directions(dataset.joints, dataset.extras)
     changes: dict[str, Any] = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
-    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
+    for name in ("joints", "measured", "distance", "flange_poses", "pose", "lines"):
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
@@ -208,8 +216,10 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}
-    reader = readers[kind]
-    return reader(content, table, common)
+    dataset = readers[kind](content, table, common)
+    if table is not None:
+        dataset = replace(dataset, lines=np.array([table.line(i) for i in range(len(table))]))
+    return dataset
 
 
 # The planning block's angles (file units) must lie in (0, limit] degrees.

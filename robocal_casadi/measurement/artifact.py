@@ -44,6 +44,7 @@ class ArtifactModel(MeasurementModel):
     table = "touches.csv"
     reach = "sockets"
     unit_name = "placements"
+    reading_name = "touch"
     error_title = "artifact error"
     placement_shared = False
     # placements differ in information more than tracker readings: with 16 candidates per
@@ -213,6 +214,11 @@ class ArtifactModel(MeasurementModel):
 
     def error_rows(self) -> np.ndarray:
         return self._layout()[0]
+
+    def error_entries(self) -> list[np.ndarray]:
+        """Three residual entries per touch, one per distance or perpendicularity."""
+        ends = np.cumsum(self._layout()[1])
+        return [np.arange(end - size, end) for end, size in zip(ends, self._layout()[1])]
 
     # ------------------------------------------------------------------ planning
 

@@ -1,0 +1,322 @@
+"""Gross errors: the readings no calibration of the robot explains, found and set aside.
+
+A gross error (a tracker beam broken mid-reading, a probe slipped out of its socket, a
+laser reading at grazing incidence, a mistyped row) is not noise: least squares spreads
+it over every estimate. ``screen`` finds such readings:
+
+1. a robust start: the Huber M-estimate (iteratively reweighted least squares, scale
+   from the median absolute deviation) over the unknowns given as free;
+2. the noise ``sigma`` of each kind of error of each dataset (position, surface,
+   distance, perpendicularity), from the median absolute deviation of its residual
+   entries over the units kept, each entry divided by ``sqrt(1 - h)`` for its leverage
+   ``h``; never below ``RESOLUTION``;
+3. per unit of data, the deletion statistic ``t = r^T V^-1 r`` with ``r`` the unit's
+   residual entries divided by their ``sigma`` and ``V = I - H`` (``I + H`` for a unit set
+   aside, whose residual is then a prediction), ``H`` the unit's block of the hat matrix
+   of the noise-weighted Jacobian. For a unit holding only noise ``t`` follows chi^2 with
+   as many degrees of freedom as the unit has entries; a unit above the
+   ``1 - FALSE_ALARM`` quantile is set aside;
+4. least squares on the units kept (those set aside weigh zero), then 2-3 again, until
+   the set aside no longer changes (at most ``ROUNDS`` rounds).
+
+The unit is what the instrument produces: a tracker point, a laser reading, a touch of
+a socket touched several times; a bar (or artifact) placement whose length or angle
+errors fail is set aside whole, with the touches that look wrong named (a bad touch
+shows only in the errors of the sockets it touched: for a cross, touch A and touch C
+show alike, so both are named). When more than ``MAX_SHARE`` of a dataset's readings
+would go, the data are bad rather than the robot: ``InputError``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..errors import InputError
+from ..results import RejectedReading
+from .problem import Problem
+from .solver import Method, solve
+
+FALSE_ALARM = 1e-3  # probability that a unit holding only noise is set aside
+MAX_SHARE = 0.2  # more of a dataset's readings than this set aside: the data are bad
+ROUNDS = 6  # rounds of fit-and-test at most
+RESOLUTION = 1e-8  # [m] noise floor: errors this small are rounding, never gross
+MAD_SCALE = 1.4826  # median absolute deviation to the standard deviation of a normal
+MIN_ENTRIES = 12  # fewer residual entries of one kind: its noise is pooled with the dataset's
+UNTESTABLE = 1e-8  # V's smallest eigenvalue below this: the fit reproduces the unit whatever
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A unit of data that is kept or set aside whole.
+
+    ``model`` indexes ``problem.models``; ``rows`` its data rows; ``entries`` indices
+    into the stacked residual; ``errors`` indices into the model's ``errors``;
+    ``reading`` what it is; ``suspect`` the touches that look wrong (placements).
+    """
+
+    model: int
+    rows: tuple[int, ...]
+    entries: np.ndarray
+    errors: tuple[int, ...]
+    reading: str
+    kinds: tuple[str, ...]  # the error kind of each entry of ``entries``
+
+
+@dataclass(frozen=True)
+class Screening:
+    """What ``screen`` found: the units set aside and the estimate on the rest."""
+
+    units: tuple[Unit, ...]
+    rejected: tuple[int, ...]  # indices into ``units``
+    statistic: np.ndarray  # per unit, t
+    quantile: np.ndarray  # per unit, the chi^2 quantile it is compared with
+    residual: np.ndarray  # per unit, |r| [m]
+    weights: np.ndarray  # per residual entry: 0 set aside, 1 kept
+    x: np.ndarray  # the least-squares estimate on the units kept
+    sigma: np.ndarray  # per residual entry, the noise of its kind [m]
+
+    def kept_rows(self, problem: Problem) -> list[np.ndarray]:
+        """Per model, a mask over its readings: True where kept."""
+        masks = [np.ones(readings(m.dataset), dtype=bool) for m in problem.models]
+        for k in self.rejected:
+            unit = self.units[k]
+            masks[unit.model][list(unit.rows)] = False
+        return masks
+
+    def kept_errors(self, problem: Problem) -> list[np.ndarray]:
+        """Per model, a mask over its ``errors``: True where kept."""
+        masks = [np.ones(len(m.error_rows()), dtype=bool) for m in problem.models]
+        for k in self.rejected:
+            unit = self.units[k]
+            masks[unit.model][list(unit.errors)] = False
+        return masks
+
+
+def readings(dataset) -> int:
+    """How many readings (table rows) ``dataset`` holds (pendant scans have no joints)."""
+    if dataset.rows:
+        return dataset.rows
+    distance = getattr(dataset, "distance", None)
+    return 0 if distance is None else len(distance)
+
+
+def units_of(problem: Problem) -> tuple[Unit, ...]:
+    """Every unit of data of ``problem``, model by model (see the module docstring)."""
+    out: list[Unit] = []
+    start = 0
+    for k, model in enumerate(problem.models):
+        rows = model.error_rows()
+        entries = model.error_entries()
+        terms = model.error_terms()
+        pose = getattr(model.dataset, "pose", None)
+        placements: dict[int, list[int]] = {}
+        for i, row in enumerate(rows):
+            if row >= 0:
+                out.append(Unit(k, (int(row),), start + entries[i], (i,), model.reading_name,
+                                (terms[i].kind,) * len(entries[i])))
+            elif i < len(terms) and terms[i].pose >= 0 and pose is not None:
+                placements.setdefault(terms[i].pose, []).append(i)
+        for placement, errors in placements.items():
+            index = np.concatenate([start + entries[i] for i in errors])
+            kinds = tuple(terms[i].kind for i in errors for _ in entries[i])
+            members = tuple(int(r) for r in np.flatnonzero(np.asarray(pose) == placement))
+            out.append(Unit(k, members, index, tuple(errors), "placement", kinds))
+        start += model.residual_size()
+    return tuple(out)
+
+
+class _Weighted:
+    """``problem`` with each residual entry multiplied by ``weights`` (0 or 1)."""
+
+    def __init__(self, problem: Problem, weights: np.ndarray):
+        self.problem = problem
+        self.weights = weights
+
+    def __getattr__(self, name):
+        return getattr(self.problem, name)
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        return self.problem.residual(x) * self.weights
+
+    def jacobian(self, x: np.ndarray, columns=None) -> np.ndarray:
+        return self.problem.jacobian(x, columns) * self.weights[:, None]
+
+    def symbolic_residual(self, x):
+        import casadi as ca
+
+        return self.problem.symbolic_residual(x) * ca.DM(self.weights)
+
+
+def screen(problem: Problem, x: np.ndarray, free: np.ndarray, *, method: Method = "lm",
+           max_iterations: int = 200, robust_start: bool = True) -> Screening:
+    """Find the units of ``problem``'s data with gross errors; see the module docstring.
+
+    ``x`` [SI] is the starting point, ``free`` the unknowns fitted (those the data
+    determine, with the placements). ``robust_start=False`` starts the rounds from ``x``
+    as it is (a least-squares fit of every unit).
+    """
+    units = units_of(problem)
+    if robust_start:
+        x = solve(problem, x, free, method=method, loss="huber",
+                  max_iterations=max_iterations).x
+    rejected: tuple[int, ...] = ()
+    weights = np.ones(problem.size)
+    tested = _test(problem, units, x, free, weights)
+    for _ in range(ROUNDS):
+        found = tuple(int(k) for k in np.flatnonzero(tested[0] > tested[1]))
+        if found == rejected:
+            break
+        rejected = found
+        weights = _weights(problem, units, rejected)
+        x = refit(problem, x, free, weights, method=method, max_iterations=max_iterations)
+        tested = _test(problem, units, x, free, weights)
+    statistic, quantile, residual, sigma = tested
+    return Screening(units, rejected, statistic, quantile, residual, weights, x, sigma)
+
+
+def _weights(problem: Problem, units: Sequence[Unit], rejected: Sequence[int]) -> np.ndarray:
+    weights = np.ones(problem.size)
+    for k in rejected:
+        weights[units[k].entries] = 0.0
+    return weights
+
+
+def refit(problem: Problem, x: np.ndarray, free: np.ndarray, weights: np.ndarray, *,
+          method: Method = "lm", max_iterations: int = 200) -> np.ndarray:
+    """Least squares on the kept entries; unknowns only set-aside data reach stay put."""
+    J = problem.jacobian(x, free) * weights[:, None]
+    reached = free.copy()
+    reached[np.flatnonzero(free)] = np.linalg.norm(J, axis=0) > 0
+    return solve(_Weighted(problem, weights), x, reached, method=method,
+                 max_iterations=max_iterations).x
+
+
+def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarray,
+          weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per unit ``(t, chi^2 quantile, |r| [m])`` at ``x``, and the noise per entry [m]."""
+    r = problem.residual(x)
+    J = problem.jacobian(x, free)
+    kept = weights > 0
+    leverage = _leverage(J, kept)
+    sigma = _noise(problem, units, r, leverage, kept)
+    Jw = J / sigma[:, None]
+    cover = _pinv_gram(Jw[kept])
+    statistic = np.zeros(len(units))
+    quantile = np.zeros(len(units))
+    residual = np.zeros(len(units))
+    for k, unit in enumerate(units):
+        e = unit.entries
+        z = r[e] / sigma[e]
+        H = Jw[e] @ cover @ Jw[e].T
+        V = np.eye(len(e)) + (H if not kept[e].all() else -H)
+        quantile[k] = chi2.ppf(1.0 - FALSE_ALARM, len(e))
+        residual[k] = float(np.linalg.norm(r[e]))
+        values = np.linalg.eigvalsh(V)
+        if values.min() < UNTESTABLE:
+            continue
+        statistic[k] = float(z @ np.linalg.solve(V, z))
+    return statistic, quantile, residual, sigma
+
+
+def _pinv_gram(J: np.ndarray) -> np.ndarray:
+    """``(J^T J)^+`` on column-scaled ``J`` (columns without data give zero)."""
+    norms = np.linalg.norm(J, axis=0)
+    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    Js = J * scale
+    inverse = np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True)
+    return scale[:, None] * inverse * scale[None, :]
+
+
+def _leverage(J: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """Diagonal of the hat matrix of the kept rows of ``J`` (0 for the others)."""
+    cover = _pinv_gram(J[kept])
+    h = np.einsum("ij,jk,ik->i", J, cover, J)
+    return np.where(kept, np.clip(h, 0.0, 1.0), 0.0)
+
+
+def _noise(problem: Problem, units: Sequence[Unit], r: np.ndarray, leverage: np.ndarray,
+           kept: np.ndarray) -> np.ndarray:
+    """Per residual entry, the noise of its kind in its dataset [m] (module docstring)."""
+    kind = np.full(problem.size, "", dtype=object)
+    model = np.full(problem.size, -1)
+    for unit in units:
+        kind[unit.entries] = unit.kinds
+        model[unit.entries] = unit.model
+    scaled = np.abs(r) / np.sqrt(np.clip(1.0 - leverage, 1e-6, None))
+    sigma = np.full(problem.size, RESOLUTION)
+    for k in range(len(problem.models)):
+        mine = (model == k) & kept
+        pooled = _mad(scaled[mine])
+        for name in set(kind[model == k]):
+            group = mine & (kind == name)
+            value = _mad(scaled[group]) if group.sum() >= MIN_ENTRIES else pooled
+            sigma[(model == k) & (kind == name)] = max(value, RESOLUTION)
+    return sigma
+
+
+def _mad(values: np.ndarray) -> float:
+    """Standard deviation of zero-mean normal values from their median absolute value."""
+    return MAD_SCALE * float(np.median(values)) if values.size else 0.0
+
+
+def suspects(problem: Problem, unit: Unit, r: np.ndarray, sigma: np.ndarray) -> str:
+    """The touches of a placement whose errors alone explain what failed, e.g.
+    ``"touch A or C"`` (a bad touch moves only the errors of the sockets it touched)."""
+    model = problem.models[unit.model]
+    terms = model.error_terms()
+    entries = model.error_entries()
+    start = sum(m.residual_size() for m in problem.models[:unit.model])
+    misfit: dict[str, float] = {}
+    sockets = sorted({s for i in unit.errors for s in terms[i].points})
+    for socket in sockets:
+        left = [i for i in unit.errors if socket not in terms[i].points]
+        misfit[socket] = sum(float(np.sum((r[start + entries[i]]
+                                           / sigma[start + entries[i]]) ** 2)) for i in left)
+    if not misfit:
+        return ""
+    best = min(misfit.values())
+    named = [s for s in sockets if misfit[s] <= best + 1e-9 * max(best, 1.0) + 1e-12]
+    return "touch " + " or ".join(named)
+
+
+def rejected_readings(problem: Problem, screening: Screening, role: str = "fit"
+                      ) -> tuple[RejectedReading, ...]:
+    """The units ``screening`` set aside, as ``RejectedReading`` rows (table order)."""
+    r = problem.residual(screening.x)
+    out = []
+    for k in screening.rejected:
+        unit = screening.units[k]
+        dataset = problem.models[unit.model].dataset
+        lines = tuple(dataset.line(row) for row in unit.rows)
+        suspect = ""
+        line = lines[0] if lines else -1
+        if unit.reading == "placement":
+            suspect = suspects(problem, unit, r, screening.sigma)
+            named = suspect.removeprefix("touch ").split(" or ")
+            points = getattr(dataset, "point", ())
+            for row in unit.rows:
+                if row < len(points) and points[row] in named:
+                    line = dataset.line(row)
+                    break
+        t, q = screening.statistic[k], screening.quantile[k]
+        residual = float(screening.residual[k])
+        threshold = residual * float(np.sqrt(q / t)) if t > 0 else float("inf")
+        table = dataset.data_path.name if dataset.data_path is not None else dataset.path.name
+        out.append(RejectedReading(dataset.path.name, table, line, lines, unit.rows, residual,
+                                   threshold, unit.reading, suspect, role))
+    return tuple(sorted(out, key=lambda e: (e.dataset, e.line)))
+
+
+def check_share(problem: Problem, screening: Screening) -> None:
+    """Refuse data of which more than ``MAX_SHARE`` would be set aside (``InputError``)."""
+    for model, kept in zip(problem.models, screening.kept_rows(problem)):
+        if kept.size and (~kept).sum() > MAX_SHARE * kept.size:
+            dataset = model.dataset
+            raise InputError(
+                f"{int((~kept).sum())} of {kept.size} readings are gross errors (more than "
+                f"{MAX_SHARE:.0%}): the data are bad, not the robot; check the instrument "
+                f"and the table", file=dataset.data_path or dataset.path)
