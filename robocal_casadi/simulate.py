@@ -983,7 +983,9 @@ def inject_gross_errors(simulated: SimulatedDataset, share: float,
             rows[row][k] = float(rows[row][k]) + rng.choice([-1, 1]) * length / units.length_scale
         else:
             k = columns.index("q1")
-            point = Kinematics(dataset.robot).points(dataset.joints[row:row + 1], dataset.probe)
+            joints = np.asarray(dataset.joints)
+            probe = np.asarray(getattr(dataset, "probe", np.zeros(3)))
+            point = Kinematics(dataset.robot).points(joints[row:row + 1], probe)
             radius = max(float(np.hypot(point[0, 0], point[0, 1])), 0.1)
             turn = rng.choice([-1, 1]) * length / radius
             rows[row][k] = float(rows[row][k]) + turn / units.angle_scale

@@ -56,7 +56,7 @@ from .prior import (
 )
 from .problem import Problem
 from .selection import Selection, select_by_condition
-from .solver import CONVERGED_DECREASE, LOSSES, METHODS, Loss, Method, Solution, solve
+from .solver import CONVERGED_DECREASE, METHODS, Loss, Method, Solution, solve
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
 
@@ -298,8 +298,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     Standard errors count repeated identical readings once (a warning on stderr says so).
 
     Arguments are checked at the door (``ArgumentError``, a ``ValueError``): ``method`` one
-    of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
-    closest valid one as a hint; ``"robust"`` as well), datasets loaded by ``load_dataset``, ``effects``
+    of ``solver.METHODS``, ``loss`` one of ``CALIBRATION_LOSSES`` (a misspelt name gets
+    the closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
     a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
     restricts the robot parameters that may be fitted, e.g. to a controller's set

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import qr, solve_triangular
 from scipy.stats import chi2
 
 from ..errors import InputError
@@ -40,12 +41,13 @@ from ..results import RejectedReading
 from .problem import Problem
 from .solver import Method, solve
 
-FALSE_ALARM = 1e-3  # probability that a unit holding only noise is set aside
+FALSE_ALARM = 1e-4  # probability that a unit holding only noise is set aside
 MAX_SHARE = 0.2  # more of a dataset's readings than this set aside: the data are bad
 ROUNDS = 6  # rounds of fit-and-test at most
 RESOLUTION = 1e-8  # [m] noise floor: errors this small are rounding, never gross
 MAD_SCALE = 1.4826  # median absolute deviation to the standard deviation of a normal
 MIN_ENTRIES = 12  # fewer residual entries of one kind: its noise is pooled with the dataset's
+RANK_TOLERANCE = 1e-10  # relative size of a QR pivot below which a direction has no data
 UNTESTABLE = 1e-8  # V's smallest eigenvalue below this: the fit reproduces the unit whatever
 
 
@@ -201,41 +203,39 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
     r = problem.residual(x)
     J = problem.jacobian(x, free)
     kept = weights > 0
-    leverage = _leverage(J, kept)
+    W = _hat_factor(J, kept)
+    leverage = np.where(kept, np.clip(np.sum(W * W, axis=1), 0.0, 1.0), 0.0)
     sigma = _noise(problem, units, r, leverage, kept)
-    Jw = J / sigma[:, None]
-    cover = _pinv_gram(Jw[kept])
+    W = _hat_factor(J / sigma[:, None], kept)
     statistic = np.zeros(len(units))
     quantile = np.zeros(len(units))
     residual = np.zeros(len(units))
     for k, unit in enumerate(units):
         e = unit.entries
         z = r[e] / sigma[e]
-        H = Jw[e] @ cover @ Jw[e].T
+        H = W[e] @ W[e].T
         V = np.eye(len(e)) + (H if not kept[e].all() else -H)
         quantile[k] = chi2.ppf(1.0 - FALSE_ALARM, len(e))
         residual[k] = float(np.linalg.norm(r[e]))
-        values = np.linalg.eigvalsh(V)
-        if values.min() < UNTESTABLE:
+        if np.linalg.eigvalsh(V).min() < UNTESTABLE:
             continue
         statistic[k] = float(z @ np.linalg.solve(V, z))
     return statistic, quantile, residual, sigma
 
 
-def _pinv_gram(J: np.ndarray) -> np.ndarray:
-    """``(J^T J)^+`` on column-scaled ``J`` (columns without data give zero)."""
-    norms = np.linalg.norm(J, axis=0)
-    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
-    Js = J * scale
-    inverse = np.linalg.pinv(Js.T @ Js, rcond=1e-12, hermitian=True)
-    return scale[:, None] * inverse * scale[None, :]
-
-
-def _leverage(J: np.ndarray, kept: np.ndarray) -> np.ndarray:
-    """Diagonal of the hat matrix of the kept rows of ``J`` (0 for the others)."""
-    cover = _pinv_gram(J[kept])
-    h = np.einsum("ij,jk,ik->i", J, cover, J)
-    return np.where(kept, np.clip(h, 0.0, 1.0), 0.0)
+def _hat_factor(J: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """``W`` with ``W W^T`` the hat matrix of the ``kept`` rows of ``J`` extended to every
+    row (``J (J_k^T J_k)^+ J^T``), from a pivoted QR of the column-scaled kept rows."""
+    norms = np.linalg.norm(J[kept], axis=0)
+    used = np.flatnonzero(norms > 0)
+    Js = J[:, used] / norms[used]
+    if not len(used):
+        return np.zeros((len(J), 0))
+    _, R, pivot = qr(Js[kept], mode="economic", pivoting=True)
+    diagonal = np.abs(np.diag(R))
+    rank = int(np.sum(diagonal > RANK_TOLERANCE * diagonal[0])) if diagonal.size else 0
+    R = R[:rank, :rank]
+    return solve_triangular(R, Js[:, pivot[:rank]].T, trans="T").T
 
 
 def _noise(problem: Problem, units: Sequence[Unit], r: np.ndarray, leverage: np.ndarray,
@@ -320,3 +320,21 @@ def check_share(problem: Problem, screening: Screening) -> None:
                 f"{int((~kept).sum())} of {kept.size} readings are gross errors (more than "
                 f"{MAX_SHARE:.0%}): the data are bad, not the robot; check the instrument "
                 f"and the table", file=dataset.data_path or dataset.path)
+
+
+SHOWN = 5  # set-aside readings named on the terminal
+
+
+def rejected_lines(rejected: Sequence[RejectedReading], units) -> list[str]:
+    """Terminal lines: how many units were set aside as gross errors, the first few named."""
+    if not rejected:
+        return ["gross errors: none found (no reading set aside)"]
+    out = []
+    for role in ("fit", "validation"):
+        mine = [e for e in rejected if e.role == role]
+        if not mine:
+            continue
+        more = f" (the first {SHOWN} below; all in result.json)" if len(mine) > SHOWN else ""
+        out.append(f"gross errors: {len(mine)} unit(s) of the {role} data set aside{more}")
+        out += ["  " + e.sentence(units) for e in mine[:SHOWN]]
+    return out

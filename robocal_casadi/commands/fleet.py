@@ -35,6 +35,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ..calibration import METHODS
+from ..calibration.identification import CALIBRATION_LOSSES
 from ..errors import InputError
 from ..output import MARKER, MARKER_TEXT, atomic_file, written_by_robocal
 from ..progress import Progress
@@ -67,8 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop after the geometric model")
     parser.add_argument("--method", choices=METHODS, default="lm",
                         help="the solver, as for calibrate (default lm)")
-    parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
-                        help="huber down-weights outliers")
+    parser.add_argument("--loss", choices=CALIBRATION_LOSSES, default="robust",
+                        help="as for calibrate: robust (default) sets gross errors aside and "
+                             "lists them; linear keeps every reading; huber down-weights")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to each geometric fit (default 200)")
     parser.add_argument("--no-report", action="store_true",
