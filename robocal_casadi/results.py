@@ -201,9 +201,10 @@ class RejectedReading:
     ``line`` is the data table's line of the reading (for a placement set aside whole,
     that of the touch that looks wrong, ``suspect`` naming the candidates); ``lines``
     every line set aside with it, ``rows`` their 0-based rows (the order they were taken
-    in). ``residual`` [m] is the length of its error under the model fitted without it,
-    ``threshold`` [m] the length noise reaches there at the false-alarm rate; ``role``
-    ``"fit"`` or ``"validation"``.
+    in), ``position`` where the point measured lay (base frame; the mean of a
+    placement's touches). ``residual`` [m] is the length of its error under the model
+    fitted without it, ``threshold`` [m] the length noise reaches there at the
+    false-alarm rate; ``role`` ``"fit"`` or ``"validation"``.
     """
 
     dataset: str
@@ -216,12 +217,15 @@ class RejectedReading:
     reading: str  # "tracker point" | "laser reading" | "touch" | "placement"
     suspect: str = ""
     role: str = "fit"
+    position: tuple[float, float, float] | None = None  # [m] base frame, the point measured
+    path: str = ""  # the dataset file as given (tells apart files of one name)
 
     def to_json(self, units: Units) -> dict:
         s = units.length_scale
         out = {"dataset": self.dataset, "line": self.line, "residual": self.residual / s,
                "threshold": self.threshold / s, "unit": units.length, "table": self.table,
-               "lines": list(self.lines), "reading": self.reading, "role": self.role}
+               "lines": list(self.lines), "reading": self.reading, "role": self.role,
+               "position": None if self.position is None else [v / s for v in self.position]}
         if self.suspect:
             out["suspect"] = self.suspect
         return out
@@ -231,7 +235,7 @@ class RejectedReading:
         s = units.length_scale
         what = self.reading + (f" ({self.suspect})" if self.suspect else "")
         return (f"{self.table} line {self.line}: {what}, error {self.residual / s:.4g} "
-                f"{units.length} against a threshold of {self.threshold / s:.4g}")
+                f"{units.length} against a threshold of {self.threshold / s:.4g} {units.length}")
 
 
 @dataclass(frozen=True)

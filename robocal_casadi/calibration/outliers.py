@@ -36,6 +36,7 @@ import numpy as np
 from scipy.linalg import qr, solve_triangular
 from scipy.stats import chi2
 
+from ..datasets import dataset_rows
 from ..errors import InputError
 from ..results import RejectedReading
 from .problem import Problem
@@ -307,8 +308,22 @@ def rejected_readings(problem: Problem, screening: Screening, role: str = "fit"
         threshold = residual * float(np.sqrt(q / t)) if t > 0 else float("inf")
         table = dataset.data_path.name if dataset.data_path is not None else dataset.path.name
         out.append(RejectedReading(dataset.path.name, table, line, lines, unit.rows, residual,
-                                   threshold, unit.reading, suspect, role))
+                                   threshold, unit.reading, suspect, role,
+                                   _position(problem, unit, screening.x), str(dataset.path)))
     return tuple(sorted(out, key=lambda e: (e.dataset, e.line)))
+
+
+def _position(problem: Problem, unit: Unit, x: np.ndarray) -> tuple[float, float, float]:
+    """Where the unit's point lay [m], base frame (mean over its rows)."""
+    model = problem.models[unit.model]
+    rows = list(unit.rows)
+    if model.uses_robot:
+        offset = x[problem.mounted_indices(model)][:3].reshape(3, 1)
+        world = np.asarray(problem.points_numeric(model, x)(offset))[:, rows]
+    else:
+        world = np.asarray(model.dataset.flange_poses)[rows, :3, 3].T
+    centre = world.mean(axis=1)
+    return float(centre[0]), float(centre[1]), float(centre[2])
 
 
 def check_share(problem: Problem, screening: Screening) -> None:
@@ -337,4 +352,18 @@ def rejected_lines(rejected: Sequence[RejectedReading], units) -> list[str]:
         more = f" (the first {SHOWN} below; all in result.json)" if len(mine) > SHOWN else ""
         out.append(f"gross errors: {len(mine)} unit(s) of the {role} data set aside{more}")
         out += ["  " + e.sentence(units) for e in mine[:SHOWN]]
+    return out
+
+
+def kept_datasets(datasets: Sequence, rejected: Sequence[RejectedReading], role: str) -> list:
+    """``datasets`` without the rows ``rejected`` set aside in ``role`` (``"fit"`` or
+    ``"validation"``), e.g. to evaluate another model on the same readings kept."""
+    out = []
+    for dataset in datasets:
+        keep = np.ones(readings(dataset), dtype=bool)
+        for entry in rejected:
+            if entry.role == role and entry.path == str(dataset.path):
+                lines = list(entry.lines)
+                keep &= ~np.isin([dataset.line(i) for i in range(len(keep))], lines)
+        out.append(dataset if keep.all() else dataset_rows(dataset, keep))
     return out

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from ..calibration import METHODS, calibrate
 from ..calibration.identification import CALIBRATION_LOSSES
-from ..calibration.outliers import rejected_lines
+from ..calibration.outliers import kept_datasets, rejected_lines
 from ..datasets import load_dataset
 from ..effect_model import delivered_lines, geometry_only, save_effects
 from ..errors import InputError
@@ -229,7 +229,9 @@ def run(args: argparse.Namespace) -> int:
         result = calibrate(datasets, validation, **options)
     else:
         result = profiled(datasets, validation, args.profile, options)
-    result = replace(result, delivered=geometry_only(result, datasets, validation))
+    result = replace(result, delivered=geometry_only(
+        result, kept_datasets(datasets, result.rejected, "fit"),
+        kept_datasets(validation, result.rejected, "validation")))
     write_outputs(result, args.out, report=not args.no_report, pdf=args.pdf, info=info,
                   templates=args.report_templates)
     print(summary(result))
