@@ -7,9 +7,16 @@ it over every estimate. ``screen`` finds such readings:
 1. a robust start: the Huber M-estimate (iteratively reweighted least squares, scale
    from the median absolute deviation) over the unknowns given as free;
 2. the noise ``sigma`` of each kind of error of each dataset (position, surface,
-   distance, perpendicularity), from the median absolute deviation of its residual
-   entries over the units kept, each entry divided by ``sqrt(1 - h)`` for its leverage
-   ``h``; never below ``RESOLUTION``;
+   distance, perpendicularity), from the 80% quantile of the absolute residual entries
+   over the units kept (1.28 sigma for normal noise), each entry divided by
+   ``sqrt(1 - h)`` for its leverage ``h``; never below ``RESOLUTION``. The quantile,
+   rather than the median, makes the scale follow errors the model does not yet explain
+   (real data carry some until diagnosis has run): a reading in the tail of such a
+   spread is the model's error, not a gross one. Gross errors on up to 20% of the
+   units leave it nearly unchanged (5% raise it by about 10%). The touches of one
+   socket are judged by the larger of that noise and their own spread, so that a
+   socket the model misses for many of its touches is not mistaken for many gross
+   errors;
 3. per unit of data, the deletion statistic ``t = r^T V^-1 r`` with ``r`` the unit's
    residual entries divided by their ``sigma`` and ``V = I - H`` (``I + H`` for a unit set
    aside, whose residual is then a prediction), ``H`` the unit's block of the hat matrix
@@ -20,8 +27,10 @@ it over every estimate. ``screen`` finds such readings:
    the set aside no longer changes (at most ``ROUNDS`` rounds).
 
 The unit is what the instrument produces: a tracker point, a laser reading, a touch of
-a socket touched several times; a bar (or artifact) placement whose length or angle
-errors fail is set aside whole, with the touches that look wrong named (a bad touch
+a socket touched several times; a bar (or artifact) placement with a socket touched
+once, whose length or angle errors fail, is set aside whole (where every socket is
+touched several times, each touch is judged on its own and the lengths between the
+sockets' centres are not tested), with the touches that look wrong named (a bad touch
 shows only in the errors of the sockets it touched: for a cross, touch A and touch C
 show alike, so both are named). When more than ``MAX_SHARE`` of a dataset's readings
 would go, the data are bad rather than the robot: ``InputError``.
@@ -34,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import qr, solve_triangular
-from scipy.stats import chi2
+from scipy.stats import chi2, norm
 
 from ..datasets import dataset_rows
 from ..errors import InputError
@@ -46,7 +55,8 @@ FALSE_ALARM = 1e-4  # probability that a unit holding only noise is set aside
 MAX_SHARE = 0.2  # more of a dataset's readings than this set aside: the data are bad
 ROUNDS = 6  # rounds of fit-and-test at most
 RESOLUTION = 1e-8  # [m] noise floor: errors this small are rounding, never gross
-MAD_SCALE = 1.4826  # median absolute deviation to the standard deviation of a normal
+SCALE_QUANTILE = 0.8  # the noise is read off this quantile of the absolute residuals ...
+QUANTILE_SCALE = float(norm.ppf(0.5 + SCALE_QUANTILE / 2))  # ... which is this many sigma
 MIN_ENTRIES = 12  # fewer residual entries of one kind: its noise is pooled with the dataset's
 RANK_TOLERANCE = 1e-10  # relative size of a QR pivot below which a direction has no data
 UNTESTABLE = 1e-8  # V's smallest eigenvalue below this: the fit reproduces the unit whatever
@@ -67,6 +77,7 @@ class Unit:
     errors: tuple[int, ...]
     reading: str
     kinds: tuple[str, ...]  # the error kind of each entry of ``entries``
+    near: tuple = ()  # units with the same key share one placement unknown (a socket)
 
 
 @dataclass(frozen=True)
@@ -119,14 +130,18 @@ def units_of(problem: Problem) -> tuple[Unit, ...]:
         placements: dict[int, list[int]] = {}
         for i, row in enumerate(rows):
             if row >= 0:
+                near = (k, terms[i].pose, terms[i].points) if terms[i].points else ()
                 out.append(Unit(k, (int(row),), start + entries[i], (i,), model.reading_name,
-                                (terms[i].kind,) * len(entries[i])))
+                                (terms[i].kind,) * len(entries[i]), near))
             elif i < len(terms) and terms[i].pose >= 0 and pose is not None:
                 placements.setdefault(terms[i].pose, []).append(i)
+        own = {int(r) for r in rows if r >= 0}
         for placement, errors in placements.items():
+            members = tuple(int(r) for r in np.flatnonzero(np.asarray(pose) == placement))
+            if own.issuperset(members):
+                continue  # every touch is judged on its own: the sockets are averages
             index = np.concatenate([start + entries[i] for i in errors])
             kinds = tuple(terms[i].kind for i in errors for _ in entries[i])
-            members = tuple(int(r) for r in np.flatnonzero(np.asarray(pose) == placement))
             out.append(Unit(k, members, index, tuple(errors), "placement", kinds))
         start += model.residual_size()
     return tuple(out)
@@ -256,12 +271,23 @@ def _noise(problem: Problem, units: Sequence[Unit], r: np.ndarray, leverage: np.
             group = mine & (kind == name)
             value = _mad(scaled[group]) if group.sum() >= MIN_ENTRIES else pooled
             sigma[(model == k) & (kind == name)] = max(value, RESOLUTION)
+    # Readings of one socket spread more than the dataset's when the model errs there
+    # alike for many of them: their own spread is then the noise they are judged by.
+    near: dict[tuple, list[np.ndarray]] = {}
+    for unit in units:
+        if unit.near:
+            near.setdefault(unit.near, []).append(unit.entries)
+    for parts in near.values():
+        entries = np.concatenate(parts)  # those set aside too: a cluster is no gross error
+        if len(entries) >= MIN_ENTRIES:
+            sigma[entries] = np.maximum(sigma[entries], _mad(scaled[entries]))
     return sigma
 
 
 def _mad(values: np.ndarray) -> float:
-    """Standard deviation of zero-mean normal values from their median absolute value."""
-    return MAD_SCALE * float(np.median(values)) if values.size else 0.0
+    """Standard deviation of zero-mean normal values from the ``SCALE_QUANTILE`` quantile
+    of their absolute values (robust to that share of gross errors less a margin)."""
+    return float(np.quantile(values, SCALE_QUANTILE)) / QUANTILE_SCALE if values.size else 0.0
 
 
 def suspects(problem: Problem, unit: Unit, r: np.ndarray, sigma: np.ndarray) -> str:
