@@ -61,6 +61,8 @@ def one_case(name: str, seed: int, share: float, folder: Path, diagnose: bool) -
     kind, rows, options = CASES[name]
     robot = industrial_6r()
     _, errors = true_parameters(robot, (5e-4, 5e-4), np.random.default_rng(seed))
+    if options:  # pendant poses: the controller's own, exact only for an accurate robot
+        errors = None
     common = dict(rows=rows, noise=NOISE, geometric_errors=errors, mounted_error=0.0,
                   progress=False, effects=None if options else EFFECT, **options)
     fit = simulate(robot, kind, out_dir=folder / "fit", seed=seed, **common)

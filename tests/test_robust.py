@@ -36,6 +36,10 @@ def _pair(tmp_path, case: str, seed: int = 0, effects=None, rows: int | None = N
     kind, default_rows, options = FAST[case]
     robot = industrial_6r()
     _, errors = true_parameters(robot, (5e-4, 5e-4), np.random.default_rng(seed))
+    # pendant poses are the controller's nominal ones: with an accurate robot only (the
+    # premise of such a scan), else every reading carries the robot's error
+    if options.get("readings") == "pendant":
+        errors = None
     common = dict(rows=rows or default_rows, noise=NOISE, geometric_errors=errors,
                   mounted_error=0.0, progress=False, effects=effects, **options)
     fit = simulate(robot, kind, out_dir=tmp_path / "fit", seed=seed, **common)
