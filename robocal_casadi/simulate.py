@@ -972,13 +972,14 @@ def inject_gross_errors(simulated: SimulatedDataset, share: float,
     columns = list(table.columns)
     for row in chosen:
         length = rng.uniform(*size)
-        if simulated.truth.kind == "tracker_points":
+        reach = MODELS[simulated.truth.kind].reach
+        if reach == "configuration":
             step = rng.normal(size=3)
             step *= length / np.linalg.norm(step)
             for axis, value in zip("xyz", step):
                 k = columns.index(axis)
                 rows[row][k] = float(rows[row][k]) + value / units.length_scale
-        elif simulated.truth.kind == "sphere_laser":
+        elif reach == "beam":
             k = columns.index("distance")
             rows[row][k] = float(rows[row][k]) + rng.choice([-1, 1]) * length / units.length_scale
         else:
