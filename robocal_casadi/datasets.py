@@ -83,9 +83,15 @@ class DatasetBase:
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``
         (0-based; a row of the table, or one laser reading of a pendant table)."""
-        if self.lines is not None and reading < len(self.lines):
+        if self.lines is not None and len(self.lines) == self.readings:
             return int(self.lines[reading])
         return reading + 2
+
+    @property
+    def readings(self) -> int:
+        """How many readings (table rows) the dataset holds; a pendant scan has no joints."""
+        distance = getattr(self, "distance", None)
+        return self.rows if self.joints is not None or distance is None else len(distance)
 
     @property
     def rows(self) -> int:
@@ -151,10 +157,14 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
     # the directions of motion belong to the full table's order: computed before cutting
     extras = with_directions(dataset.joints, dataset.extras)
     changes: dict[str, Any] = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
-    for name in ("joints", "measured", "distance", "flange_poses", "pose", "lines"):
+    for name in ("joints", "measured", "distance", "flange_poses", "pose"):
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
+    # the table lines, where they still describe these rows (a copy cut by hand may not)
+    lines = dataset.lines if dataset.lines is not None and len(dataset.lines) == len(mask) \
+        else None
+    changes["lines"] = None if lines is None else np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)

@@ -112,10 +112,7 @@ class Screening:
 
 def readings(dataset) -> int:
     """How many readings (table rows) ``dataset`` holds (pendant scans have no joints)."""
-    if dataset.rows:
-        return dataset.rows
-    distance = getattr(dataset, "distance", None)
-    return 0 if distance is None else len(distance)
+    return dataset.readings
 
 
 def units_of(problem: Problem) -> tuple[Unit, ...]:
