@@ -326,15 +326,28 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
                            loss=fit_loss)
     rejected: tuple[RejectedReading, ...] = ()
+    screened_from = nominal.datasets
     if robust:
         nominal, rejected = _screened(nominal, effects, method=method,
                                       max_iterations=max_iterations)
-    problem = nominal.problem
-    identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
-                                                    max_iterations=max_iterations)
-    geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
-                           loss=fit_loss, max_iterations=max_iterations)
-    final = _diagnose(problem, geometric, validation, diagnose, method=method, loss=fit_loss)
+    for attempt in range(2):
+        problem = nominal.problem
+        identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
+                                                        max_iterations=max_iterations)
+        geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
+                               loss=fit_loss, max_iterations=max_iterations)
+        final = _diagnose(problem, geometric, validation, diagnose, method=method,
+                          loss=fit_loss)
+        # Effects found change what the residual holds: readings set aside before they
+        # were known are judged again under the final model (once).
+        if not robust or not final.added or attempt:
+            break
+        revised = _rescreened(screened_from, final, rejected, method=method,
+                              max_iterations=max_iterations)
+        if revised is None:
+            break
+        kept, rejected = revised
+        nominal = _refitted(nominal, kept, effects, method=method)
     x_nominal_final = _embed(problem, nominal.solution.x, final.problem)
     x_geometric_final = _embed(problem, geometric.solution.x, final.problem)
     residuals = _residuals(final.problem, x_nominal_final, x_geometric_final, final.solution.x)
@@ -421,13 +434,48 @@ def _screened(nominal: NominalFit, effects: Sequence[Effect], *, method: Method,
     rejected = outliers.rejected_readings(problem, screening)
     datasets = [dataset_rows(m.dataset, keep)
                 for m, keep in zip(problem.models, screening.kept_rows(problem))]
-    kept = Problem(problem.robot, models_for(datasets), effects, kinematics=problem.kinematics)
-    solution = solve(kept, kept.initial(), kept.mask("placement"), method=method)
-    identifiability = analyse_identifiability(kept, solution.x, nominal.candidates)
+    return _refitted(nominal, datasets, effects, method=method), rejected
+
+
+def _refitted(nominal: NominalFit, datasets: Sequence[DatasetBase], effects: Sequence[Effect],
+              *, method: Method) -> NominalFit:
+    """``nominal`` again on ``datasets`` (the nominal fit and identifiability there)."""
+    problem = Problem(nominal.problem.robot, models_for(datasets), effects,
+                      kinematics=nominal.problem.kinematics)
+    solution = solve(problem, problem.initial(), problem.mask("placement"), method=method)
+    identifiability = analyse_identifiability(problem, solution.x, nominal.candidates)
     if not identifiability.identifiable:
         raise InputError("the readings kept identify no robot parameter", file=datasets[0].path)
-    return replace(nominal, datasets=tuple(datasets), problem=kept, solution=solution,
-                   identifiability=identifiability), rejected
+    return replace(nominal, datasets=tuple(datasets), problem=problem, solution=solution,
+                   identifiability=identifiability)
+
+
+def _rescreened(datasets: Sequence[DatasetBase], final: DiagnosedFit,
+                rejected: tuple[RejectedReading, ...], *, method: Method, max_iterations: int
+                ) -> tuple[list, tuple[RejectedReading, ...]] | None:
+    """The units of ``datasets`` (all of them) judged under the final model, starting from
+    those ``rejected``; None when the same are set aside, else the kept data and them."""
+    full = Problem(final.problem.robot, models_for(datasets), final.problem.effects,
+                   start=_values(final.problem, final.solution.x),
+                   kinematics=final.problem.kinematics)
+    units = outliers.units_of(full)
+    lines = {(e.path, line) for e in rejected for line in e.lines}
+    before = tuple(k for k, unit in enumerate(units) if all(
+        (str(full.models[unit.model].dataset.path), full.models[unit.model].dataset.line(row))
+        in lines for row in unit.rows))
+    weights = outliers.weights_of(full, units, before)
+    x = outliers.refit(full, full.initial(), full.mask("placement"), weights, method=method)
+    free = full.mask("placement")
+    names = [final.problem.unknowns.names[i] for i in np.flatnonzero(final.solution.free)]
+    free[full.unknowns.indices([n for n in names if n in full.unknowns])] = True
+    screening = outliers.screen(full, x, free, method=method, max_iterations=max_iterations,
+                                robust_start=False, rejected=before)
+    if set(screening.rejected) == set(before):
+        return None
+    outliers.check_share(full, screening)
+    kept = [dataset_rows(m.dataset, keep)
+            for m, keep in zip(full.models, screening.kept_rows(full))]
+    return kept, outliers.rejected_readings(full, screening)
 
 
 def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,

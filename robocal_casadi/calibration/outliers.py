@@ -167,33 +167,34 @@ class _Weighted:
 
 
 def screen(problem: Problem, x: np.ndarray, free: np.ndarray, *, method: Method = "lm",
-           max_iterations: int = 200, robust_start: bool = True) -> Screening:
+           max_iterations: int = 200, robust_start: bool = True,
+           rejected: tuple[int, ...] = ()) -> Screening:
     """Find the units of ``problem``'s data with gross errors; see the module docstring.
 
     ``x`` [SI] is the starting point, ``free`` the unknowns fitted (those the data
     determine, with the placements). ``robust_start=False`` starts the rounds from ``x``
-    as it is (a least-squares fit of every unit).
+    as it is: the least-squares fit of every unit but those ``rejected`` (indices into
+    ``units_of(problem)``).
     """
     units = units_of(problem)
     if robust_start:
         x = solve(problem, x, free, method=method, loss="huber",
                   max_iterations=max_iterations).x
-    rejected: tuple[int, ...] = ()
-    weights = np.ones(problem.size)
+    weights = weights_of(problem, units, rejected)
     tested = _test(problem, units, x, free, weights)
     for _ in range(ROUNDS):
         found = tuple(int(k) for k in np.flatnonzero(tested[0] > tested[1]))
         if found == rejected:
             break
         rejected = found
-        weights = _weights(problem, units, rejected)
+        weights = weights_of(problem, units, rejected)
         x = refit(problem, x, free, weights, method=method, max_iterations=max_iterations)
         tested = _test(problem, units, x, free, weights)
     statistic, quantile, residual, sigma = tested
     return Screening(units, rejected, statistic, quantile, residual, weights, x, sigma)
 
 
-def _weights(problem: Problem, units: Sequence[Unit], rejected: Sequence[int]) -> np.ndarray:
+def weights_of(problem: Problem, units: Sequence[Unit], rejected: Sequence[int]) -> np.ndarray:
     weights = np.ones(problem.size)
     for k in rejected:
         weights[units[k].entries] = 0.0
