@@ -211,3 +211,18 @@ def test_sweep_gross_errors_every_kind(tmp_path, case, seed, share):
     # at most one unit of clean data in the few hundred here (0.5% of them)
     assert len([e for e in robust_clean.rejected if e.role == "fit"]) <= 1
     assert robust_clean.validation.rms_final <= 1.01 * clean.validation.rms_final
+
+
+def test_report_lists_every_reading_set_aside(tmp_path):
+    from robocal_casadi.report.content import Plot, Table
+    from robocal_casadi.report.rejected import rejected_section
+
+    _, held, bad = _pair(tmp_path, "tracker_points")
+    injected = inject_gross_errors(bad, 0.05, seed=8)
+    result = calibrate([bad.load()], diagnose=False)
+    section = rejected_section(result)
+    (table,) = [b for b in section.blocks if isinstance(b, Table)]
+    assert sorted(int(row[1]) for row in table.rows) == sorted(injected)
+    (plot,) = [b for b in section.blocks if isinstance(b, Plot)]
+    figure = plot.draw()
+    assert len(figure.axes) == 2
