@@ -15,7 +15,7 @@ Then the real data: UR10 series A and D (every fourth pose held out) and the Pan
 
 Prints JSON (lengths in mm).
 
-    python benchmarks/robust.py [--seeds 2] [--quick] [--shared DIR]
+    python benchmarks/robust.py [--seeds 2] [--quick] [--shared DIR] [--no-real]
 """
 
 from __future__ import annotations
@@ -144,9 +144,9 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true",
                         help="one seed, UR10 series D and one Panda split")
     parser.add_argument("--no-diagnose", action="store_true")
-    parser.add_argument("--shared", type=Path, default=Path("/work/shared/data"),
-                        metavar="DIR", help="folder of the real data sets (default: the "
-                        "package's copies when this folder is missing)")
+    parser.add_argument("--shared", type=Path, default=None, metavar="DIR",
+                        help="folder of the real data sets, e.g. with UR10 series A "
+                        "(default: the package's copies)")
     parser.add_argument("--no-real", action="store_true", help="simulated cases only")
     args = parser.parse_args()
     diagnose = not args.no_diagnose
@@ -162,7 +162,7 @@ def main() -> None:
     real = []
     if not args.no_real:
         shared = args.shared
-        if not shared.is_dir():
+        if shared is None or not shared.is_dir():
             from robocal_casadi.commands.demo import data_folder
 
             shared = data_folder()
