@@ -197,7 +197,7 @@ def test_sweep_gross_errors_every_kind(tmp_path, case, seed, share):
     where the data see the joints: the corrupted rows go (at least 95%), the held-out
     error stays within 1.1x that of the clean readings kept (a bar loses a whole placement
     per bad touch, which may cost more: benchmarks/robust.py gives the ratio to the full
-    clean data), and the effect is named as on clean data."""
+    clean data), and the effects are named as on the clean readings."""
     effects = None if case == "sphere_pendant" else {"joint_scale": {2: 1e-3}}
     fit, held, bad = _pair(tmp_path, case, seed=seed, effects=effects,
                            rows=2 * FAST[case][1])
@@ -210,9 +210,12 @@ def test_sweep_gross_errors_every_kind(tmp_path, case, seed, share):
     keep = ~np.isin([data.line(i) for i in range(readings(data))], sorted(_set_aside(result)))
     oracle = calibrate([dataset_rows(data, keep)], [held.load()], loss="linear")
     assert result.validation.rms_final <= 1.1 * oracle.validation.rms_final
-    names = [(e.name, e.joints) for e in clean.effects]
-    assert [(e.name, e.joints) for e in result.effects] == names
-    assert [(e.name, e.joints) for e in robust_clean.effects] == names
+    # the same effects as the clean readings kept name (diagnosis on a few hundred laser
+    # readings may take a gear-ratio error for a compliance on clean data too)
+    assert [(e.name, e.joints) for e in result.effects] == \
+        [(e.name, e.joints) for e in oracle.effects]
+    assert [(e.name, e.joints) for e in robust_clean.effects] == \
+        [(e.name, e.joints) for e in clean.effects]
     # at most one unit of clean data in the few hundred here (0.5% of them)
     assert len([e for e in robust_clean.rejected if e.role == "fit"]) <= 1
     assert robust_clean.validation.rms_final <= 1.01 * clean.validation.rms_final
