@@ -79,7 +79,20 @@ class DatasetBase:
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read
-    lines: np.ndarray | None = None  # per data row, its line in the CSV table (1-based)
+    lines: np.ndarray | None = field(default=None, repr=False)  # table line of each reading
+
+    def line(self, reading: int) -> int:
+        """The data table's line (1-based, header on line 1) of reading ``reading``
+        (0-based; a row of the table, or one laser reading of a pendant table)."""
+        if self.lines is not None and len(self.lines) == self.readings:
+            return int(self.lines[reading])
+        return reading + 2
+
+    @property
+    def readings(self) -> int:
+        """How many readings (table rows) the dataset holds; a pendant scan has no joints."""
+        distance = getattr(self, "distance", None)
+        return self.rows if self.joints is not None or distance is None else len(distance)
 
     @property
     def rows(self) -> int:
@@ -149,11 +162,10 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
         value = getattr(dataset, name, None)
         if value is not None:
             changes[name] = np.asarray(value)[mask]
-    # the table's lines, unless the rows were changed in memory after reading
-    if hasattr(dataset, "lines"):
-        lines = dataset.lines
-        changes["lines"] = None if lines is None or len(lines) != len(mask) else \
-            np.asarray(lines)[mask]
+    # the table lines, where they still describe these rows (a copy cut by hand may not)
+    lines = dataset.lines if dataset.lines is not None and len(dataset.lines) == len(mask) \
+        else None
+    changes["lines"] = None if lines is None else np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)
@@ -223,8 +235,10 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}
-    reader = readers[kind]
-    return reader(content, table, common)
+    dataset = readers[kind](content, table, common)
+    if table is not None:
+        dataset = replace(dataset, lines=np.array([table.line(i) for i in range(len(table))]))
+    return dataset
 
 
 # The planning block's angles (file units) must lie in (0, limit] degrees.

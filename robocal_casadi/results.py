@@ -198,6 +198,50 @@ class RmsSummary:
 
 
 @dataclass(frozen=True)
+class RejectedReading:
+    """A unit of data set aside as a gross error (``calibration.outliers``).
+
+    ``line`` is the data table's line of the reading (for a placement set aside whole,
+    that of the touch that looks wrong, ``suspect`` naming the candidates); ``lines``
+    every line set aside with it, ``rows`` their 0-based rows (the order they were taken
+    in), ``position`` where the point measured lay (base frame; the mean of a
+    placement's touches). ``residual`` [m] is the length of its error under the model
+    fitted without it, ``threshold`` [m] the length noise reaches there at the
+    false-alarm rate; ``role`` ``"fit"`` or ``"validation"``.
+    """
+
+    dataset: str
+    table: str
+    line: int
+    lines: tuple[int, ...]
+    rows: tuple[int, ...]
+    residual: float
+    threshold: float
+    reading: str  # "tracker point" | "laser reading" | "touch" | "placement"
+    suspect: str = ""
+    role: str = "fit"
+    position: tuple[float, float, float] | None = None  # [m] base frame, the point measured
+    path: str = ""  # the dataset file as given (tells apart files of one name)
+
+    def to_json(self, units: Units) -> dict:
+        s = units.length_scale
+        out = {"dataset": self.dataset, "line": self.line, "residual": self.residual / s,
+               "threshold": self.threshold / s, "unit": units.length, "table": self.table,
+               "lines": list(self.lines), "reading": self.reading, "role": self.role,
+               "position": None if self.position is None else [v / s for v in self.position]}
+        if self.suspect:
+            out["suspect"] = self.suspect
+        return out
+
+    def sentence(self, units: Units) -> str:
+        """One line: where, what, and by how much."""
+        s = units.length_scale
+        what = self.reading + (f" ({self.suspect})" if self.suspect else "")
+        return (f"{self.table} line {self.line}: {what}, error {self.residual / s:.4g} "
+                f"{units.length} against a threshold of {self.threshold / s:.4g} {units.length}")
+
+
+@dataclass(frozen=True)
 class ErrorTerm:
     """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
     components x, y, z), ``"surface"`` (signed distance from a surface), ``"distance"``
@@ -280,6 +324,9 @@ class CalibrationResult:
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     predicted_accuracy: Any = None  # ``delivery.accuracy.PredictedAccuracy``
     delivery: Any = None  # ``delivery.choice.Delivery``: what robot_calibrated.yaml holds
+    rejected: tuple[RejectedReading, ...] = ()  # units of data set aside as gross errors
+    validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
+    # over the readings kept)
 
     @classmethod
     def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
@@ -395,8 +442,13 @@ class CalibrationResult:
                     "datasets": _per_dataset(self.residuals, units)},
         }
         if self.validation is not None:
+            every = self.validation_all or self.validation
             out["validation"] = {**self.validation.to_json(units),
+                                 "kept": self.validation.to_json(units),
+                                 "all": every.to_json(units),
+                                 "rejected": sum(e.role == "validation" for e in self.rejected),
                                  "datasets": _per_dataset(self.validation_residuals, units)}
+        out["rejected"] = [e.to_json(units) for e in self.rejected]
         out["mounted"] = {}
         for name, (value, std) in self.mounted.items():
             quantity = self.mounted_quantities.get(name, "length")

@@ -81,7 +81,7 @@ from .output import atomic_directory, replace_refusal
 from .parameters import perturbed_stems
 from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
-from .table import write_table
+from .table import read_table, write_table
 from .transforms import (
     invert,
     matrix_from_quaternion,
@@ -1007,3 +1007,49 @@ def _truth_dict(truth: Truth, units: Units, payload_com) -> dict:
 
 __all__ = ["SimulatedDataset", "Truth", "TrueEffects", "TrueRobot", "simulate",
            "parse_effects", "true_parameters", "ray_sphere_distance"]
+
+
+# ----------------------------------------------------------------------------- gross errors
+
+
+def inject_gross_errors(simulated: SimulatedDataset, share: float,
+                        size: tuple[float, float] = (0.002, 0.010), seed: int = 0
+                        ) -> tuple[int, ...]:
+    """Corrupt ``share`` of the rows of a simulated table in place; the lines changed.
+
+    Each chosen reading is off by a length drawn uniformly from ``size`` [m]: a tracker
+    point moved in a random direction, a laser reading lengthened or shortened, a touch
+    taken with the probe beside its socket (the first joint turned so the probe moves by
+    that length along its circle about the first axis). At least one row is corrupted.
+    """
+    share = positive(share, "share")
+    table = read_table(simulated.table_path)
+    dataset = simulated.load()
+    units = dataset.units
+    rng = np.random.default_rng(seed)
+    count_ = max(1, int(round(share * len(table))))
+    chosen = np.sort(rng.choice(len(table), size=count_, replace=False))
+    rows = [list(r) for r in table.rows]
+    columns = list(table.columns)
+    for row in chosen:
+        length = rng.uniform(*size)
+        reach = MODELS[simulated.truth.kind].reach
+        if reach == "configuration":
+            step = rng.normal(size=3)
+            step *= length / np.linalg.norm(step)
+            for axis, value in zip("xyz", step):
+                k = columns.index(axis)
+                rows[row][k] = float(rows[row][k]) + value / units.length_scale
+        elif reach == "beam":
+            k = columns.index("distance")
+            rows[row][k] = float(rows[row][k]) + rng.choice([-1, 1]) * length / units.length_scale
+        else:
+            k = columns.index("q1")
+            joints = np.asarray(dataset.joints)
+            probe = np.asarray(getattr(dataset, "probe", np.zeros(3)))
+            point = Kinematics(dataset.robot).points(joints[row:row + 1], probe)
+            radius = max(float(np.hypot(point[0, 0], point[0, 1])), 0.1)
+            turn = rng.choice([-1, 1]) * length / radius
+            rows[row][k] = float(rows[row][k]) + turn / units.angle_scale
+    write_table(simulated.table_path, columns, rows)
+    return tuple(int(table.line(int(r))) for r in chosen)

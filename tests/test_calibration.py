@@ -152,7 +152,8 @@ def test_methods_agree_with_levenberg_marquardt(method, tmp_path):
 
 
 def test_huber_resists_outliers(tmp_path):
-    """Gross outliers pull the plain fit away from the clean-data fit; Huber barely moves."""
+    """Gross outliers pull the plain fit away from the clean-data fit; Huber barely moves,
+    nor does the default, which sets exactly those rows aside."""
     robot = industrial_6r()
     sim = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=200, noise=NOISE,
                    geometric_errors=ERRORS, seed=31, progress=False)
@@ -163,8 +164,10 @@ def test_huber_resists_outliers(tmp_path):
 
     spoiled = replace(data, measured=measured)
     clean = calibrate([data], diagnose=False)
-    plain = calibrate([spoiled], diagnose=False)
+    plain = calibrate([spoiled], diagnose=False, loss="linear")
     robust = calibrate([spoiled], diagnose=False, loss="huber")
+    default = calibrate([spoiled], diagnose=False)
+    assert sorted(row for e in default.rejected for row in e.rows) == list(range(0, 200, 25))
 
     def worst_shift(result):
         """Largest distance from the clean estimate, in the clean fit's standard errors."""
@@ -173,6 +176,7 @@ def test_huber_resists_outliers(tmp_path):
 
     assert worst_shift(plain) > 10
     assert worst_shift(robust) < 3
+    assert worst_shift(default) < 3
 
 
 def test_condition_number_selection_drops_what_hurts(tmp_path):

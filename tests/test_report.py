@@ -238,7 +238,8 @@ def test_every_section_is_present(full_report):
     _, path = full_report
     ids = {attrs.get("id") for tag, attrs in read_page(path).tags if tag == "section"}
     assert ids == {"conclusion", "accuracy", "applying", "robot-data", "identifiability",
-                   "parameters", "errors", "effects", "sphere", "instrument", "appendix"}
+                   "parameters", "errors", "rejected", "effects", "sphere", "instrument",
+                   "appendix"}
 
 
 def test_every_image_is_a_png_with_content(full_report):

@@ -24,7 +24,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from ..checks import choice, count, positive
-from ..datasets import DatasetBase
+from ..datasets import DatasetBase, dataset_rows
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..fields import cut
@@ -38,11 +38,12 @@ from ..results import (
     Identifiability,
     ParameterEstimate,
     PriorSummary,
+    RejectedReading,
     RmsSummary,
     SphereEstimate,
 )
 from ..robot import Robot
-from . import diagnosis, unexplained
+from . import diagnosis, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
 from .prior import (
@@ -58,7 +59,7 @@ from .prior import (
 )
 from .problem import Problem
 from .selection import Selection, select_by_condition
-from .solver import CONVERGED_DECREASE, LOSSES, METHODS, Loss, Method, Solution, solve
+from .solver import CONVERGED_DECREASE, METHODS, Loss, Method, Solution, solve
 from .start_state import settle_start
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
@@ -216,6 +217,8 @@ def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:
 
 Rule = Literal["prior", "fraction"]
 RULES: tuple[Rule, ...] = get_args(Rule)
+CalibrationLoss = Literal["robust", "linear", "huber"]
+CALIBRATION_LOSSES: tuple[CalibrationLoss, ...] = get_args(CalibrationLoss)
 
 
 @dataclass(frozen=True)
@@ -265,21 +268,28 @@ class DiagnosedFit:
 class Validation:
     """Held-out data under each model (see ``_validate``); empty when none were given."""
 
-    summary: RmsSummary | None = None
+    summary: RmsSummary | None = None  # over the readings kept
     residuals: tuple[DatasetResiduals, ...] = ()
     spheres: tuple[SphereEstimate, ...] = ()
+    all: RmsSummary | None = None  # over every reading, those set aside included
+    rejected: tuple[RejectedReading, ...] = ()
 
 
 @reports_stages(default=False)
 def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequence[Effect] = (),
-              diagnose: bool = True, method: Method = "lm", loss: Loss = "linear",
+              diagnose: bool = True, method: Method = "lm", loss: CalibrationLoss = "robust",
               select_growth: float | None = None, max_iterations: int = 200,
               progress: bool = False, rule: Rule = "prior",
               parameters: Sequence[str] | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
-    diagnosis add more. ``method``, ``loss`` and ``max_iterations`` go to ``solver.solve``;
+    diagnosis add more. ``loss="robust"`` (default) first sets aside the units of data
+    with gross errors (``outliers``: listed in ``result.rejected``), then runs everything
+    below on the units kept by least squares; held-out data get the same treatment, their
+    statistics given over all readings and over those kept. ``"linear"`` keeps every
+    reading; ``"huber"`` keeps every reading and down-weights large residuals in the
+    fits. ``method``, the fits' loss and ``max_iterations`` go to ``solver.solve``;
     a geometric fit that has not converged within ``max_iterations`` is a ``SolverError``. With
     ``select_growth`` (e.g. 0.05), units of data that grow the condition number by more
     than that fraction are dropped first, as in the published cross-bar method
@@ -296,8 +306,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     Standard errors count repeated identical readings once (a warning on stderr says so).
 
     Arguments are checked at the door (``ArgumentError``, a ``ValueError``): ``method`` one
-    of ``solver.METHODS``, ``loss`` one of ``solver.LOSSES`` (a misspelt name gets the
-    closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
+    of ``solver.METHODS``, ``loss`` one of ``CALIBRATION_LOSSES`` (a misspelt name gets
+    the closest valid one as a hint), datasets loaded by ``load_dataset``, ``effects``
     ``Effect`` objects, ``max_iterations`` a whole number >= 1, ``select_growth`` None or
     a number >= 0, ``rule`` one of ``RULES``. ``parameters`` (robot parameter names)
     restricts the robot parameters that may be fitted, e.g. to a controller's set
@@ -307,7 +317,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     """
     method = choice(method, METHODS, "method")
     rule = choice(rule, RULES, "rule")
-    loss = choice(loss, LOSSES, "loss")
+    loss = choice(loss, CALIBRATION_LOSSES, "loss")
+    robust = loss == "robust"
+    fit_loss: Loss = "linear" if loss == "robust" else loss
     max_iterations = count(max_iterations, "max_iterations")
     if select_growth is not None:
         select_growth = positive(select_growth, "select_growth", allow_zero=True)
@@ -324,13 +336,30 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         parameters = parameter_names(parameters, robot.parameters().names, "parameters")
 
     nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
-                           loss=loss)
-    problem = nominal.problem
-    identifiability, least_squares = _geometric_fit(nominal, method=method, loss=loss,
-                                                    max_iterations=max_iterations)
-    geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
-                           loss=loss, max_iterations=max_iterations)
-    final = _diagnose(problem, geometric, validation, diagnose, method=method, loss=loss)
+                           loss=fit_loss)
+    rejected: tuple[RejectedReading, ...] = ()
+    screened_from = nominal.datasets
+    if robust:
+        nominal, rejected = _screened(nominal, effects, method=method,
+                                      max_iterations=max_iterations)
+    for attempt in range(2):
+        problem = nominal.problem
+        identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
+                                                        max_iterations=max_iterations)
+        geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
+                               loss=fit_loss, max_iterations=max_iterations)
+        final = _diagnose(problem, geometric, validation, diagnose, method=method,
+                          loss=fit_loss)
+        # Effects found change what the residual holds: readings set aside before they
+        # were known are judged again under the final model (once).
+        if not robust or not final.added or attempt:
+            break
+        revised = _rescreened(screened_from, final, rejected, method=method,
+                              max_iterations=max_iterations)
+        if revised is None:
+            break
+        kept, rejected = revised
+        nominal = _refitted(nominal, kept, effects, method=method)
     x_nominal_final = _embed(problem, nominal.solution.x, final.problem)
     x_geometric_final = _embed(problem, geometric.solution.x, final.problem)
     residuals = _residuals(final.problem, x_nominal_final, x_geometric_final, final.solution.x)
@@ -339,10 +368,11 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     held_out = Validation()
     if validation:
         held_out = _validate(robot, validation, problem, geometric.solution.x, final.problem,
-                             final.solution.x)
+                             final.solution.x, robust=robust,
+                             identifiable=nominal.identifiability.identifiable)
     std, prior_summary, notes = _standard_errors(final, geometric, rule)
     recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
-    return CalibrationResult.from_fit(
+    result = CalibrationResult.from_fit(
         datasets=tuple(d.path.name for d in nominal.datasets), robot=robot,
         problem=problem, final_problem=final.problem, nominal=nominal.solution,
         geometric=geometric.solution, final=final.solution, std=std,
@@ -357,6 +387,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         unexplained=find_unexplained(final.problem, final.solution.x, final.solution.free),
         recommended=recommended, recommendation=recommendation, prior=prior_summary,
         notes=geometric.notes + notes, method=method, loss=loss)
+    return replace(result, rejected=rejected + held_out.rejected, validation_all=held_out.all)
 
 
 def parameter_names(value, valid: Sequence[str], argument: str) -> tuple[str, ...]:
@@ -425,6 +456,67 @@ def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Ef
         raise InputError("the data identify no robot parameter (too few or degenerate rows)",
                          file=datasets[0].path)
     return NominalFit(tuple(datasets), problem, nominal, identifiability, selection, candidates)
+
+
+def _screened(nominal: NominalFit, effects: Sequence[Effect], *, method: Method,
+              max_iterations: int) -> tuple[NominalFit, tuple[RejectedReading, ...]]:
+    """The nominal fit again on the units ``outliers.screen`` keeps, and those it set aside.
+
+    Screened with the unknowns the data determine at nominal, from a robust start; every
+    later stage (identifiability, fits, diagnosis, noise level) sees the kept units only.
+    """
+    problem = nominal.problem
+    free = _free_mask(problem, nominal.identifiability)
+    screening = outliers.screen(problem, nominal.solution.x, free, method=method,
+                                max_iterations=max_iterations)
+    if not screening.rejected:
+        return nominal, ()
+    outliers.check_share(problem, screening)
+    rejected = outliers.rejected_readings(problem, screening)
+    datasets = [dataset_rows(m.dataset, keep)
+                for m, keep in zip(problem.models, screening.kept_rows(problem))]
+    return _refitted(nominal, datasets, effects, method=method), rejected
+
+
+def _refitted(nominal: NominalFit, datasets: Sequence[DatasetBase], effects: Sequence[Effect],
+              *, method: Method) -> NominalFit:
+    """``nominal`` again on ``datasets`` (the nominal fit and identifiability there)."""
+    problem = Problem(nominal.problem.robot, models_for(datasets), effects,
+                      kinematics=nominal.problem.kinematics)
+    solution = solve(problem, problem.initial(), problem.mask("placement"), method=method)
+    identifiability = analyse_identifiability(problem, solution.x, nominal.candidates)
+    if not identifiability.identifiable:
+        raise InputError("the readings kept identify no robot parameter", file=datasets[0].path)
+    return replace(nominal, datasets=tuple(datasets), problem=problem, solution=solution,
+                   identifiability=identifiability)
+
+
+def _rescreened(datasets: Sequence[DatasetBase], final: DiagnosedFit,
+                rejected: tuple[RejectedReading, ...], *, method: Method, max_iterations: int
+                ) -> tuple[list, tuple[RejectedReading, ...]] | None:
+    """The units of ``datasets`` (all of them) judged under the final model, starting from
+    those ``rejected``; None when the same are set aside, else the kept data and them."""
+    full = Problem(final.problem.robot, models_for(datasets), final.problem.effects,
+                   start=_values(final.problem, final.solution.x),
+                   kinematics=final.problem.kinematics)
+    units = outliers.units_of(full)
+    lines = {(e.path, line) for e in rejected for line in e.lines}
+    before = tuple(k for k, unit in enumerate(units) if all(
+        (str(full.models[unit.model].dataset.path), full.models[unit.model].dataset.line(row))
+        in lines for row in unit.rows))
+    weights = outliers.weights_of(full, units, before)
+    x = outliers.refit(full, full.initial(), full.mask("placement"), weights, method=method)
+    free = full.mask("placement")
+    names = [final.problem.unknowns.names[i] for i in np.flatnonzero(final.solution.free)]
+    free[full.unknowns.indices([n for n in names if n in full.unknowns])] = True
+    screening = outliers.screen(full, x, free, method=method, max_iterations=max_iterations,
+                                robust_start=False, rejected=before)
+    if set(screening.rejected) == set(before):
+        return None
+    outliers.check_share(full, screening)
+    kept = [dataset_rows(m.dataset, keep)
+            for m, keep in zip(full.models, screening.kept_rows(full))]
+    return kept, outliers.rejected_readings(full, screening)
 
 
 def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
@@ -764,11 +856,17 @@ def _embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
 
 
 def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
-              x_geometric: np.ndarray, final_problem: Problem, x_final: np.ndarray) -> Validation:
+              x_geometric: np.ndarray, final_problem: Problem, x_final: np.ndarray, *,
+              robust: bool = False, identifiable: Sequence[str] = ()) -> Validation:
     """Stage 5: the held-out data under the nominal, geometric and final models.
 
     Robot, effects and mounted instrument come from the calibration; the placements are
-    fitted again on the held-out data.
+    fitted again on the held-out data. ``robust``: the units that are gross errors are
+    set aside, the placements of every model fitted on the rest; the statistics are given
+    over the readings kept (``summary``) and over all of them (``all``). Gross errors are
+    judged as in the fit (``outliers.screen``, the ``identifiable`` parameters free with
+    the placements): a reading the calibrated model merely predicts less well than the
+    others is the model's error, not the reading's, and is kept.
     """
     stages = []
     # the side of the play each joint starts the held-out tables on is theirs, like the
@@ -782,8 +880,19 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
                                           kinematics=problem.kinematics,
                                           label_prefix="validation:")
         stages.append((val_problem, x_val))
+    rejected: tuple[RejectedReading, ...] = ()
+    kept = [np.ones(len(m.error_rows()), dtype=bool) for m in stages[-1][0].models]
+    if robust:
+        last, x_last = stages[-1]
+        screening = outliers.screen(last, x_last, _screened_unknowns(last, identifiable))
+        if screening.rejected:
+            rejected = outliers.rejected_readings(last, screening, role="validation")
+            kept = screening.kept_errors(last)
+            stages = [(p, outliers.refit(p, x, p.mask("placement"), screening.weights))
+                      for p, x in stages]
     errors = [p.errors(x) for p, x in stages]
-    summary = RmsSummary(*(_rms(e) for e in errors))
+    every = RmsSummary(*(_rms(e) for e in errors))
+    summary = RmsSummary(*(_rms([e[m] for e, m in zip(stage, kept)]) for stage in errors))
     residuals = []
     parts = _components(stages)
     for k, model in enumerate(stages[-1][0].models):
@@ -796,7 +905,17 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
             frame=model.component_frame, lines=dataset.lines))
     validation_problem, x_validation = stages[-1]
     return Validation(summary, tuple(residuals),
-                      _spheres(validation_problem, x_validation, None, "validation"))
+                      _spheres(validation_problem, x_validation, None, "validation"),
+                      all=every, rejected=rejected)
+
+
+def _screened_unknowns(problem: Problem, identifiable: Sequence[str]) -> np.ndarray:
+    """The placements and the ``identifiable`` parameters, when the data are enough for
+    them (twice as many residual entries); else the placements alone."""
+    free = problem.mask("placement")
+    wider = free.copy()
+    wider[problem.unknowns.indices([n for n in identifiable if n in problem.unknowns])] = True
+    return wider if problem.size >= 2 * int(wider.sum()) else free
 
 
 def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str) -> tuple:

@@ -37,6 +37,7 @@ from ..results import CalibrationResult
 from ..robot import load_robot, save_robot
 from .identification import calibrate as _calibrate
 from .identification import evaluate
+from .outliers import kept_datasets
 
 ROBOT_FILE = "robot_calibrated.yaml"
 REFUSED = 3  # exit status: the calibration is not better than doing nothing
@@ -107,7 +108,9 @@ def calibrate_job(datasets: Sequence, validation: Sequence = (),
 def deliver(result: CalibrationResult, datasets: Sequence,
             validation: Sequence = ()) -> CalibrationResult:
     """``result`` with its ``delivery`` chosen: ``robot_calibrated`` the delivered geometry,
-    ``recommended`` and its reason updated when doing nothing is better."""
+    ``recommended`` and its reason updated when doing nothing is better. Judged on the
+    readings the calibration kept (gross errors set aside)."""
+    datasets, validation = _kept(result, datasets, validation)
     with stage("delivery: the geometry a controller runs"):
         delivery = choose(result, datasets, validation)
     recommendation = result.recommendation
@@ -138,6 +141,7 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     data) and ``predicted_accuracy``, computed from the files as written when given
     (``robot_file``; ``effects_folder`` holding ``effects_calibrated.yaml``), else from
     the models in memory."""
+    datasets, validation = _kept(result, datasets, validation)
     robot = load_robot(robot_file) if robot_file is not None else result.robot_calibrated
     delivery: Delivery = result.delivery
     mounted = delivery.candidate(delivery.delivered).mounted
@@ -164,6 +168,13 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
                  "candidates": {c.name: {"fit": c.fit_rms, "held_out": c.held_out_rms}
                                 for c in delivery.candidates}}
     return replace(result, delivered=delivered, predicted_accuracy=predicted)
+
+
+def _kept(result: CalibrationResult, datasets: Sequence,
+          validation: Sequence) -> tuple[list, list]:
+    """The fit and held-out datasets without the readings the calibration set aside."""
+    return (kept_datasets(list(datasets), result.rejected, "fit"),
+            kept_datasets(list(validation), result.rejected, "validation"))
 
 
 def _with_effects(result: CalibrationResult, robot, datasets, validation,

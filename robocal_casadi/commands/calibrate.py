@@ -17,7 +17,9 @@ import sys
 from pathlib import Path
 
 from ..calibration import METHODS
+from ..calibration.identification import CALIBRATION_LOSSES
 from ..calibration.job import JobOptions, ReportOptions, run_job
+from ..calibration.outliers import rejected_lines
 from ..datasets import load_dataset
 from ..effect_model import delivered_lines
 from ..errors import InputError
@@ -40,8 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=METHODS, default="lm",
                         help="lm: Levenberg-Marquardt (default); ipopt; linearised: iterated "
                              "A dx = b; two_stage: angles then lengths")
-    parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
-                        help="huber down-weights outliers")
+    parser.add_argument("--loss", choices=CALIBRATION_LOSSES, default="robust",
+                        help="robust (default): readings with gross errors are found, listed "
+                             "and set aside; linear: every reading kept, plain least squares; "
+                             "huber: every reading kept, large residuals down-weighted")
     parser.add_argument("--select-growth", type=float, default=None, metavar="G",
                         help="drop units of data (bar placements, readings) that grow the "
                              "condition number by more than the fraction G, e.g. 0.05")
@@ -108,6 +112,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
         v = result.validation
         lines.append(f"validation RMS [{units.length}]: nominal {v.rms_nominal / s:.4g}, geometric "
                      f"{v.rms_geometric / s:.4g}, final {v.rms_final / s:.4g}")
+    lines += rejected_lines(result.rejected, units)
     for label, dropped in result.selection.items():
         if dropped:
             lines.append(f"data selection dropped {len(dropped)} unit(s) of {label}: "

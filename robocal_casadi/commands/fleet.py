@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from ..calibration import METHODS
+from ..calibration.identification import CALIBRATION_LOSSES
 from ..errors import InputError
 from ..output import MARKER, Marker, atomic_file, read_marker
 from ..progress import Progress
@@ -70,8 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop after the geometric model")
     parser.add_argument("--method", choices=METHODS, default="lm",
                         help="the solver, as for calibrate (default lm)")
-    parser.add_argument("--loss", choices=("linear", "huber"), default="linear",
-                        help="huber down-weights outliers")
+    parser.add_argument("--loss", choices=CALIBRATION_LOSSES, default="robust",
+                        help="as for calibrate: robust (default) sets gross errors aside and "
+                             "lists them; linear keeps every reading; huber down-weights")
     parser.add_argument("--max-iterations", type=int, default=200, metavar="N",
                         help="iterations allowed to each geometric fit (default 200)")
     parser.add_argument("--no-report", action="store_true",

@@ -31,7 +31,8 @@ from ..output import atomic_file, not_replacing_inputs, replace_refusal, written
 from .spec import FleetRobot
 
 if TYPE_CHECKING:
-    from ..calibration.solver import Loss, Method
+    from ..calibration.identification import CalibrationLoss
+    from ..calibration.solver import Method
 
 RECORD = "fleet_robot.json"
 RECORD_VERSION = 2  # 2: results carry what is delivered and the predicted accuracy
@@ -44,7 +45,7 @@ class Settings:
 
     diagnose: bool = True
     method: Method = "lm"
-    loss: Loss = "linear"
+    loss: CalibrationLoss = "robust"
     max_iterations: int = 200
     report: bool = True
     allow_outside_data: bool = False
@@ -210,7 +211,12 @@ def robot_summary(result) -> dict:
                                "estimate": float(estimate.estimate),
                                "std": None if estimate.std is None else float(estimate.std),
                                "identifiable": bool(estimate.identifiable)}
-    return {"units": result.units.as_dict(), "fit": rms(result.fit),
+    aside = sum(len(e.lines) for e in result.rejected if e.role == "fit")
+    kept = sum(len(r.joints) if r.joints is not None else len(r.errors_final)
+               for r in result.residuals)
+    rejected = {"units": sum(e.role == "fit" for e in result.rejected), "readings": aside,
+                "share": aside / max(kept + aside, 1)}
+    return {"units": result.units.as_dict(), "fit": rms(result.fit), "rejected": rejected,
             "validation": rms(result.validation), "effects": effects,
             "compliance": compliance, "joint_offsets": offsets,
             "recommended": result.recommended,

@@ -270,6 +270,10 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
                   if summary.get(block) is not None}
         if values:
             quantities.append(_judged(f"{block}.{key}", label, "length", values, judged))
+    shares = {name: (summary["rejected"]["share"], None) for name, summary in summaries.items()
+              if summary.get("rejected") is not None}
+    if shares:
+        quantities.append(_rejections(shares))
     joints = sorted({int(j) for summary in summaries.values()
                      for j in summary.get("compliance", {})})
     for joint in joints:
@@ -293,6 +297,19 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
     return FleetSummary(fleet=fleet, outcomes=tuple(outcomes), quantities=tuple(quantities),
                         moves=tuple(moves), previous=previous_folder, missing_previous=missing,
                         units=_fleet_units(good))
+
+
+REJECTED_SHARE = 0.01  # a robot with more of its readings set aside as gross errors, and
+# standing out from the fleet, is flagged
+
+
+def _rejections(values: dict) -> Quantity:
+    """The share of each robot's readings set aside as gross errors; a robot stands out
+    above the fleet's spread (``high_outliers``) and above ``REJECTED_SHARE``."""
+    spread, findings = high_outliers("rejected.share", values)
+    return Quantity(key="rejected.share", label="share of the readings set aside as gross errors",
+                    kind="share", values=values, judged=True, spread=spread,
+                    findings=tuple(f for f in findings if f.value > REJECTED_SHARE))
 
 
 def _judged(key: str, label: str, kind: str, values: dict, judged: bool) -> Quantity:

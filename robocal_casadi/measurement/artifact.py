@@ -44,6 +44,7 @@ class ArtifactModel(MeasurementModel):
     table = "touches.csv"
     reach = "sockets"
     unit_name = "placements"
+    reading_name = "touch"
 
     @classmethod
     def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
@@ -217,6 +218,11 @@ class ArtifactModel(MeasurementModel):
 
     def error_rows(self) -> np.ndarray:
         return self._layout()[0]
+
+    def error_entries(self) -> list[np.ndarray]:
+        """Three residual entries per touch, one per distance or perpendicularity."""
+        ends = np.cumsum(self._layout()[1])
+        return [np.arange(end - size, end) for end, size in zip(ends, self._layout()[1])]
 
     # ------------------------------------------------------------------ planning
 

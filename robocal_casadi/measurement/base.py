@@ -51,6 +51,8 @@ class MeasurementModel(ABC):
     placed artifact) or ``"beam"`` (the laser aimed at a surface)."""
     unit_name: ClassVar[str] = "readings"
     """What one planned candidate (and one simulated ``--rows``) is, plural."""
+    reading_name: ClassVar[str] = "reading"
+    """What one row of the data table is, in the instrument's words (singular)."""
 
     @classmethod
     def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
@@ -113,6 +115,15 @@ class MeasurementModel(ABC):
     def error_rows(self) -> np.ndarray:
         """For each entry of ``errors``, the data row it belongs to (-1 if none)."""
         return np.full(len(self.errors(np.zeros(self.residual_size()))), -1)
+
+    def error_entries(self) -> list[np.ndarray]:
+        """For each entry of ``errors``, the indices of the residual entries it is made of.
+
+        Default: the errors take equal consecutive blocks from the start of the residual
+        (entries past the last block, such as a gauge row, belong to no error)."""
+        count = len(self.error_rows())
+        size = self.residual_size() // max(count, 1)
+        return [np.arange(i * size, (i + 1) * size) for i in range(count)]
 
     component_frame = ""  # frame of 3-D error components ("instrument", "base")
 

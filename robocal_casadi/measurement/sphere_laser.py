@@ -47,6 +47,7 @@ class SphereLaserModel(MeasurementModel):
     table = "scan.csv"
     reach = "beam"
     error_title = "distance from the sphere surface"
+    reading_name = "laser reading"
     measured_columns = ("distance",)
     invisible_reason = "has no effect on the laser points' distances from the sphere centre"
     absorbed_reason = ("absorbed by the unknown sphere centre (distances from one point do not "

@@ -41,6 +41,7 @@ class TrackerModel(MeasurementModel):
     table = "points.csv"
     reach = "configuration"
     error_title = "position error"
+    reading_name = "tracker point"
     measured_columns = ("x", "y", "z")
     separable = True
     invisible_reason = "has no effect on the measured positions"

@@ -40,6 +40,7 @@ from .numbers import (
     relation_in_units,
     row_count,
 )
+from .rejected import rejected_section
 from .unexplained import unexplained_blocks
 
 SOLVER_TITLES = {"seconds": "time [s]", "residuals": "residual entries",
@@ -64,8 +65,9 @@ def build_document(result: CalibrationResult, title: str | None = None,
                      result.units.length != shown.length else "."))
     candidates = (conclusion_section(result), accuracy_section(result),
                   applying_section(result), work_cell_section(result),
-                  robot_and_data_section(result),
-                  errors_section(result), parameters_section(result), effects_section(result),
+                  robot_and_data_section(result), errors_section(result),
+                  rejected_section(result), parameters_section(result),
+                  effects_section(result),
                   identifiability_section(result), sphere_section(result),
                   instrument_section(result), appendix_section(result))
     facts = info.facts() + (("robot", robot.name),)
