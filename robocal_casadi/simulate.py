@@ -517,8 +517,9 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     true_effects = parse_effects(effects, nominal)
     for effect, _ in true_effects.entries:
         if effect.tracker_only and MODELS[kind].reach != "configuration":
-            raise InputError(f"{effect.name} is simulated for data taken at any configuration "
-                             f"(tracker_points), not for {kind}", where=f"effects.{effect.name}")
+            raise InputError(f"{effect.name} is simulated only for data taken at any "
+                             f"configuration (absolute points), not for {kind}",
+                             where=f"effects.{effect.name}")
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
     if temperature is None and true_effects.get("thermal_drift") is not None:

@@ -28,7 +28,7 @@ from ..datasets import DatasetBase, dataset_rows
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..fields import cut
-from ..measurement import SphereLaserModel, model_for
+from ..measurement import SphereLaserModel
 from ..progress import reports_stages, stage
 from ..results import (
     DOMINATED_SHARE,
@@ -45,6 +45,7 @@ from ..results import (
 from ..robot import Robot
 from . import diagnosis, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
+from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
 from .prior import (
     SIGMA_ITERATIONS,
@@ -63,19 +64,6 @@ from .solver import CONVERGED_DECREASE, METHODS, Loss, Method, Solution, solve
 from .start_state import settle_start
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
-
-
-def models_for(datasets: Sequence, prefix: str = "") -> list:
-    """One measurement model per dataset, labelled by file stem (made unique)."""
-    models = []
-    seen: dict[str, int] = {}
-    for dataset in datasets:
-        label = prefix + Path(dataset.path).stem
-        seen[label] = seen.get(label, 0) + 1
-        if seen[label] > 1:
-            label = f"{label}#{seen[label]}"
-        models.append(model_for(dataset, label))
-    return models
 
 
 def consistent_problem(problem: Problem, x: np.ndarray) -> tuple[Problem, np.ndarray]:
@@ -192,22 +180,6 @@ def _components(stages) -> list[dict[str, np.ndarray]]:
 def _rms(errors: Sequence[np.ndarray]) -> float:
     flat = np.concatenate([np.asarray(e) for e in errors]) if errors else np.zeros(0)
     return float(np.sqrt(np.mean(flat**2))) if flat.size else float("nan")
-
-
-def refit_placement(problem: Problem, x: np.ndarray, *, method: Method = "lm") -> np.ndarray:
-    """``x`` with only the placement unknowns re-solved (robot, effects, mounted held)."""
-    return solve(problem, x, problem.mask("placement"), method=method).x
-
-
-def evaluate(robot, datasets: Sequence, effects: Sequence[Effect], values: dict[str, float],
-             label_prefix: str = "", kinematics=None) -> tuple[Problem, np.ndarray]:
-    """Problem over ``datasets`` started at ``values`` (by name), placements re-fitted.
-
-    ``kinematics`` of the same robot may be passed to reuse its CasADi functions.
-    """
-    problem = Problem(robot, models_for(datasets, label_prefix), effects, start=values,
-                      kinematics=kinematics)
-    return problem, refit_placement(problem, problem.initial())
 
 
 def _values(problem: Problem, x: np.ndarray) -> dict[str, float]:

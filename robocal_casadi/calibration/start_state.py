@@ -28,7 +28,7 @@ import numpy as np
 
 from ..effects.base import Effect
 from ..effects.motion import is_direction_column, with_directions
-from .problem import Problem
+from .evaluation import evaluate
 
 SIDES = (0.0, -1.0, 1.0)  # tried in this order: a side must fit better than the middle
 
@@ -42,8 +42,6 @@ def settle_start(robot, datasets: Sequence, effects: Sequence[Effect], values: d
     ``values`` the calibrated unknowns by name (robot, effects, mounted instrument); the
     placements are fitted on each dataset first, at the middle of the play.
     """
-    from .identification import evaluate
-
     columns = sorted({c for e in effects for c in e.required_columns()
                       if is_direction_column(c)})
     if not columns:
@@ -61,21 +59,25 @@ def settle_start(robot, datasets: Sequence, effects: Sequence[Effect], values: d
         if not unknown:
             out.append(dataset)
             continue
-        settled = replace(dataset, extras=extras)
-        problem, x = evaluate(robot, [settled], effects, values, kinematics=kinematics)
         for column, rows in unknown.items():
-            extras[column][rows] = _best_side(problem, x, extras[column], rows)
-        out.append(settled)
+            extras[column][rows] = _best_side(robot, dataset, extras, column, rows, effects,
+                                              values, kinematics)
+        out.append(replace(dataset, extras=extras))
     return tuple(out)
 
 
-def _best_side(problem: Problem, x: np.ndarray, direction: np.ndarray,
-               rows: np.ndarray) -> float:
-    """The value of ``direction`` (modified in place while trying, the problem reads it)
-    at ``rows`` among ``SIDES`` with the smallest squared error of those rows."""
+def _best_side(robot, dataset, extras: dict, column: str, rows: np.ndarray,
+               effects: Sequence[Effect], values: dict, kinematics) -> float:
+    """The value of ``column`` at ``rows`` among ``SIDES`` with the smallest squared error
+    of those rows, each side tried on its own copy of the data (a problem holds its data
+    as built), the placement fitted for each."""
     best, best_sse = SIDES[0], np.inf
     for side in SIDES:
-        direction[rows] = side
+        trial = dict(extras)
+        trial[column] = np.array(extras[column], dtype=float)
+        trial[column][rows] = side
+        problem, x = evaluate(robot, [replace(dataset, extras=trial)], effects, values,
+                              kinematics=kinematics)
         errors = problem.errors(x)[0]
         chosen = np.isin(problem.models[0].error_rows(), rows)
         sse = float(np.sum(errors[chosen] ** 2))
