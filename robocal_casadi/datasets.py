@@ -163,9 +163,10 @@ def dataset_rows(dataset: Dataset, mask: np.ndarray) -> Dataset:
         if value is not None:
             changes[name] = np.asarray(value)[mask]
     # the table lines, where they still describe these rows (a copy cut by hand may not)
-    lines = dataset.lines if dataset.lines is not None and len(dataset.lines) == len(mask) \
-        else None
-    changes["lines"] = None if lines is None else np.asarray(lines)[mask]
+    if hasattr(dataset, "lines"):  # a stand-in holding joints and extras only has none
+        lines = dataset.lines if dataset.lines is not None and \
+            len(dataset.lines) == len(mask) else None
+        changes["lines"] = None if lines is None else np.asarray(lines)[mask]
     points = getattr(dataset, "point", None)
     if points:
         changes["point"] = tuple(p for p, keep in zip(points, mask) if keep)
