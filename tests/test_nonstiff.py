@@ -86,7 +86,7 @@ def test_hysteresis_is_looked_for_where_backlash_is_not():
 
 
 def test_hysteresis_is_simulated_for_tracker_data_only(tmp_path):
-    with pytest.raises(InputError, match="tracker_points"):
+    with pytest.raises(InputError, match="any configuration .* not for artifact_touches"):
         simulate(driven(ROBOT, "cable"), "artifact_touches", out_dir=tmp_path / "a", rows=4,
                  effects={"hysteresis": {2: 1e-3}}, progress=False)
 
