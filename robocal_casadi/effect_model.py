@@ -159,8 +159,9 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
                              where=where) from None
         if name == "joint_compliance":
             payload |= bool(entry.get("payload", False))
-            effect: Effect = JointCompliance(joints, robot=robot,
-                                             payload=entry.get("payload", False))
+            effect: Effect = JointCompliance(
+                joints, robot=robot, payload=entry.get("payload", False)
+            ).with_terms_named(parameters, robot)
         elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
             coupling: type[JointCoupling] = EFFECTS[name]  # type: ignore[assignment]
             effect = coupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])

@@ -162,3 +162,20 @@ def test_predicted_parameter_error_matches_monte_carlo(tmp_path):
     # A mean of `draws` squared norms of a Gaussian field: relative spread of the mean
     # square at most sqrt(2/draws) (one degree of freedom), 3 sigma on the RMS.
     assert parameter_part == pytest.approx(estimate, rel=3 * np.sqrt(2 / draws))
+
+
+def test_lumped_compliance_reads_back_at_another_geometry():
+    """Which lumped compliance terms are independent is judged numerically on a geometry;
+    an effects file written at the calibration's reads back by name at any other."""
+    from robocal_casadi.effects import JointCompliance
+
+    panda = load_robot(UR10.parents[1] / "panda-mukca" / "robot.yaml")
+    assert not panda.has_inertia  # the lumped form
+    written = JointCompliance((6,), robot=panda)
+    names = written.parameter_names()
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        moved = panda.with_parameters(panda.parameter_vector()
+                                      + 1e-3 * rng.standard_normal(len(panda.parameters())))
+        read = JointCompliance((6,), robot=moved).with_terms_named(names, moved)
+        assert read.parameter_names() == names

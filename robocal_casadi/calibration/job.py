@@ -50,7 +50,7 @@ class JobOptions:
 
     diagnose: bool = True
     method: str = "lm"
-    loss: str = "linear"
+    loss: str = "robust"
     select_growth: float | None = None
     max_iterations: int = 200
     rule: str = "prior"

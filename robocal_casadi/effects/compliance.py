@@ -180,6 +180,27 @@ class JointCompliance(Effect):
         form = ", lumped" if self.lumped else ""
         return f"JointCompliance(joints={list(self.joints)}{form})"
 
+    def with_terms_named(self, names, robot: Robot) -> JointCompliance:
+        """The lumped form with exactly the terms ``names`` holds (``c{j}_h{k}x`` ...), as
+        a calibration chose them: which terms are independent is judged numerically on
+        the geometry at hand, so a file written at one geometry is read back by name."""
+        if not self.lumped:
+            return self
+        order = {name: k for k, name in enumerate(names)}
+        count = len(FIRST_MOMENT_COMPONENTS) * robot.dof  # the basis's columns
+        for joint in self.joints:
+            found = [t for t in range(count) if _term_name(joint, t) in order]
+            self.terms[joint] = tuple(sorted(found, key=lambda t: order[_term_name(joint, t)]))
+        return self
+        wanted = set(names)
+        width = 4 * len(self.terms.get(self.joints[0], ())) if False else None  # noqa: F841
+        for joint in self.joints:
+            count = max((t for t in self.terms[joint]), default=0) + 1
+            limit = max(count, len(FIRST_MOMENT_COMPONENTS) * 64)
+            self.terms[joint] = tuple(t for t in range(limit)
+                                      if _term_name(joint, t) in wanted)
+        return self
+
     @classmethod
     def create(cls, joints, robot: Robot | None = None,
                extras: Mapping[str, Any] | None = None, **options) -> JointCompliance:
