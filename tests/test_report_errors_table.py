@@ -115,3 +115,23 @@ def test_nothing_written_for_a_result_of_the_wrong_type(tmp_path):
     with pytest.raises(TypeError):
         write_errors_csv({"fit": {}}, tmp_path)  # type: ignore[arg-type]
     assert not (tmp_path / "errors.csv").exists()
+
+
+def test_readings_set_aside_are_listed_too(tmp_path):
+    """The robust default sets the corrupted reading aside; errors.csv still has a row for
+    its line, with the error it showed (nothing dropped silently)."""
+    identification = pytest.importorskip("robocal_casadi.calibration")
+    from robocal_casadi.simulate import simulate
+
+    robot = examples.industrial_6r().with_units(Units("mm", "deg"))
+    fit = simulate(robot, "tracker_points", out_dir=tmp_path / "fit", rows=60, seed=3,
+                   noise=1e-5, geometric_errors=(3e-4, 3e-4), progress=False)
+    dataset = fit.load()
+    line = _corrupt(dataset.data_path, 17)
+    result = identification.calibrate([load_dataset(dataset.path)], diagnose=False)
+    assert [r.line for r in result.rejected] == [line]
+    rows = _read(write_errors_csv(result, tmp_path))
+    aside = [r for r in rows if r["role"] == "fit, set aside"]
+    assert [int(r["line"]) for r in aside] == [line]
+    assert float(aside[0]["error_final_mm"]) == pytest.approx(result.rejected[0].residual / 1e-3)
+    assert len(rows) == 60  # 59 kept readings and the one set aside

@@ -44,6 +44,7 @@ def write_errors_csv(result: CalibrationResult, folder: Path) -> Path:
                             ("validation", result.validation_residuals)):
         for r in residuals:
             writer.writerows([_cell(v) for v in row] for row in error_rows(r, role))
+    writer.writerows([_cell(v) for v in row] for row in set_aside_rows(result))
     with atomic_file(path) as staging:
         staging.write_text(text.getvalue(), encoding="utf-8")
         staging.chmod(0o644)
@@ -63,6 +64,17 @@ def error_rows(residuals: DatasetResiduals, role: str) -> Iterator[tuple]:
         yield (residuals.label, role, line, term.kind,
                term.pose if term.pose >= 0 else None, "-".join(term.points) or None,
                *(float(s[i]) for s in stages))
+
+
+def set_aside_rows(result: CalibrationResult) -> Iterator[tuple]:
+    """One row per table line of each reading the calibration set aside as a gross error
+    (``result.rejected``): role ``fit, set aside`` or ``validation, set aside``, the error
+    under the model fitted without it in ``error_final_mm`` (the other models' columns
+    empty: it was never fitted), nothing dropped silently."""
+    for reading in getattr(result, "rejected", ()) or ():
+        for line in reading.lines or (reading.line,):
+            yield (reading.dataset, f"{reading.role}, set aside", line, reading.reading,
+                   None, reading.suspect or None, None, None, reading.residual / MM)
 
 
 def csv_line(residuals: DatasetResiduals, row: int) -> int:
