@@ -208,12 +208,12 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     fit readings, when effects are recommended but a controller runs geometry alone."""
     if result.recommended != "final" or not result.effects:
         return 0.0
-    from ..delivery.projection import _targets
+    from ..delivery.projection import model_targets
     from ..kinematics import Kinematics
 
     final_robot = result.robot_nominal.with_parameters(
         np.array([p.estimate for p in result.parameters], dtype=float))
-    targets = _targets(result, final_robot)
+    targets = model_targets(result, final_robot)
     if targets is None:
         return 0.0
     Q, T_target = targets

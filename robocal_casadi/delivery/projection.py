@@ -33,7 +33,7 @@ def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot 
     """The geometry-only robot closest to ``result``'s model with effects (geometry
     ``final_robot``) over the fit readings, started from ``start_robot``; None when the
     data carry no joint readings (sensor-only scans) or no robot parameter was fitted."""
-    targets = _targets(result, final_robot)
+    targets = model_targets(result, final_robot)
     kinematics = Kinematics(start_robot)
     registry = kinematics.registry
     fitted = [n for n in result.covariance_names if n in registry]
@@ -53,7 +53,7 @@ def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot 
     return start_robot.with_parameters(p)
 
 
-def _targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] | None:
+def model_targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] | None:
     """Fit readings (N x dof) and the tool poses (N x 4 x 4) [m] the model with effects
     gives there, at most ``MAX_ROWS`` rows evenly spread."""
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
