@@ -64,7 +64,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..effects import EFFECTS
+from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
 from ..progress import note, reports_stages, stage
 from ..results import EffectFinding, Identifiability
@@ -82,7 +82,6 @@ MIN_GAIN = 0.01  # an effect must lower the held-out RMS by at least this fracti
 RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
 EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
-THERMAL_COLUMNS = ("temperature", "time")
 
 
 # ----------------------------------------------------------------------------- results
@@ -192,7 +191,7 @@ def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
     """Extra columns present in every dataset, joined; ``payload`` if any dataset has it."""
     datasets = [m.dataset for m in problem.models]
     out: dict[str, np.ndarray] = {}
-    for column in THERMAL_COLUMNS:
+    for column in data_columns():
         if all(column in d.extras for d in datasets):
             values = np.concatenate([np.asarray(d.extras[column], dtype=float) for d in datasets])
             if np.all(np.isfinite(values)) and np.ptp(values) > 0:
@@ -487,7 +486,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     start = time.perf_counter()
     extras = _joined_extras(problem)
     if available_columns is not None:
-        for column in THERMAL_COLUMNS:
+        for column in data_columns():
             if column in extras and column not in available_columns:
                 del extras[column]
     candidates, candidate_effects = _candidates(problem, extras)
