@@ -35,6 +35,7 @@ from robocal_casadi.calibration import (
 )
 from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.examples import industrial_6r
+from robocal_casadi.results import Decision
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m]
@@ -108,9 +109,9 @@ def real_split(name: str, fit, validation) -> dict:
         "effects": [e.summary for e in result.effects],
         "unexplained": None if result.unexplained is None else
         result.unexplained.to_json(1e-3, "mm"),
-        "rejected_as_implausible": sorted({f"{t['effect']}{list(t['joints'])}"
+        "rejected_as_implausible": sorted({f"{t.effect}{list(t.joints)}"
                                            for t in result.diagnosis
-                                           if "implausible" in t["decision"]}),
+                                           if t.outcome is Decision.IMPLAUSIBLE}),
         "seconds": seconds,
     }
 

@@ -93,14 +93,14 @@ def _touches(setup, workspace, count, rng, progress) -> list[Candidate]:
                                               workspace.p)
         placements = [_random_placement(setup, c, rng) for c in centres]
         # sockets in the world for each placement, each touched `touches` times, 2 seeds each
-        targets, owners = [], []
+        world_points, owners = [], []
         for k, T in enumerate(placements):
             for name in names:
                 world = T[:3, :3] @ (layout[name] - centroid) + T[:3, 3]
                 for _ in range(setup.touches * 2):
-                    targets.append(world)
+                    world_points.append(world)
                     owners.append((k, name))
-        targets = np.array(targets)
+        targets = np.array(world_points)
         solved = workspace.solve_points(targets, setup.offset,
                                         workspace.random_joints(rng, len(targets)))
         ok = solved.ok & workspace.clear_of_table(solved.joints, targets)

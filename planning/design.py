@@ -192,7 +192,7 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
             f"{needed} {what} of this kind", file=setup.path)
-    best = None
+    best: tuple[float, list[int], int] | None = None
     with Progress("plan: exchange", total=None, stream=stream) as progress:
         starts = STARTS_CONDITION if index == "O2" else STARTS
         for start in range(starts):  # a greedy start, then random ones: keep the best
@@ -204,6 +204,7 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
             if best is None or value > best[0]:
                 best = (value, chosen, swaps)
+    assert best is not None  # both start counts are positive
     _, chosen, swaps = best
     chosen_candidates = tuple(candidates[i] for i in chosen)
     spectrum = info.spectrum(chosen, scaling(index))

@@ -82,13 +82,10 @@ def open_path(C: np.ndarray) -> list[int]:
     n = len(C)
     if n <= 2:
         return list(range(n))
-    best, best_cost = None, np.inf
     starts = range(n) if n <= 300 else range(0, n, max(1, n // 300))
-    for start in starts:
-        path = _nearest_neighbour(C, start)
-        cost = float(np.sum(C[path[:-1], path[1:]]))
-        if cost < best_cost:
-            best, best_cost = path, cost
+    # the first of the cheapest paths, as a strict-improvement scan would keep
+    best = min((_nearest_neighbour(C, start) for start in starts),
+               key=lambda path: float(np.sum(C[path[:-1], path[1:]])))
     return _two_opt(C, best) if n <= TWO_OPT_LIMIT else best
 
 
@@ -152,20 +149,10 @@ def _group_path(ends: np.ndarray, turns: np.ndarray) -> list[int]:
     if n == 1:
         return [0]
     leave_enter = move_costs(ends[:, 1], ends[:, 0], turns)  # node a's exit to node b's entry
-    best, best_cost = None, np.inf
     starts = range(2 * n) if n <= 150 else range(0, 2 * n, max(1, n // 75))
-    for start in starts:
-        path = [start]
-        used = np.zeros(2 * n, bool)
-        used[start & ~1:(start & ~1) + 2] = True
-        while len(path) < n:
-            nxt = int(np.argmin(np.where(used, np.inf, leave_enter[path[-1]])))
-            path.append(nxt)
-            used[nxt & ~1:(nxt & ~1) + 2] = True
-        cost = sum(leave_enter[a, b] for a, b in zip(path[:-1], path[1:]))
-        if cost < best_cost:
-            best, best_cost = path, cost
-    path = best
+    # the first of the cheapest paths, as a strict-improvement scan would keep
+    path = min((_greedy_group_path(leave_enter, start) for start in starts),
+               key=lambda path: sum(leave_enter[a, b] for a, b in zip(path[:-1], path[1:])))
     if n > GROUP_TWO_OPT_LIMIT:
         return path
     for _ in range(50):
@@ -182,6 +169,20 @@ def _group_path(ends: np.ndarray, turns: np.ndarray) -> list[int]:
                     improved = True
         if not improved:
             break
+    return path
+
+
+def _greedy_group_path(leave_enter: np.ndarray, start: int) -> list[int]:
+    """Nodes from ``start``, each step to the cheapest entry of a group not yet visited
+    (node ``2g`` runs group ``g`` forwards, ``2g + 1`` backwards)."""
+    n = len(leave_enter) // 2
+    path = [start]
+    used = np.zeros(2 * n, bool)
+    used[start & ~1:(start & ~1) + 2] = True
+    while len(path) < n:
+        nxt = int(np.argmin(np.where(used, np.inf, leave_enter[path[-1]])))
+        path.append(nxt)
+        used[nxt & ~1:(nxt & ~1) + 2] = True
     return path
 
 

@@ -8,6 +8,8 @@ planner aimed at, touches by placement and socket.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from robocal_casadi.calibration import Problem, analyse_identifiability
@@ -18,9 +20,10 @@ from robocal_casadi.measurement import model_class, model_for
 from .candidates import Candidate
 
 
-def planned_dataset(dataset: Dataset, candidates, kinematics: Kinematics | None = None) -> Dataset:
+def planned_dataset(dataset: Dataset, candidates: Iterable[Candidate],
+                    kinematics: Kinematics | None = None) -> Dataset:
     """``dataset`` with its rows replaced by those of ``candidates`` (nominal readings)."""
-    candidates: list[Candidate] = list(candidates)
+    candidates = list(candidates)
     Q = np.vstack([c.joints for c in candidates])
     kinematics = kinematics or Kinematics(dataset.robot)
     poses = np.concatenate([np.full(len(c.joints), k + 1) for k, c in enumerate(candidates)])

@@ -144,8 +144,9 @@ class RowModel:
         blocks, start = [], 0
         for candidate in candidates:
             k = len(candidate.joints)
-            X = np.concatenate([np.vstack(G[start:start + k]), np.vstack(S[start:start + k])],
-                               axis=1)
+            # the candidate's k readings' rows, stacked
+            X = np.concatenate([G[start:start + k].reshape(-1, G.shape[2]),
+                                S[start:start + k].reshape(-1, S.shape[2])], axis=1)
             blocks.append(Block(X if self.shared else _project_out(X[:, :G.shape[2]],
                                                                    X[:, G.shape[2]:])))
             start += k

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 from robocal_casadi.datasets import ArtifactTouches, Dataset, SphereLaser, TrackerPoints
 from robocal_casadi.errors import InputError
 from robocal_casadi.fields import number, vector
-from robocal_casadi.measurement import MeasurementModel, model_class
+from robocal_casadi.measurement import ArtifactModel, MeasurementModel, model_class
 from robocal_casadi.robot import Robot
 from robocal_casadi.units import Units
 
@@ -119,6 +119,7 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
                          visibility_cone=option("visibility_cone", np.radians(60.0), A), **common)
     if isinstance(dataset, ArtifactTouches):
         model = model_class(dataset.kind, file=path)
+        assert issubclass(model, ArtifactModel)  # every touch kind's model is an artifact's
         bar = model.cross
         touches = 1 if bar else int(option("touches_per_socket", 4, 1.0))
         if touches < 1:
@@ -173,13 +174,12 @@ def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray
         return np.array(out)
 
     rng = np.random.default_rng(0)
-    best = None
+    fits = []
     for _ in range(5):
         start = rng.normal(scale=scale, size=(len(names), 3))
         start[:, 2] = 0.0
-        fit = least_squares(residual, start.ravel(), xtol=1e-15, ftol=1e-15, gtol=1e-15)
-        if best is None or fit.cost < best.cost:
-            best = fit
+        fits.append(least_squares(residual, start.ravel(), xtol=1e-15, ftol=1e-15, gtol=1e-15))
+    best = min(fits, key=lambda fit: fit.cost)
     X = best.x.reshape(-1, 3)
     constraint = residual(best.x)[: len(dataset.distances) + len(dataset.perpendicular)]
     if np.max(np.abs(constraint)) > 1e-9 * max(scale, 1.0):

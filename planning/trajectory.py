@@ -82,13 +82,14 @@ REPAIRS = 2  # re-solves with the instants that broke a constraint added
 FIT_ITERATIONS = 100  # of the start's fit
 FEASIBLE = 1e-4  # violation of a usable iterate, solver units: well inside the margins
 CLEARANCE_UNIT = 0.1  # [m] the clearance constraint's unit in the solver
-IPOPT = {"print_level": 0, "sb": "yes", "hessian_approximation": "limited-memory",
-         "tol": 1e-4, "constr_viol_tol": 1e-7, "acceptable_tol": 1e-2,
-         "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-3,
-         "acceptable_constr_viol_tol": 1e-7,
-         # the start is feasible: keep IPOPT from pushing it far into the interior
-         "bound_push": 1e-6, "bound_frac": 1e-6, "slack_bound_push": 1e-6,
-         "slack_bound_frac": 1e-6}
+IPOPT: dict[str, float | str] = {
+    "print_level": 0, "sb": "yes", "hessian_approximation": "limited-memory",
+    "tol": 1e-4, "constr_viol_tol": 1e-7, "acceptable_tol": 1e-2,
+    "acceptable_iter": 4, "acceptable_obj_change_tol": 1e-3,
+    "acceptable_constr_viol_tol": 1e-7,
+    # the start is feasible: keep IPOPT from pushing it far into the interior
+    "bound_push": 1e-6, "bound_frac": 1e-6, "slack_bound_push": 1e-6,
+    "slack_bound_frac": 1e-6}
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,8 @@ class ScanRows:
         axis = setup.axis / np.linalg.norm(setup.axis)
         o = T[:3, :3] @ setup.offset + T[:3, 3]
         d = T[:3, :3] @ axis
+        if setup.centre is None:
+            raise ValueError("a laser scan's set-up needs the sphere's centre")
         v = o - setup.centre
         b = ca.dot(d, v)
         disc = b**2 - (ca.dot(v, v) - setup.radius**2)
@@ -493,9 +496,9 @@ def _fit(setup, rows, B, knots, path, lower, upper) -> np.ndarray:
     Q = ca.mtimes(banded, C)
     disc, reading = rows.beam.map(N, "serial")(Q.T)
     parts = _linear_parts(setup, knots, C) + _beam_parts(setup, disc, reading)
-    solver = ca.nlpsol("scan_fit", "ipopt",
-                       {"x": c, "f": 0.5 * ca.sumsqr(Q - ca.DM(path)),
-                        "g": ca.vertcat(*[p[0] for p in parts])},
+    nlp: dict[str, ca.MX] = {"x": c, "f": 0.5 * ca.sumsqr(Q - ca.DM(path)),
+                             "g": ca.vertcat(*[p[0] for p in parts])}
+    solver = ca.nlpsol("scan_fit", "ipopt", nlp,
                        {"print_time": False,
                         "ipopt": {**IPOPT, "tol": 1e-8, "max_iter": FIT_ITERATIONS}})
     first, *_ = np.linalg.lstsq(B, path, rcond=None)

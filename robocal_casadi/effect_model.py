@@ -23,9 +23,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
-from .effects.coupling import JointCoupling
-from .effects.deflection import LinkDeflection
+from .effects import EFFECTS, Effect, RowContext
 from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
@@ -42,23 +40,12 @@ def effects_to_dict(result) -> dict | None:
         return None
     values = np.asarray(result.effect_values, dtype=float)
     entries, start = [], 0
-    payload_in_data = any("payload" in r.extras for r in result.residuals)
+    columns = {c for r in result.residuals for c in r.extras}
     for effect in result.effect_models:
         names = effect.parameter_names()
         own = values[start:start + len(names)]
-        entry = {"name": effect.name, "joints": list(effect.joints),
-                 "parameters": {n: float(v) for n, v in zip(names, own)}}
+        entries.append(effect.to_dict(dict(zip(names, own)), columns))
         start += len(names)
-        if isinstance(effect, ThermalDrift):
-            entry["column"] = effect.column
-            entry["reference"] = float(effect.constants()[0])
-        if isinstance(effect, JointCompliance):
-            entry["payload"] = bool(effect.payload or payload_in_data)
-        if isinstance(effect, LinkDeflection):
-            entry["payload"] = effect.payload
-        if isinstance(effect, JointCoupling):
-            entry["drivers"] = [int(d) for d in effect.drivers]
-        entries.append(entry)
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
     # The geometry fitted together with the effects belongs with them: robot_calibrated.yaml
     # may hold another (the best geometry-only model, ``delivery``).
@@ -95,7 +82,7 @@ class EffectModel:
         names: list[str] = []
         for effect in self.effects:
             needed = list(effect.required_columns())
-            if isinstance(effect, JointCompliance) or getattr(effect, "payload", False):
+            if effect.reads_payload():
                 needed.append("payload")
             names += [n for n in needed if n not in names]
         return tuple(names)
@@ -148,43 +135,36 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
         return EffectModel(robot, (), np.zeros(0))
     content = load_yaml(path, what="effects file")
     robot = _with_geometry(robot, content.get("geometry"), path)
-    effects, values, payload = [], [], False
+    effects, values = [], []
     for k, entry in enumerate(content.get("effects") or []):
-        where = f"effects[{k}]"
-        try:
-            name, joints = entry["name"], tuple(int(j) for j in entry["joints"])
-            parameters = {str(n): float(v) for n, v in entry["parameters"].items()}
-        except (KeyError, TypeError, ValueError, AttributeError):
-            raise InputError("expected {name, joints, parameters}", file=path,
-                             where=where) from None
-        if name == "joint_compliance":
-            payload |= bool(entry.get("payload", False))
-            effect: Effect = JointCompliance(
-                joints, robot=robot, payload=entry.get("payload", False)
-            ).with_terms_named(parameters, robot)
-        elif name in EFFECTS and issubclass(EFFECTS[name], JointCoupling):
-            coupling: type[JointCoupling] = EFFECTS[name]  # type: ignore[assignment]
-            effect = coupling(joints, drivers=[int(d) for d in entry.get("drivers", ())])
-        elif name == "link_deflection":
-            payload |= bool(entry.get("payload", True))
-            effect = LinkDeflection(joints, payload=bool(entry.get("payload", True)))
-        elif name == "thermal_drift":
-            effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
-                                  reference_value=float(entry["reference"]))
-        elif name in EFFECTS:
-            effect = EFFECTS[name](joints)
-        else:
-            raise InputError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", file=path,
-                             where=where)
-        names = effect.parameter_names()
-        if set(names) != set(parameters):
-            raise InputError(f"{name} on joints {list(joints)} has parameters {list(names)} for "
-                             f"this robot, the file gives {sorted(parameters)}", file=path,
-                             where=where)
+        effect, parameters = _read_entry(entry, robot, path, f"effects[{k}]")
         effects.append(effect)
-        values += [parameters[n] for n in names]
-    com = tuple(float(v) for v in content.get("payload_com", (0.0, 0.0, 0.0)))
-    return EffectModel(robot, tuple(effects), np.array(values, dtype=float), com, payload)  # type: ignore[arg-type]
+        values += [parameters[n] for n in effect.parameter_names()]
+    x, y, z = (float(v) for v in content.get("payload_com", (0.0, 0.0, 0.0)))
+    return EffectModel(robot, tuple(effects), np.array(values, dtype=float), (x, y, z),
+                       any(effect.has_payload_term() for effect in effects))
+
+
+def _read_entry(entry, robot: Robot, path: Path, where: str) -> tuple[Effect, dict[str, float]]:
+    """One effect of an effects file and its values (name -> SI), rebuilt by its class."""
+    try:
+        name, joints = entry["name"], tuple(int(j) for j in entry["joints"])
+        parameters = {str(n): float(v) for n, v in entry["parameters"].items()}
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise InputError("expected {name, joints, parameters}", file=path, where=where) from None
+    if name not in EFFECTS:
+        raise InputError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", file=path,
+                         where=where)
+    try:
+        effect = EFFECTS[name].from_dict(entry, robot)
+    except (KeyError, TypeError, ValueError) as error:
+        raise InputError(f"{name}: malformed entry ({error})", file=path, where=where) from None
+    names = effect.parameter_names()
+    if set(names) != set(parameters):
+        raise InputError(f"{name} on joints {list(joints)} has parameters {list(names)} for "
+                         f"this robot, the file gives {sorted(parameters)}", file=path,
+                         where=where)
+    return effect, parameters
 
 
 def _with_geometry(robot: Robot, geometry, path: Path) -> Robot:

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from enum import Enum
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -22,6 +23,48 @@ if TYPE_CHECKING:
     from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
+
+
+class Decision(Enum):
+    """What diagnosis decided about one candidate in one round.
+
+    ``ADDED``: the model takes it; ``IMPLAUSIBLE``: supported by the numbers but refused,
+    its estimate outside what real robots show (it stands in for something else);
+    ``CONFOUNDED``: as good an explanation as a rival of another effect type, the data
+    cannot tell them apart; ``TAKEN_OUT``: added in an earlier round and removed, no longer
+    paying its way with the effects found later; ``NOT_PAYING``: it does not lower the
+    errors enough for its parameters (or not on held-out data, or the geometry absorbs it,
+    or another candidate did better this round).
+    """
+
+    ADDED = "added"
+    IMPLAUSIBLE = "refused as implausible"
+    CONFOUNDED = "confounded"
+    TAKEN_OUT = "taken out"
+    NOT_PAYING = "not paying"
+
+
+class DiagnosisRecord(Protocol):
+    """One candidate as diagnosis tested it (``calibration.diagnosis.CandidateTest``):
+    the fields the report and the terminal read; ``as_dict`` gives every recorded number
+    by name, ``decision`` the reason in words, ``outcome`` the decision itself."""
+
+    @property
+    def effect(self) -> str: ...
+
+    @property
+    def joints(self) -> tuple[int, ...]: ...
+
+    @property
+    def label(self) -> str: ...
+
+    @property
+    def decision(self) -> str: ...
+
+    @property
+    def outcome(self) -> Decision: ...
+
+    def as_dict(self) -> dict[str, Any]: ...
 
 
 @dataclass(frozen=True)
@@ -305,7 +348,7 @@ class CalibrationResult:
     solver: dict[str, Any] = field(default_factory=dict)
     effect_models: tuple[Effect, ...] = ()  # the effects fitted, values in ``effect_values``
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    diagnosis: tuple[dict, ...] = ()  # every candidate tested, with its numbers
+    diagnosis: tuple[DiagnosisRecord, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
     parameters_geometric: tuple[ParameterEstimate, ...] = ()  # the geometric fit's estimates
     unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
@@ -334,7 +377,8 @@ class CalibrationResult:
                  final: Solution, std: np.ndarray, identifiability: Identifiability,
                  parameters: Sequence[ParameterEstimate],
                  parameters_geometric: Sequence[ParameterEstimate],
-                 effects: Sequence[EffectFinding], diagnosis: Sequence[dict], fit: RmsSummary,
+                 effects: Sequence[EffectFinding], diagnosis: Sequence[DiagnosisRecord],
+                 fit: RmsSummary,
                  validation: RmsSummary | None, residuals: Sequence[DatasetResiduals],
                  validation_residuals: Sequence[DatasetResiduals],
                  spheres: Sequence[SphereEstimate], selection: Selection | None,

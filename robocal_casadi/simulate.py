@@ -132,13 +132,7 @@ class TrueEffects:
         """The effect names of ``result.json`` with estimator-style parameter names (SI)."""
         out: dict[str, Any] = {}
         for effect, values in self.entries:
-            entry: dict[str, Any] = {"joints": sorted(set(effect.joints)), "unit": effect.unit}
-            if getattr(effect, "column", None):
-                entry["column"] = effect.column  # type: ignore[attr-defined]
-            if getattr(effect, "drivers", None):
-                entry["drivers"] = {int(j): int(k) for j, k in effect.pairs}  # type: ignore
-            entry["parameters"] = {n: float(values[n]) for n in effect.parameter_names()}
-            out[effect.name] = entry
+            out[effect.name] = effect.truth_dict(values)
         return out
 
 
@@ -522,7 +516,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
                              where=f"effects.{effect.name}")
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
-    if temperature is None and true_effects.get("thermal_drift") is not None:
+    if temperature is None and any("temperature" in effect.required_columns()
+                                   for effect, _ in true_effects.entries):
         temperature = (reference_temperature - 2.0, reference_temperature + 6.0)
 
     setup = _Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),

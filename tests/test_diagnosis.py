@@ -13,6 +13,7 @@ import pytest
 from robocal_casadi.calibration import Problem, calibrate, diagnosis, models_for, solve
 from robocal_casadi.effects import EFFECTS
 from robocal_casadi.examples import ROBOTS
+from robocal_casadi.results import Decision
 from robocal_casadi.simulate import simulate
 
 NOISE = 1e-5  # [m] per tracker coordinate
@@ -209,6 +210,11 @@ def test_candidate_rows_read_as_mappings_and_diagnosis_is_frozen(tmp_path):
     assert [f.name for f in outcome.added] == ["joint_scale"]
     row = outcome.tested[0]
     assert dict(row)["effect"] == row.effect and set(row) >= {"bic_drop", "decision"}
+    # the decision is typed; the mapping (what the report tabulates) is the numbers and words
+    assert "outcome" not in row and row.as_dict() == dict(row)
+    added = [t for t in outcome.tested if t.outcome is Decision.ADDED]
+    assert [(t.effect, t.joints) for t in added] == [("joint_scale", (2,))]
+    assert all((t.outcome is Decision.ADDED) == (t.decision == "added") for t in outcome.tested)
     with pytest.raises(AttributeError):
         outcome.rounds = 0  # type: ignore[misc]
     assert "joint_scale" in repr(outcome)

@@ -13,11 +13,14 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 import pytest
+import yaml
 
 from robocal_casadi.calibration import calibrate, diagnosis
-from robocal_casadi.effects import EFFECTS, Effect, Plausible, RowContext, TrueWorld
+from robocal_casadi.effect_model import EffectModel, load_effects, save_effects
+from robocal_casadi.effects import EFFECTS, Effect, Plausible, RowContext, TrueWorld, register
 from robocal_casadi.effects.motion import direction_column, travel_column
 from robocal_casadi.examples import ROBOTS
+from robocal_casadi.robot import dump_yaml
 from robocal_casadi.simulate import simulate
 from robocal_casadi.units import Units
 
@@ -289,3 +292,63 @@ def test_calibration_recovers_the_simulated_effect(tmp_path, monkeypatch, name):
     # down to the noise floor (3-D error of 1e-5 m per coordinate), from above it
     floor = 1e-5 * np.sqrt(3)
     assert result.fit.rms_final <= 1.1 * floor < result.fit.rms_geometric
+
+
+# ----------------------------------------------------------------------------- description
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_description_round_trip_evaluates_identically(name):
+    """An effect written by ``to_dict`` (through YAML text) and rebuilt by ``from_dict``
+    has the same parameters and the same corrections at random rows: the same expression
+    evaluated twice, so equal to round-off."""
+    effect = example(EFFECTS[name])
+    names = effect.parameter_names()
+    theta = theta_of(effect)
+    entry = effect.to_dict(dict(zip(names, theta)), FIT_EXTRAS.keys())
+    text = dump_yaml({"effects": [entry]})
+    (loaded,) = yaml.safe_load(text)["effects"]
+    back = EFFECTS[loaded["name"]].from_dict(loaded, ROBOT)
+    assert type(back) is type(effect)
+    assert back.parameter_names() == names
+    values = np.array([loaded["parameters"][n] for n in names])
+    np.testing.assert_array_equal(values, theta)  # YAML keeps every digit
+    Q, extras = rows(effect, 7)
+    com = np.array([0.0, 0.02, 0.1])
+    before = effect.contribution(ROBOT, theta, Q, extras, com)
+    after = back.contribution(ROBOT, values, Q, extras, com)
+    scale = max(np.abs(before.dq).max(), np.abs(before.dp).max(), 1e-300)
+    np.testing.assert_allclose(after.dq, before.dq, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(after.dp, before.dp, rtol=0, atol=1e-13 * scale)
+
+
+@pytest.fixture
+def quadratic_effect():
+    """The effect defined under tests/, registered for one test and taken out after."""
+    from quadratic_effect import QuadraticReading
+
+    register(QuadraticReading)
+    yield QuadraticReading
+    EFFECTS.pop(QuadraticReading.name)
+
+
+def test_an_effect_defined_outside_the_library(tmp_path, monkeypatch, quadratic_effect):
+    """Registered with one line, a new effect is simulated, found by diagnosis with its
+    true value, written to the effects file and read back to the same tool poses."""
+    cls = quadratic_effect
+    truth = 1e-4
+    sim = simulate(robot_for(cls), "tracker_points", out_dir=tmp_path / "fit", rows=200,
+                   noise=1e-5, seed=4, geometric_errors=(5e-4, 5e-4),
+                   effects={cls.name: {2: truth}}, progress=False)
+    assert sim.truth.effects.as_dict()[cls.name]["parameters"] == {"e2_sq": truth}
+    monkeypatch.setattr(diagnosis, "EFFECTS", {cls.name: cls})
+    result = calibrate([sim.load()])
+    assert [e.name for e in result.effects] == [cls.name], result.effects
+    assert result.effects[0].parameters["e2_sq"] == pytest.approx(truth, rel=0.1)
+    assert save_effects(result, tmp_path)
+    model = load_effects(tmp_path, result.robot_calibrated)
+    assert [type(e) for e in model.effects] == [cls]
+    Q, _ = rows(model.effects[0], 5)
+    direct = EffectModel(model.robot, tuple(result.effect_models),
+                         np.asarray(result.effect_values, dtype=float)).tool_poses(Q)
+    np.testing.assert_allclose(model.tool_poses(Q), direct, rtol=0, atol=1e-12)

@@ -23,7 +23,7 @@ from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.examples import ROBOTS
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model
-from robocal_casadi.results import RmsSummary
+from robocal_casadi.results import Decision, RmsSummary
 from robocal_casadi.robot import save_robot
 from robocal_casadi.simulate import simulate
 
@@ -209,6 +209,9 @@ def test_an_implausibly_large_periodic_error_is_not_named(tmp_path):
     rejected = [t for t in result.diagnosis
                 if t["effect"] == "joint_cyclic" and t["joints"] == (3,)]
     assert any("implausible" in t["decision"] for t in rejected)
+    assert any(t.outcome is Decision.IMPLAUSIBLE for t in rejected)
+    assert all((t.outcome is Decision.IMPLAUSIBLE) == ("implausible" in t.decision)
+               for t in result.diagnosis)
     stand_in = [line for line in summary(result).splitlines() if "stand in for" in line]
     assert stand_in and "joint_cyclic[3]" in stand_in[0]
     assert result.unexplained is not None and "q3" in result.unexplained.variables[:2]
@@ -260,6 +263,7 @@ def test_an_effect_that_stood_in_for_a_later_one_is_taken_out(tmp_path, monkeypa
     removed = [t for t in result.diagnosis if str(t["decision"]).startswith("removed")]
     assert [t["effect"] for t in removed] == ["joint_coupling"]
     assert "with the other effects in" in removed[0]["decision"]
+    assert [t for t in result.diagnosis if t.outcome is Decision.TAKEN_OUT] == removed
     assert any(line.startswith("added, then taken out again") and "joint_coupling" in line
                for line in summary(result).splitlines())
     scale = next(e for e in result.effects if e.name == "joint_scale")

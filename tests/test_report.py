@@ -20,11 +20,13 @@ import numpy as np
 import pytest
 
 from robocal_casadi import examples
+from robocal_casadi.calibration.diagnosis import CandidateTest
 from robocal_casadi.errors import InputError
 from robocal_casadi.report import write_report
 from robocal_casadi.results import (
     CalibrationResult,
     DatasetResiduals,
+    Decision,
     EffectFinding,
     Identifiability,
     ParameterEstimate,
@@ -594,7 +596,7 @@ def test_thermal_drift_is_shown_against_temperature_with_the_fitted_growth():
     np.testing.assert_allclose(panel.fitted, 1.2e-5 * (panel.x - 23.3) * 1e6)
 
 
-def _diagnosis(rounds: int = 3) -> tuple[dict, ...]:
+def _diagnosis(rounds: int = 3) -> tuple[CandidateTest, ...]:
     """60 candidate tests as diagnosis records them; joint 2 compliance added in round 1."""
     entries = []
     rng = np.random.default_rng(4)
@@ -617,7 +619,8 @@ def _diagnosis(rounds: int = 3) -> tuple[dict, ...]:
                         "held": ("a1_6", "b1_6"), "remaining_norm": 0.002, "rss_drop": 1e-3,
                         "bic_drop": float("nan"), "cv_rms_before": 4e-4,
                         "cv_rms_after": float("nan"), "decision": "not supported"})
-    return tuple(entries)
+    return tuple(CandidateTest(**e, outcome=Decision.ADDED if e["decision"] == "added"
+                               else Decision.NOT_PAYING) for e in entries)
 
 
 def test_diagnosis_shows_the_added_and_strongest_rejected_and_folds_the_rest(tmp_path):
@@ -627,10 +630,12 @@ def test_diagnosis_shows_the_added_and_strongest_rejected_and_folds_the_rest(tmp
     path = write_report(result, tmp_path / "report.html")
     page = read_page(path)
     summary = page.tables["diagnosis-summary"][1:]
-    rejected = sorted((e for e in diagnosis if e["decision"] != "added" and e["parameters"] > 0
-                       and np.isfinite(e["bic_drop"])), key=lambda e: -e["bic_drop"])[:5]
+    rejected = sorted((e for e in diagnosis if e.outcome is not Decision.ADDED
+                       and e.parameters > 0 and np.isfinite(e.bic_drop)),
+                      key=lambda e: -e.bic_drop)[:5]
     assert len(summary) == 1 + 5
-    assert summary[0][1] == "joint compliance" and summary[0][-1] == "added"
+    decision = page.tables["diagnosis-summary"][0].index("decision")
+    assert summary[0][1] == "joint compliance" and summary[0][decision] == "added"
     assert [float(row[7]) for row in summary[1:]] == pytest.approx(
         [round(e["bic_drop"], 1) for e in rejected], abs=0.051)
     assert [row[6] for row in summary[:1]] == [f"{100 * diagnosis[1]['rss_drop']:.1f} %"]

@@ -61,13 +61,14 @@ import math
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
-from ..effects import EFFECTS
+from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
 from ..progress import note, reports_stages, stage
-from ..results import EffectFinding, Identifiability
+from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
 from .solver import Loss, Method, Solution, solve
@@ -82,7 +83,6 @@ MIN_GAIN = 0.01  # an effect must lower the held-out RMS by at least this fracti
 RIVAL_MARGIN = 1.1  # a rival whose held-out error is within 10% is as good an explanation
 EXTRAPOLATION_TOLERANCE = 0.02  # a held-out region's squared error may grow this much
 MAX_ROUNDS = 8
-THERMAL_COLUMNS = ("temperature", "time")
 
 
 # ----------------------------------------------------------------------------- results
@@ -96,7 +96,8 @@ def _field_names(cls: type) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class CandidateTest(Mapping):
-    """One candidate tested in one round, with its numbers (also readable as a mapping).
+    """One candidate tested in one round, with its numbers (also readable as a mapping of
+    every field but ``outcome``, the ``Decision``; ``decision`` gives its reason in words).
 
     ``parameters`` counts the columns kept after the identifiability check, ``held`` names
     those the geometry absorbs; ``remaining_norm`` is the smallest relative norm among
@@ -121,6 +122,11 @@ class CandidateTest(Mapping):
     worst_region: str = ""  # the extrapolating scheme the candidate helps least
     estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
     label: str = ""  # the candidate as the effect names it (e.g. a coupling's driver)
+    outcome: Decision = Decision.NOT_PAYING
+
+    def as_dict(self) -> dict[str, Any]:
+        """Every recorded number and word by name (the fields but ``outcome``)."""
+        return {key: getattr(self, key) for key in self._keys()}
 
     def __getitem__(self, key: str):
         if key not in self._keys():
@@ -135,7 +141,7 @@ class CandidateTest(Mapping):
 
     @classmethod
     def _keys(cls) -> tuple[str, ...]:
-        return _field_names(cls)
+        return tuple(name for name in _field_names(cls) if name != "outcome")
 
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "
@@ -192,7 +198,7 @@ def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
     """Extra columns present in every dataset, joined; ``payload`` if any dataset has it."""
     datasets = [m.dataset for m in problem.models]
     out: dict[str, np.ndarray] = {}
-    for column in THERMAL_COLUMNS:
+    for column in data_columns():
         if all(column in d.extras for d in datasets):
             values = np.concatenate([np.asarray(d.extras[column], dtype=float) for d in datasets])
             if np.all(np.isfinite(values)) and np.ptp(values) > 0:
@@ -487,7 +493,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     start = time.perf_counter()
     extras = _joined_extras(problem)
     if available_columns is not None:
-        for column in THERMAL_COLUMNS:
+        for column in data_columns():
             if column in extras and column not in available_columns:
                 del extras[column]
     candidates, candidate_effects = _candidates(problem, extras)
@@ -516,6 +522,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     note(f"{k + 1}/{len(remaining)} {_label(candidate)}")
                     screens.append(screening.screen(candidate))
             decisions: dict[int, str] = {}
+            outcomes: dict[int, Decision] = {}  # the rest: Decision.NOT_PAYING
             for s in screens:
                 decisions[id(s)] = s.decision or screening.verdict(
                     s.bic_drop, s.held_out, bic_threshold)
@@ -523,6 +530,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     reason = _implausible(effect_of[s.candidate], dict(s.values), big.robot)
                     if reason:
                         decisions[id(s)] = f"implausible ({reason}): stands in for something else"
+                        outcomes[id(s)] = Decision.IMPLAUSIBLE
             passing = sorted((s for s in screens if not decisions[id(s)]),
                              key=lambda s: -s.bic_drop)
             numbers = {id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out) for s in screens}
@@ -537,6 +545,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 if rivals:
                     names = ", ".join(_label(t.candidate) for t in rivals)
                     decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
+                    outcomes[id(s)] = Decision.CONFOUNDED
                     continue
                 trial_free = free | _mask_of(big, s.kept)
                 with stage(f"refit with {_label(s.candidate)}"):
@@ -555,8 +564,10 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     if reason:
                         verdict = (f"implausible after refit ({reason}): stands in for "
                                    f"something else")
+                        outcomes[id(s)] = Decision.IMPLAUSIBLE
                 if not verdict:
                     decisions[id(s)] = "added"
+                    outcomes[id(s)] = Decision.ADDED
                     accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)
                     break
                 decisions[id(s)] = f"rejected after refit: {verdict}"
@@ -573,7 +584,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
                     cv_rms_after=after, decision=decisions[id(s)] or "not supported",
                     extrapolation=total, worst_region=worst, estimate=s.values,
-                    label=_label(s.candidate)))
+                    label=_label(s.candidate),
+                    outcome=outcomes.get(id(s), Decision.NOT_PAYING)))
             if accepted is None:
                 break
             s, solution, r_new, J_new, trial_free, bic, after = accepted
@@ -641,7 +653,7 @@ def _removal(group: list[_Step], numbers: dict, reason: str, round_: int) -> Can
         cv_rms_before=float(numbers["cv_rms_before"]),
         cv_rms_after=float(numbers["cv_rms_after"]),
         decision=f"removed: stood in for effects found later ({reason})",
-        label=", ".join(_label(step.candidate) for step in group))
+        label=", ".join(_label(step.candidate) for step in group), outcome=Decision.TAKEN_OUT)
 
 
 def _final(problem: Problem, big: Problem, x: np.ndarray, free: np.ndarray,

@@ -24,7 +24,7 @@ from ..datasets import load_dataset
 from ..effect_model import delivered_lines
 from ..errors import InputError
 from ..profiles import PROFILES
-from ..results import CalibrationResult
+from ..results import CalibrationResult, Decision
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -132,15 +132,15 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
         lines += delivered_lines(result.delivered, s, units.length)
     if result.predicted_accuracy is not None:
         lines.append(result.predicted_accuracy.sentence(s, units.length))
-    stand_ins = _rejected(result, "implausible")
+    stand_ins = _rejected(result, Decision.IMPLAUSIBLE)
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
                      f"library does not name): {', '.join(stand_ins)}")
-    removed = _rejected(result, "removed")
+    removed = _rejected(result, Decision.TAKEN_OUT)
     if removed:
         lines.append("added, then taken out again (with the later effects in, it no longer "
                      f"helps): {', '.join(removed)}")
-    confounded = _rejected(result, "confounded")
+    confounded = _rejected(result, Decision.CONFOUNDED)
     if confounded:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
     if result.unexplained is not None:
@@ -172,13 +172,13 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
                 "max": result.predicted_accuracy.max / s}}
 
 
-def _rejected(result: CalibrationResult, word: str) -> list[str]:
-    """Labels of the candidates whose decision holds ``word`` and were never added."""
+def _rejected(result: CalibrationResult, outcome: Decision) -> list[str]:
+    """Labels of the candidates diagnosis decided ``outcome`` for and never added."""
     added = {(e.name, tuple(e.joints)) for e in result.effects}
     out: list[str] = []
     for test in result.diagnosis:
-        label = test.get("label") or f"{test['effect']}{list(test['joints'])}"
-        if word in test["decision"] and (test["effect"], tuple(test["joints"])) not in added \
+        label = test.label or f"{test.effect}{list(test.joints)}"
+        if test.outcome is outcome and (test.effect, tuple(test.joints)) not in added \
                 and label not in out:
             out.append(label)
     return out

@@ -3,9 +3,9 @@
 ``EFFECTS`` is the registry: it maps the effect names of ``result.json`` to their classes, in
 the order diagnosis tries them, and is what diagnosis, the simulator, the ``simulate``
 command and the report read. Adding an effect means writing its module and adding its
-class to ``REGISTERED`` below. ``make_effect`` builds one for a robot and the fit data
-(lumped compliance without masses, a thermal reference from the data's mean, the
-driving joints of a coupling).
+class to ``REGISTERED`` below (an effect defined elsewhere calls ``register``).
+``make_effect`` builds one for a robot and the fit data (lumped compliance without masses,
+a thermal reference from the data's mean, the driving joints of a coupling).
 """
 
 from __future__ import annotations
@@ -32,6 +32,22 @@ REGISTERED: tuple[type[Effect], ...] = (JointCompliance, JointCyclic, JointScale
                                         JointCoupling, TransmissionCoupling, Backlash, Hysteresis,
                                         LinkDeflection)
 EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in REGISTERED}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Add ``cls`` to ``EFFECTS`` after the built-in ones (usable as a class decorator): an
+    effect written outside this package is then tried by diagnosis, simulated, written and
+    read back like the others. A name already taken by another class is refused."""
+    if EFFECTS.get(cls.name, cls) is not cls:
+        raise ValueError(f"effect name {cls.name!r} is taken by {EFFECTS[cls.name].__name__}")
+    EFFECTS[cls.name] = cls
+    return cls
+
+
+def data_columns() -> tuple[str, ...]:
+    """The data columns (besides ``payload``) the registered effects read, each once, in
+    registry order (``Effect.data_columns``)."""
+    return tuple(dict.fromkeys(c for cls in EFFECTS.values() for c in cls.data_columns))
 
 
 def effect_class(name: str, where: str = "effects") -> type[Effect]:
@@ -67,5 +83,6 @@ __all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Hys
            "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LinkDeflection",
            "Plausible",
            "REGISTERED", "RowContext", "ThermalDrift", "TransmissionCoupling", "TrueWorld",
-           "direction_column", "directions_of_motion", "effect_class", "effect_title",
-           "gravity_torque", "joint_list", "make_effect", "with_directions"]
+           "data_columns", "direction_column", "directions_of_motion", "effect_class",
+           "effect_title", "gravity_torque", "joint_list", "make_effect", "register",
+           "with_directions"]

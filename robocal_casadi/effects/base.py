@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -167,7 +167,10 @@ class Effect(ABC):
     whole table in order, or shifts the measured point); ``simulation_default``: the true
     values of one entry [unit] the simulator uses when none are given, in
     ``parameter_names`` order; ``formula``: the relation in one line, as the terminal
-    shows it (``q_true = (1 + s) q_read``).
+    shows it (``q_true = (1 + s) q_read``); ``data_columns``: the data columns (besides
+    ``payload``) diagnosis gathers for its candidates (``temperature`` [C], ``time`` [s]);
+    ``view_quantity``: what the report calls the fitted ``dq``; ``view_curve``: whether that
+    ``dq`` at a joint is a function of the plotted variable alone (drawn as a line).
     """
 
     PLOT_VARIABLES: ClassVar[tuple[str, ...]] = ("joint", "torque", "driver", "direction",
@@ -185,6 +188,9 @@ class Effect(ABC):
     tracker_only: ClassVar[bool] = False
     simulation_default: ClassVar[tuple[float, ...]]
     formula: ClassVar[str]
+    data_columns: ClassVar[tuple[str, ...]] = ()
+    view_quantity: ClassVar[str] = "reading error"
+    view_curve: ClassVar[bool] = False
 
     def __init__(self, joints: tuple[int, ...]):
         self.joints = tuple(int(j) for j in joints)  # 1-based
@@ -283,6 +289,55 @@ class Effect(ABC):
         """The unit of one parameter (``unit`` unless a subclass mixes units)."""
         return self.unit
 
+    # ----------------------------------------------------------------- description
+
+    def to_dict(self, values: Mapping[str, float],
+                columns: Collection[str] = ()) -> dict[str, Any]:
+        """One entry of ``effects_calibrated.yaml``: ``name``, ``joints`` (1-based),
+        ``parameters`` (``values``, name -> SI, in ``parameter_names`` order) and the
+        ``settings`` ``from_dict`` rebuilds the effect from; ``columns``: the extra columns of
+        the data the values were fitted on."""
+        return {"name": self.name, "joints": list(self.joints),
+                "parameters": {n: float(values[n]) for n in self.parameter_names()},
+                **self.settings(columns)}
+
+    def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
+        """What besides its joints and parameter names ``from_dict`` needs (none by
+        default); ``columns`` as in ``to_dict``."""
+        return {}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], robot: Robot) -> Effect:
+        """The effect an entry written by ``to_dict`` describes, for the calibrated
+        ``robot``. A malformed entry raises ``KeyError``, ``TypeError`` or ``ValueError``
+        (the reader names the file and entry)."""
+        return cls(tuple(int(j) for j in entry["joints"]))
+
+    def truth_dict(self, values: Mapping[str, float]) -> dict[str, Any]:
+        """The entry of the simulator's ``truth.yaml``: ``joints``, ``unit``, the
+        ``truth_settings`` and the true ``parameters`` (name -> SI)."""
+        return {"joints": sorted(set(self.joints)), "unit": self.unit, **self.truth_settings(),
+                "parameters": {n: float(values[n]) for n in self.parameter_names()}}
+
+    def truth_settings(self) -> dict[str, Any]:
+        """What a reader of ``truth.yaml`` needs besides joints and values (none by default)."""
+        return {}
+
+    def reads_payload(self) -> bool:
+        """Whether ``delta`` reads the row's ``payload`` [kg]."""
+        return False
+
+    def has_payload_term(self) -> bool:
+        """Whether the parameters include a term proportional to the payload, i.e. were
+        identified with a payload in the data."""
+        return False
+
+    @classmethod
+    def compliance_parameter(cls, joint: int) -> str | None:
+        """The parameter holding ``joint``'s (1-based) compliance under gravity [rad/Nm],
+        the figure a fleet compares across robots; None when the effect holds none."""
+        return None
+
     # ----------------------------------------------------------------- data
 
     def required_columns(self) -> tuple[str, ...]:
@@ -374,6 +429,23 @@ class Effect(ABC):
         if self.plot_variable == "joint":
             return Q[:, joint - 1]
         raise NotImplementedError(f"{self.name}: plot variable {self.plot_variable!r}")
+
+    @classmethod
+    def view_caption(cls, torque: bool) -> tuple[str, str] | None:
+        """The report's words for a joint panel: against what the error is plotted and
+        what the fitted curve shows (``torque``: plotted against the gravity torque); None
+        for the generic words built from ``plot_variable`` and ``formula``."""
+        return None
+
+    @classmethod
+    def column_of(cls, parameters: Collection[str]) -> str | None:
+        """The data column fitted ``parameters`` were fitted against, None for none."""
+        return None
+
+    @classmethod
+    def column_label(cls, column: str) -> str | None:
+        """A plot axis label of data column ``column`` with its unit, None for none."""
+        return None
 
     # ----------------------------------------------------------------- diagnosis
 

@@ -43,7 +43,7 @@ deliberately wide, it refuses only what no arm does).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from functools import lru_cache
 from typing import Any
 
@@ -165,6 +165,20 @@ class JointCompliance(Effect):
     plot_variable = "torque"
     simulation_default = (1e-6,)
     formula = "q_true = q_read - c g(q_read), g the gravity torque (links + payload column)"
+    view_quantity = "deflection"
+
+    @classmethod
+    def view_caption(cls, torque: bool) -> tuple[str, str]:
+        if torque:
+            return ("against the gravity torque the joint holds, computed with pinocchio from "
+                    "the calibrated robot's link masses and the data's payload column. Without "
+                    "compliance the error grows with the torque; with it, it does not",
+                    "the dashed line (right axis) is the fitted deflection -c tau")
+        return ("against the joint angle: the robot file gives no link masses, so the "
+                "gravity torque cannot be computed and the compliance was fitted with "
+                "lumped link terms",
+                "the black points (right axis) are the fitted deflection at each "
+                "measurement, which depends on the whole pose")
 
     def __init__(self, joints: tuple[int, ...], robot: Robot | None = None,
                  payload: bool = False):
@@ -200,6 +214,28 @@ class JointCompliance(Effect):
             self.terms[joint] = tuple(t for t in range(limit)
                                       if _term_name(joint, t) in wanted)
         return self
+
+    def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
+        """``payload``: whether the payload term was (or, with a payload column in the
+        data, could have been) identified."""
+        return {"payload": bool(self.payload or "payload" in columns)}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], robot: Robot) -> JointCompliance:
+        """Lumped terms read back by name (``with_terms_named``)."""
+        names = [str(n) for n in entry["parameters"]]
+        return cls(tuple(int(j) for j in entry["joints"]), robot=robot,
+                   payload=entry.get("payload", False)).with_terms_named(names, robot)
+
+    def reads_payload(self) -> bool:
+        return True
+
+    def has_payload_term(self) -> bool:
+        return self.payload
+
+    @classmethod
+    def compliance_parameter(cls, joint: int) -> str | None:
+        return f"c{joint}"
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,

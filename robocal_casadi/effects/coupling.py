@@ -18,7 +18,7 @@ changes their length with those joints' angles.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -112,6 +112,19 @@ class JointCoupling(Effect):
             entries[j - 1] = entries.get(j - 1, 0) + theta[2 * i] * ca.sin(q) \
                 + theta[2 * i + 1] * ca.cos(q)
         return column(entries, row.robot.dof), None
+
+    def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
+        """``drivers``: the driving joint of each joint, 1-based."""
+        return {"drivers": [int(d) for d in self.drivers]}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], robot: Robot) -> JointCoupling:
+        return cls(tuple(int(j) for j in entry["joints"]),
+                   drivers=[int(d) for d in entry.get("drivers", ())])
+
+    def truth_settings(self) -> dict[str, Any]:
+        """``drivers``: coupled joint -> driving joint, 1-based."""
+        return {"drivers": {int(j): int(k) for j, k in self.pairs}} if self.drivers else {}
 
     @classmethod
     def create(cls, joints, robot: Robot | None = None,

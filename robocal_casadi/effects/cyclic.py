@@ -48,6 +48,12 @@ class JointCyclic(Effect):
     revolute_only = True
     simulation_default = (2e-4, 1e-4, 1e-4, 5e-5)
     formula = "q_true = q_read + a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q"
+    view_curve = True
+
+    @classmethod
+    def view_caption(cls, torque: bool) -> tuple[str, str]:
+        return ("against the joint angle", "the dashed line (right axis) is the fitted reading "
+                "error a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q")
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"{h}_{j}" for j in self.joints for h in HARMONICS)

@@ -50,7 +50,7 @@ bends, not the joint.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import casadi as ca
@@ -114,6 +114,21 @@ class LinkDeflection(Effect):
 
     def __repr__(self) -> str:
         return f"LinkDeflection(links={list(self.joints)}, payload={self.payload})"
+
+    def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
+        """``payload``: whether the sag under the payload is a term of its own."""
+        return {"payload": self.payload}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], robot: Robot) -> LinkDeflection:
+        return cls(tuple(int(j) for j in entry["joints"]),
+                   payload=bool(entry.get("payload", True)))
+
+    def reads_payload(self) -> bool:
+        return self.payload
+
+    def has_payload_term(self) -> bool:
+        return self.payload
 
     @property
     def label(self) -> str:

@@ -39,6 +39,12 @@ class JointScale(Effect):
     plot_variable = "joint"
     simulation_default = (5e-4,)
     formula = "q_true = (1 + s) q_read"
+    view_curve = True
+
+    @classmethod
+    def view_caption(cls, torque: bool) -> tuple[str, str]:
+        return ("against the joint angle",
+                "the dashed line (right axis) is the fitted reading error s q")
 
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(f"s{j}" for j in self.joints)

@@ -16,7 +16,7 @@ start, so ``|k_t|`` stays below 3e-5/K x 2 K / 60 s = 1e-6/s.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import casadi as ca
@@ -50,6 +50,7 @@ class ThermalDrift(Effect):
     sentence = "link lengths grow by {value:.3g} per {per} ({key})"
     plot_variable = "column"
     per = "column"
+    data_columns = tuple(COLUMNS)
     simulation_default = (1.2e-5,)
     formula = ("every d_i, a_i of the true robot becomes L (1 + k (T - T_ref)); a drifting\n"
                "      temperature column is written (see --temperature, --reference-temperature)")
@@ -80,6 +81,28 @@ class ThermalDrift(Effect):
     def plausible(self, parameter: str, drive: str = "gear") -> Plausible:
         """The same for every drive: thermal growth is the links'."""
         return PLAUSIBLE[parameter]
+
+    def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
+        """``column`` and its ``reference`` ``T_ref`` [C or s]."""
+        return {"column": self.column, "reference": float(self.constants()[0])}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any], robot: Robot) -> ThermalDrift:
+        return cls(tuple(int(j) for j in entry["joints"]),
+                   column=entry.get("column", "temperature"),
+                   reference_value=float(entry["reference"]))
+
+    @classmethod
+    def column_of(cls, parameters: Collection[str]) -> str | None:
+        """The column whose coefficient is among ``parameters`` (``k_T``, ``k_t``)."""
+        return next((c for c, (name, _) in COLUMNS.items() if name in parameters), None)
+
+    @classmethod
+    def column_label(cls, column: str) -> str | None:
+        return {"temperature": "temperature [C]", "time": "time [s]"}.get(column)
+
+    def truth_settings(self) -> dict[str, Any]:
+        return {"column": self.column}
 
     @classmethod
     def create(cls, joints=(), robot: Robot | None = None,

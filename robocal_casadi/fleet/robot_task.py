@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..effects import EFFECTS
 from ..errors import InputError, RobocalError
 from ..output import atomic_file, not_replacing_inputs, replace_refusal, written_by_robocal
 from .spec import FleetRobot
@@ -194,12 +195,12 @@ def robot_summary(result) -> dict:
         effects.append({"name": effect.name, "joints": list(effect.joints), "unit": effect.unit,
                         "parameters": {k: float(v) for k, v in effect.parameters.items()},
                         "std": std})
-        if effect.name == "joint_compliance":
-            for joint in effect.joints:
-                key = f"c{joint}"
-                if key in effect.parameters:
-                    compliance[str(joint)] = {"value": float(effect.parameters[key]),
-                                              "std": std.get(key)}
+        cls = EFFECTS.get(effect.name)
+        keys = {j: cls.compliance_parameter(j) for j in effect.joints} if cls else {}
+        for joint, key in keys.items():
+            if key is not None and key in effect.parameters:
+                compliance[str(joint)] = {"value": float(effect.parameters[key]),
+                                          "std": std.get(key)}
     estimates = {p.name: p for p in result.parameters}
     offsets = {}
     for index, joint in enumerate(result.robot_nominal.joints, start=1):

@@ -3,21 +3,22 @@
 An engineer believes an effect when the error before it (geometric calibration only)
 shows a pattern against the effect's own variable and the error after it does not:
 
-- ``joint_compliance``: the gravity torque at the joint [N m] (pinocchio's generalized
-  gravity of the calibrated robot's links, plus the row's ``payload`` [kg] at
-  ``payload_com`` in the flange frame; the flange origin when the data gives none).
-  A robot file without link masses has no torque to show: the joint angle instead.
-- ``joint_cyclic``, ``joint_scale``: the joint angle; ``joint_coupling``: the angle of
-  the driving joint; ``backlash``: the joint's direction of motion (-1, 0, +1, from the
-  row order of the full table).
-- ``thermal_drift``: the ``temperature`` [C] or ``time`` [s] column.
+- ``torque``: the gravity torque at the joint [N m] (pinocchio's generalized gravity of
+  the calibrated robot's links, plus the row's ``payload`` [kg] at ``payload_com`` in
+  the flange frame; the flange origin when the data gives none). A robot file without
+  link masses has no torque to show: the joint angle instead.
+- ``joint``: the joint angle; ``driver``: the angle of the driving joint; ``direction``:
+  the joint's direction of motion (-1, 0, +1, from the row order of the full table).
+- ``column``: a data column the effect reads (``temperature`` [C], ``time`` [s]).
 
-Which it is, and its title, come from the effect's class (``Effect.plot_variable``,
-``Effect.plot_values``, ``Effect.title``). The fitted effect is the effect object's own
-evaluation (``Effect.contribution``, the same ``delta`` the identification used) with
-the values of the result (``result.effect_models``, ``result.effect_values``, SI), on
-the calibrated geometry: the joint correction ``dq_j`` [rad or m] for joint effects, the
-relative length change ``k (T - T_ref)`` [1] for thermal drift. Everything returned here
+Which it is, its title and the caption's words come from the effect's class
+(``Effect.plot_variable``, ``Effect.plot_values``, ``Effect.title``,
+``Effect.view_caption``, ``Effect.view_quantity``, ``Effect.column_label``). The fitted
+effect is the effect object's own evaluation (``Effect.contribution``, the same
+``delta`` the identification used) with the values of the result
+(``result.effect_models``, ``result.effect_values``, SI), on the calibrated geometry:
+the joint correction ``dq_j`` [rad or m] for joint effects, the relative length change
+``k (T - T_ref)`` [1] for an effect of a data column. Everything returned here
 is in display units (``numbers.display_units``: lengths in mm, angles in the robot
 file's angle unit; torques in N m, forces in N).
 """
@@ -28,7 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..effects import EFFECTS, effect_title
+from ..effects import EFFECTS, data_columns, effect_title
 from ..effects.base import Effect
 from ..effects.motion import with_directions
 from ..results import CalibrationResult, DatasetResiduals, EffectFinding
@@ -138,10 +139,9 @@ def _column_of(finding: EffectFinding, models, residuals) -> str:
         column = getattr(model, "column", None)
         if column:
             return column
-    names = " ".join(finding.parameters)
-    if "k_t" in names.split():
-        return "time"
-    for column in ("temperature", "time"):
+    cls = EFFECTS.get(finding.name)
+    named = cls.column_of(tuple(finding.parameters)) if cls is not None else None
+    for column in ((named,) if named else ()) + data_columns():
         if any(column in r.extras for r in residuals):
             return column
     return "row"
@@ -161,8 +161,9 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
     # per-row inputs of the row order (directions of motion) come from the full table
     with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))
                         for r in residuals if r.joints is not None)
+    cls = EFFECTS.get(finding.name)
     joint_effect = (bool(finding.joints) and bool(with_joints)
-                    and EFFECTS.get(finding.name, EFFECTS["joint_scale"]).per != "column")
+                    and (cls is None or cls.per != "column"))
     title = effect_title(finding.name)
     if joint_effect:
         title += f", {_joint_list(finding.joints)}"
@@ -181,10 +182,10 @@ def _gather(residuals: DatasetResiduals, units: Units):
 
 def _joint_view(result, finding, title, models, residuals) -> EffectView:
     units, robot = display_units(result.units), result.robot_calibrated
-    compliance = finding.name == "joint_compliance"
-    torque = compliance and robot.has_inertia
+    cls = EFFECTS.get(finding.name)
+    variable = cls.plot_variable if cls is not None else "joint"
+    torque = variable == "torque" and robot.has_inertia
     model = models[0][0] if models else None
-    variable = EFFECTS[finding.name].plot_variable if finding.name in EFFECTS else "joint"
     if variable == "torque" or model is None:
         variable = "joint"  # without the effect object, the joint angle is all there is
     panels = []
@@ -224,32 +225,17 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             x_label = f"q{driver} [{joint_reading_unit(robot, driver - 1, units)[1]}]"
         else:
             x_label = f"q{joint} [{angle_unit}]"
-        what = "deflection" if compliance else "reading error"
-        curve = torque or finding.name in ("joint_cyclic", "joint_scale")
+        what = cls.view_quantity if cls is not None else "reading error"
+        curve = torque or (cls is not None and cls.view_curve)
         panels.append(EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin),
                                   x_label, fitted, f"fitted {what} dq{joint} [{angle_unit}]",
                                   fitted_is_curve=curve))
     before_after = ("Error before the effects (geometric calibration only, orange) and after "
                     "them (with every effect found, blue) on the fit data; lines are the RMS "
                     "in bins")
-    if compliance and torque:
-        against = ("against the gravity torque the joint holds, computed with pinocchio from "
-                   "the calibrated robot's link masses and the data's payload column. Without "
-                   "compliance the error grows with the torque; with it, it does not")
-        fitted_text = "the dashed line (right axis) is the fitted deflection -c tau"
-    elif compliance:
-        against = ("against the joint angle: the robot file gives no link masses, so the "
-                   "gravity torque cannot be computed and the compliance was fitted with "
-                   "lumped link terms")
-        fitted_text = ("the black points (right axis) are the fitted deflection at each "
-                       "measurement, which depends on the whole pose")
-    elif finding.name == "joint_cyclic":
-        against = "against the joint angle"
-        fitted_text = ("the dashed line (right axis) is the fitted reading error "
-                       "a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q")
-    elif finding.name == "joint_scale":
-        against = "against the joint angle"
-        fitted_text = "the dashed line (right axis) is the fitted reading error s q"
+    words = cls.view_caption(torque) if cls is not None else None
+    if words is not None:
+        against, fitted_text = words
     else:
         against = {"driver": "against the angle of the driving joint",
                    "direction": "against the joint's direction of motion (from the row order)",
@@ -287,7 +273,7 @@ def _column_view(result, finding, title, models, residuals, units) -> EffectView
     xs, geo, fin, fits = [], [], [], []
     for r in residuals:
         rows, g, f = _gather(r, units)
-        if column in ("temperature", "time"):
+        if column != "row":
             if column not in r.extras:
                 continue
             x = np.asarray(r.extras[column], dtype=float)[rows]
@@ -297,7 +283,7 @@ def _column_view(result, finding, title, models, residuals, units) -> EffectView
         geo.append(g)
         fin.append(f)
         reference = next((getattr(m, "reference_value", None) for m, _ in models), None)
-        if models and reference is not None and column in ("temperature", "time"):
+        if models and reference is not None and column != "row":
             k = sum(float(theta[0]) for _, theta in models)
             fits.append(k * (x - reference) * 1e6)
         else:
@@ -305,8 +291,8 @@ def _column_view(result, finding, title, models, residuals, units) -> EffectView
     if not xs:
         return EffectView(finding.name, title, (), f"{title}: no data to plot.", column)
     fitted = None if any(v is None for v in fits) else np.concatenate(fits)
-    label = {"temperature": "temperature [C]", "time": "time [s]"}.get(
-        column, "data row (measurement order)")
+    labels = (cls.column_label(column) for cls in EFFECTS.values())
+    label = next((text for text in labels if text), "data row (measurement order)")
     panel = EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin), label,
                         fitted, "fitted length change [µm/m]", True)
     caption = (f"{title}. Error before the effects (geometric calibration only, orange) and "

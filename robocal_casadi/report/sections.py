@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from ..measurement import MODELS, SphereLaserModel
-from ..results import CalibrationResult
+from ..results import CalibrationResult, Decision, DiagnosisRecord
 from ..units import Units
 from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
@@ -505,16 +505,18 @@ NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
                 "cv_rms_before", "cv_rms_after"}
 
 
-def diagnosis_blocks(diagnosis: tuple, units: Units) -> list:
+def diagnosis_blocks(diagnosis: tuple[DiagnosisRecord, ...], units: Units) -> list:
     """What diagnosis tested: the candidates added and the strongest few rejected in the
     main text, every candidate in a block folded away on screen (printed in full)."""
-    entries = [dict(entry) for entry in diagnosis]
-    added = [e for e in entries if e.get("decision") == "added"]
-    rejected = [e for e in entries if e.get("decision") != "added"
-                and isinstance(e.get("bic_drop"), (int, float))
-                and math.isfinite(float(e["bic_drop"]))
-                and int(e.get("parameters", 1) or 0) > 0]
-    rejected.sort(key=lambda e: float(e["bic_drop"]), reverse=True)
+    entries = [entry.as_dict() for entry in diagnosis]
+    is_added = [entry.outcome is Decision.ADDED for entry in diagnosis]
+    added = [e for e, a in zip(diagnosis, is_added) if a]
+    numbers = [(t, e) for t, e, a in zip(diagnosis, entries, is_added) if not a
+               and isinstance(e.get("bic_drop"), (int, float))
+               and math.isfinite(float(e["bic_drop"]))
+               and int(e.get("parameters", 1) or 0) > 0]
+    numbers.sort(key=lambda pair: float(pair[1]["bic_drop"]), reverse=True)
+    rejected = [t for t, _ in numbers]
     strongest = rejected[:DIAGNOSIS_SHOWN]
     rounds = max((int(e.get("round", 1) or 1) for e in entries), default=1)
     shown = added + strongest
@@ -538,7 +540,8 @@ def diagnosis_blocks(diagnosis: tuple, units: Units) -> list:
     return blocks
 
 
-def diagnosis_table(diagnosis: tuple, units: Units, *, name: str = "diagnosis",
+def diagnosis_table(diagnosis: tuple[DiagnosisRecord, ...], units: Units, *,
+                    name: str = "diagnosis",
                     caption: str = "Every candidate tested by diagnosis") -> Table:
     """Candidate effects diagnosis tested, with the numbers it recorded.
 
@@ -546,8 +549,9 @@ def diagnosis_table(diagnosis: tuple, units: Units, *, name: str = "diagnosis",
     and are shown in the file's length unit; relative drops in percent.
     """
     keys: list[str] = []
-    for entry in diagnosis:
-        for k, v in dict(entry).items():
+    entries = [entry.as_dict() for entry in diagnosis]
+    for entry in entries:
+        for k, v in entry.items():
             if k not in keys and isinstance(v, (int, float, str, bool, list, tuple)):
                 keys.append(k)
     lengths = {k for k in keys if "rms" in k and "drop" not in k}
@@ -568,10 +572,10 @@ def diagnosis_table(diagnosis: tuple, units: Units, *, name: str = "diagnosis",
             return "-"
         return _scalar_text(value)
 
-    rows = tuple(tuple(cell(k, dict(entry).get(k, "")) for k in keys) for entry in diagnosis)
+    rows = tuple(tuple(cell(k, entry.get(k, "")) for k in keys) for entry in entries)
     header = tuple(f"{DIAGNOSIS_HEADERS.get(k, k)} [{units.length}]" if k in lengths
                    else DIAGNOSIS_HEADERS.get(k, k) for k in keys)
-    muted = tuple(dict(entry).get("decision") != "added" for entry in diagnosis)
+    muted = tuple(entry.outcome is not Decision.ADDED for entry in diagnosis)
     return Table(name, caption, header, rows, muted,
                  tuple(k in NUMERIC_KEYS for k in keys))
 
