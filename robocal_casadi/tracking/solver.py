@@ -232,8 +232,6 @@ class NlpsolSolver:
         suffix = f", qpsol={self.qpsol!r}" if self.qpsol else ""
         return f"NlpsolSolver({self.problem.robot.name!r}, plugin={self.plugin!r}{suffix})"
 
-    # long: one real-time loop over arrays bound to the step function once; its active
-    # set, history and errors would only be passed to and fro by a split, every cycle.
     def solve(self, previous: np.ndarray, goal: np.ndarray, lower: np.ndarray,
               upper: np.ndarray, start: np.ndarray | None = None) -> SolveOutcome:
         """As ``GaussNewtonSolver.solve``."""
