@@ -192,41 +192,20 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
             f"{needed} {what} of this kind", file=setup.path)
-    best: tuple[float, list[int], int] | None = None
     with Progress("plan: exchange", total=None, stream=stream) as progress:
-        starts = STARTS_CONDITION if index == "O2" else STARTS
-        for start in range(starts):  # a greedy start, then random ones: keep the best
-            if start == 0:
-                initial = greedy(info, count, rng)
-            else:
-                initial = list(rng.choice(len(candidates), size=count, replace=False))
-            chosen, swaps = exchange(info, initial, index, progress=progress)
-            value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
-            if best is None or value > best[0]:
-                best = (value, chosen, swaps)
-    assert best is not None  # both start counts are positive
-    _, chosen, swaps = best
+        chosen, swaps = _best_exchange(info, len(candidates), count, index, rng, progress)
     chosen_candidates = tuple(candidates[i] for i in chosen)
     spectrum = info.spectrum(chosen, scaling(index))
     refined = False
     if refine:
-        for _ in range(refine_rounds):
-            better = refine_plan(setup, workspace, row_model, info, chosen_candidates, index)
-            if better is None:
-                break
-            chosen_candidates, spectrum = better
-            refined = True
+        chosen_candidates, spectrum, refined = _refined(
+            setup, workspace, row_model, info, chosen_candidates, spectrum, index, refine_rounds)
     value = index_value(index, spectrum)
     if not np.isfinite(value) or spectrum[-1] <= 1e-10 * spectrum[0]:
         raise InputError(f"no plan of {count} found that identifies all {info.m} parameters; "
                          f"ask for more (--count)", file=setup.path)
-    randoms = random_designs(info, count, RANDOM_PLANS, rng)
-    random_values = np.array([index_value(index, info.spectrum(d, scaling(index)))
-                              for d in randoms])
-    random_tool = np.array([tool_error(info.spectrum(d, "tool"), setup.noise) for d in randoms])
-    random_condition = np.array([exact_condition(row_model.blocks([candidates[i] for i in d]),
-                                                 row_model.parameters, row_model.shared)
-                                 for d in randoms])
+    random_values, random_tool, random_condition = _random_plans(
+        setup, row_model, info, candidates, count, index, rng)
     blocks = row_model.blocks(list(chosen_candidates))
     predicted = tool_error(info.spectrum_of([info.restrict(b) for b in blocks], "tool"),
                            setup.noise)
@@ -236,3 +215,51 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
                 info.identifiable_names, len(candidates), swaps, refined, predicted,
                 random_tool, exact_condition(blocks, row_model.parameters, row_model.shared),
                 travel, bound, random_condition)
+
+
+def _best_exchange(info: Information, pool: int, count: int, index: str,
+                   rng: np.random.Generator, progress: Progress) -> tuple[list[int], int]:
+    """``(chosen candidates, swaps)``: the best exchange search of a greedy start and
+    random ones (more for the condition number, whose landscape is rougher)."""
+    best: tuple[float, list[int], int] | None = None
+    starts = STARTS_CONDITION if index == "O2" else STARTS
+    for start in range(starts):  # a greedy start, then random ones: keep the best
+        if start == 0:
+            initial = greedy(info, count, rng)
+        else:
+            initial = list(rng.choice(pool, size=count, replace=False))
+        chosen, swaps = exchange(info, initial, index, progress=progress)
+        value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
+        if best is None or value > best[0]:
+            best = (value, chosen, swaps)
+    assert best is not None  # both start counts are positive
+    return best[1], best[2]
+
+
+def _refined(setup, workspace, row_model: RowModel, info: Information, chosen: tuple,
+             spectrum: np.ndarray, index: str, rounds: int) -> tuple[tuple, np.ndarray, bool]:
+    """``(candidates, spectrum, refined)`` after up to ``rounds`` continuous refinements,
+    stopping at the first that does not help."""
+    refined = False
+    for _ in range(rounds):
+        better = refine_plan(setup, workspace, row_model, info, chosen, index)
+        if better is None:
+            break
+        chosen, spectrum = better
+        refined = True
+    return chosen, spectrum, refined
+
+
+def _random_plans(setup, row_model: RowModel, info: Information, candidates, count: int,
+                  index: str, rng: np.random.Generator
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random feasible plans of ``count`` for comparison: their index values, predicted
+    tool errors [m] and exact condition numbers."""
+    randoms = random_designs(info, count, RANDOM_PLANS, rng)
+    random_values = np.array([index_value(index, info.spectrum(d, scaling(index)))
+                              for d in randoms])
+    random_tool = np.array([tool_error(info.spectrum(d, "tool"), setup.noise) for d in randoms])
+    random_condition = np.array([exact_condition(row_model.blocks([candidates[i] for i in d]),
+                                                 row_model.parameters, row_model.shared)
+                                 for d in randoms])
+    return random_values, random_tool, random_condition

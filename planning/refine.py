@@ -29,6 +29,8 @@ user's index.
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
 
@@ -66,97 +68,157 @@ def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Informat
     return tuple(refined), spectrum
 
 
+class _Program:
+    """The refinement NLP as it is assembled: variables with bounds and starts,
+    constraints with bounds, and the symbolic row blocks of each candidate."""
+
+    def __init__(self) -> None:
+        self.variables: list = []
+        self.starts: list = []
+        self.lower: list = []
+        self.upper: list = []
+        self.constraints: list = []
+        self.c_lower: list = []
+        self.c_upper: list = []
+        self.blocks: list = []
+
+    def constrain(self, expression, lower, upper) -> None:
+        self.constraints.append(expression)
+        self.c_lower.append(lower)
+        self.c_upper.append(upper)
+
+
 def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
-    kin = workspace.kinematics
-    p = row_model.p
-    dof = kin.dof
-    variables, starts, lower, upper = [], [], [], []
-    constraints, c_lower, c_upper = [], [], []
-    blocks = []
-    keep = info.columns
-    heights_fn = workspace.heights
-    body = workspace.body
-    if body is not None:
+    dof = workspace.kinematics.dof
+    program = _Program()
+    clearance = None
+    if workspace.body is not None:
         q = ca.SX.sym("q", dof)
-        clearance = ca.Function("clearance", [q], [body.clearance_bound(q)])
+        clearance = ca.Function("clearance", [q], [workspace.body.clearance_bound(q)])
     for c, candidate in enumerate(candidates):
-        Q0 = candidate.joints
-        Q = ca.MX.sym(f"Q{c}", dof, len(Q0))
-        variables.append(ca.vec(Q))
-        starts.append(Q0.T.ravel(order="F"))
-        lo = np.maximum(workspace.lower, -np.inf)
-        hi = workspace.upper
-        lower.append(np.maximum(np.tile(lo, (len(Q0), 1)), Q0 - STEP).T.ravel(order="F"))
-        upper.append(np.minimum(np.tile(hi, (len(Q0), 1)), Q0 + STEP).T.ravel(order="F"))
-        for k in range(len(Q0)):
-            constraints.append(heights_fn(Q[:, k], p))
-            c_lower.append(np.full(dof, workspace.table_height + MARGIN))
-            c_upper.append(np.full(dof, np.inf))
-            if body is not None:  # capsules clear of the table, each other, the sight line
-                constraints.append(clearance(Q[:, k]))
-                c_lower.append([MARGIN])
-                c_upper.append([np.inf])
+        Q = _joint_variables(program, workspace, candidate, c)
+        _keep_clear(program, workspace, row_model.p, Q, len(candidate.joints), clearance)
         reach = setup.model.reach
         if reach == "configuration":
-            q = Q[:, 0]
-            world = kin.point(q, p, setup.offset)
-            blocks.append(row_model.symbolic_block(candidate, Q))
-            constraints.append(world[2])
-            c_lower.append([workspace.table_height + MARGIN])
-            c_upper.append([np.inf])
-            if setup.instrument is not None:
-                T = kin.flange_pose(q, p)
-                towards = setup.instrument - world
-                constraints.append(ca.dot(T[:3, 2], towards) / ca.norm_2(towards))
-                c_lower.append([np.cos(setup.visibility_cone - ANGLE_MARGIN)])
-                c_upper.append([1.0])
+            _keep_visible(program, setup, workspace, row_model, candidate, Q)
         elif reach == "beam":
-            q = Q[:, 0]
-            T = kin.flange_pose(q, p)
-            o = T[:3, :3] @ setup.offset + T[:3, 3]
-            axis = setup.axis / np.linalg.norm(setup.axis)
-            d = T[:3, :3] @ axis
-            v = o - setup.centre
-            b = ca.dot(d, v)
-            disc = b**2 - (ca.dot(v, v) - setup.radius**2)
-            reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
-            hit_normal = (o + reading * d - setup.centre) / setup.radius
-            constraints += [disc, reading, -ca.dot(d, hit_normal), o[2]]
-            c_lower += [[1e-8], [setup.laser_range[0]],
+            _keep_on_sphere(program, setup, workspace, row_model, candidate, Q)
+        else:
+            _keep_in_sockets(program, setup, workspace, row_model, candidate, Q)
+    objective = _objective(_information(program.blocks, info), info, mode)
+    values = _run_ipopt(program, objective, max_iterations)
+    out, start = [], 0
+    for candidate in candidates:
+        size = candidate.joints.size
+        out.append(values[start:start + size].reshape(len(candidate.joints), dof))
+        start += size
+    return out
+
+
+def _joint_variables(program: _Program, workspace, candidate, c: int):
+    """The joint readings of candidate ``c`` as variables, within ``STEP`` of the chosen
+    ones and inside the joint limits."""
+    Q0 = candidate.joints
+    Q = ca.MX.sym(f"Q{c}", workspace.kinematics.dof, len(Q0))
+    program.variables.append(ca.vec(Q))
+    program.starts.append(Q0.T.ravel(order="F"))
+    lo = np.maximum(workspace.lower, -np.inf)
+    hi = workspace.upper
+    program.lower.append(np.maximum(np.tile(lo, (len(Q0), 1)), Q0 - STEP).T.ravel(order="F"))
+    program.upper.append(np.minimum(np.tile(hi, (len(Q0), 1)), Q0 + STEP).T.ravel(order="F"))
+    return Q
+
+
+def _keep_clear(program: _Program, workspace, p, Q, readings: int, clearance) -> None:
+    """Every joint frame origin above the worktable; the capsules clear of the table,
+    of each other and of the sight line."""
+    dof = workspace.kinematics.dof
+    for k in range(readings):
+        program.constrain(workspace.heights(Q[:, k], p),
+                          np.full(dof, workspace.table_height + MARGIN), np.full(dof, np.inf))
+        if clearance is not None:
+            program.constrain(clearance(Q[:, k]), [MARGIN], [np.inf])
+
+
+def _keep_visible(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
+    """Any configuration (tracker): the target above the table, facing the instrument."""
+    kin, p = workspace.kinematics, row_model.p
+    q = Q[:, 0]
+    world = kin.point(q, p, setup.offset)
+    program.blocks.append(row_model.symbolic_block(candidate, Q))
+    program.constrain(world[2], [workspace.table_height + MARGIN], [np.inf])
+    if setup.instrument is not None:
+        T = kin.flange_pose(q, p)
+        towards = setup.instrument - world
+        program.constrain(ca.dot(T[:3, 2], towards) / ca.norm_2(towards),
+                          [np.cos(setup.visibility_cone - ANGLE_MARGIN)], [1.0])
+
+
+def _keep_on_sphere(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
+    """Aiming a beam (laser on a sphere): the beam hits the sphere within the incidence
+    limit and the sensor's range [m]; the expected reading follows the pose."""
+    T = workspace.kinematics.flange_pose(Q[:, 0], row_model.p)
+    o = T[:3, :3] @ setup.offset + T[:3, 3]
+    axis = setup.axis / np.linalg.norm(setup.axis)
+    d = T[:3, :3] @ axis
+    v = o - setup.centre
+    b = ca.dot(d, v)
+    disc = b**2 - (ca.dot(v, v) - setup.radius**2)
+    reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
+    hit_normal = (o + reading * d - setup.centre) / setup.radius
+    program.constraints += [disc, reading, -ca.dot(d, hit_normal), o[2]]
+    program.c_lower += [[1e-8], [setup.laser_range[0]],
                         [np.cos(setup.max_incidence - ANGLE_MARGIN)],
                         [workspace.table_height + MARGIN]]
-            c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
-            blocks.append(row_model.symbolic_block(candidate, Q, data=[reading]))
-        else:
-            blocks.append(row_model.symbolic_block(candidate, Q))
-            for k, name in enumerate(candidate.points):
-                constraints.append(kin.point(Q[:, k], p, setup.offset) - candidate.sockets[name])
-                c_lower.append(np.zeros(3))
-                c_upper.append(np.zeros(3))
+    program.c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
+    program.blocks.append(row_model.symbolic_block(candidate, Q, data=[reading]))
+
+
+def _keep_in_sockets(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
+    """Seated in sockets (bars and artifacts): the probe stays on its socket."""
+    program.blocks.append(row_model.symbolic_block(candidate, Q))
+    for k, name in enumerate(candidate.points):
+        program.constrain(
+            workspace.kinematics.point(Q[:, k], row_model.p, setup.offset)
+            - candidate.sockets[name], np.zeros(3), np.zeros(3))
+
+
+def _information(blocks, info: Information):
+    """The plan's information over the kept columns, after the Schur complement of the
+    shared placement unknowns (symbolic)."""
     m, shared = info.m, info.shared
-    A = 0
+    A: Any = 0  # becomes the symbolic sum of the blocks' normal matrices
     for X in blocks:
-        Xk = ca.horzcat(*[X[:, int(j)] for j in keep])
+        Xk = ca.horzcat(*[X[:, int(j)] for j in info.columns])
         A = A + Xk.T @ Xk
     M = A[:m, :m]
     if shared:
         M = M - A[:m, m:] @ ca.solve(A[m:, m:], A[m:, :m])
+    return M
+
+
+def _objective(M, info: Information, mode: str):
+    """The smooth objective standing for the user's index (see the module docstring)."""
+    m = info.m
     if mode == "tool":
         # the index itself: log sum 1 / s_i^2 of J L^-T (info.tool = L^-1)
-        T = ca.DM(info.tool)
-        objective = ca.log(ca.trace(ca.solve(T @ M @ T.T, ca.DM.eye(m))))
-    elif mode == "design":
+        T = ca.DM(info._tool_transform())
+        return ca.log(ca.trace(ca.solve(T @ M @ T.T, ca.DM.eye(m))))
+    if mode == "design":
         # columns normalised (unit diagonal): the sum of 1 / eigenvalues weighs the
         # smallest ones most, a smooth stand-in for the condition number
         d = ca.sqrt(ca.diag(M))
-        objective = ca.log(ca.trace(ca.solve(M / (d @ d.T), ca.DM.eye(m))))
-    else:
-        d = ca.DM(info.reference)
-        objective = -ca.log(ca.det(M / (d @ d.T)))
-    x = ca.vertcat(*variables)
-    g = ca.vertcat(*constraints)
-    lbg = np.concatenate([np.ravel(v) for v in c_lower])
-    ubg = np.concatenate([np.ravel(v) for v in c_upper])
+        return ca.log(ca.trace(ca.solve(M / (d @ d.T), ca.DM.eye(m))))
+    d = ca.DM(info.reference)
+    return -ca.log(ca.det(M / (d @ d.T)))
+
+
+def _run_ipopt(program: _Program, objective, max_iterations: int) -> np.ndarray:
+    """IPOPT from the chosen plan; the best feasible iterate when it stops early."""
+    x = ca.vertcat(*program.variables)
+    g = ca.vertcat(*program.constraints)
+    lbg = np.concatenate([np.ravel(v) for v in program.c_lower])
+    ubg = np.concatenate([np.ravel(v) for v in program.c_upper])
     best = BestFeasible(x.shape[0], g.shape[0], lbg, ubg, FEASIBLE, "refine_best_feasible")
     solver = ca.nlpsol("refine", "ipopt", {"x": x, "f": objective, "g": g},
                        {"print_time": False, "iteration_callback": best,
@@ -164,20 +226,14 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
                                   "hessian_approximation": "limited-memory",
                                   "tol": 1e-6, "constr_viol_tol": 1e-9,
                                   "bound_relax_factor": 0.0}})
-    x0 = np.concatenate(starts)
-    result = solver(x0=x0, lbx=np.concatenate(lower), ubx=np.concatenate(upper),
+    x0 = np.concatenate(program.starts)
+    result = solver(x0=x0, lbx=np.concatenate(program.lower), ubx=np.concatenate(program.upper),
                     lbg=lbg, ubg=ubg)
     if not solver.stats().get("success") and best.x is not None:
         # stopped at the iteration limit: its last iterate may break a constraint, the
         # best one that met them all is a plan
         result = {"x": best.x}
-    values = np.asarray(result["x"]).ravel()
-    out, start = [], 0
-    for candidate in candidates:
-        size = candidate.joints.size
-        out.append(values[start:start + size].reshape(len(candidate.joints), dof))
-        start += size
-    return out
+    return np.asarray(result["x"]).ravel()
 
 
 def _rebuild(setup, workspace, candidates, Q_new):

@@ -163,6 +163,8 @@ def _jacobian(evaluate: Evaluate, x: Any) -> np.ndarray:
     return J
 
 
+# long: the outer (accepted steps) and inner (damping) loops read as the algorithm of the
+# module docstring in one place; every part of a step is already a helper of its own.
 def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
                         tolerances: Tolerances = Tolerances(), damping: Damping | None = DAMPING,
                         retract: Callable[[Any, np.ndarray], Any] = _vector_retract,

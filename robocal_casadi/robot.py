@@ -282,27 +282,13 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
     )
     base = _frame_from_dict(content.get("base"), units, file=file, where="base")
     tool = _frame_from_dict(content.get("tool"), units, file=file, where="tool")
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-    if content.get("gravity") is not None:
-        gx, gy, gz = vector(content["gravity"], 3, file=file, where="gravity")
-        gravity = (float(gx), float(gy), float(gz))
-        if max(abs(g) for g in gravity) > MAX_GRAVITY:
-            raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
-                             file=file, where="gravity")
+    gravity = _gravity_from_dict(content.get("gravity"), file=file)
     tolerance = _tolerance_from_dict(content.get("tolerance"), units, file=file)
     for i, raw in enumerate(raw_joints, start=1):
         tolerance.update(_joint_tolerance(raw.get("tolerance"), i, units, file=file,
                                           where=f"joints[{i - 1}] (joint {i}).tolerance"))
-    name = content.get("name")
-    if name is None:
-        name = Path(file).stem if file else "robot"
-    elif isinstance(name, (list, dict, bool)):
-        raise InputError(f"expected a name, got {cut(name)}", file=file, where="name")
-    elif len(str(name)) > MAX_NAME:
-        raise InputError(f"a name of {len(str(name))} characters; at most {MAX_NAME} are "
-                         "allowed", file=file, where="name")
     return Robot(
-        name=str(name),
+        name=_name_from_dict(content.get("name"), file=file),
         convention=convention,
         joints=joints,
         base=base,
@@ -314,6 +300,30 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         has_gravity=content.get("gravity") is not None,
         tolerance=tolerance,
     )
+
+
+def _gravity_from_dict(raw: Any, *, file) -> tuple[float, float, float]:
+    """``gravity:`` [m/s^2] in the world frame (default ``(0, 0, -9.81)``)."""
+    if raw is None:
+        return (0.0, 0.0, -9.81)
+    gx, gy, gz = vector(raw, 3, file=file, where="gravity")
+    gravity = (float(gx), float(gy), float(gz))
+    if max(abs(g) for g in gravity) > MAX_GRAVITY:
+        raise InputError(f"gravity {list(gravity)} m/s^2 is implausibly large",
+                         file=file, where="gravity")
+    return gravity
+
+
+def _name_from_dict(name: Any, *, file) -> str:
+    """``name:`` (default the file's stem, else ``robot``), at most ``MAX_NAME`` long."""
+    if name is None:
+        return Path(file).stem if file else "robot"
+    if isinstance(name, (list, dict, bool)):
+        raise InputError(f"expected a name, got {cut(name)}", file=file, where="name")
+    if len(str(name)) > MAX_NAME:
+        raise InputError(f"a name of {len(str(name))} characters; at most {MAX_NAME} are "
+                         "allowed", file=file, where="name")
+    return str(name)
 
 
 def _tolerance_value(raw: Any, scale: float, kind: str, unit: str, *, file, where: str) -> float:
@@ -397,21 +407,38 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str,
                         unit=units.angle)
     for key, value in (("theta", values["theta"]), ("alpha", values["alpha"]), ("beta", beta)):
         _within_a_turn(value, units, file=file, where=f"{where}.{key}")
-    limits = None
-    if raw.get("limits") is not None:
-        revolute = joint_type == "revolute"
-        scale = A if revolute else L
-        lo, hi = quantities(raw["limits"], 2, scale, "angle" if revolute else "length",
-                            file=file, where=f"{where}.limits",
-                            unit=units.angle if revolute else units.length)
-        if lo >= hi:
-            raise InputError(f"lower limit {lo / scale:g} is not below upper limit "
-                             f"{hi / scale:g}", file=file, where=f"{where}.limits")
-        # A URDF is in radians by definition: wide limits there are the vendor's, not a unit slip.
-        if revolute and units.angle == "rad" and not urdf and max(abs(lo), abs(hi)) > MAX_LIMIT:
-            raise InputError(f"[{lo:g}, {hi:g}] rad allows more than two turns each way; "
-                             f"{DEGREES_HINT}", file=file, where=f"{where}.limits")
-        limits = (lo, hi)
+    limits = _limits_from_dict(raw.get("limits"), joint_type == "revolute", units, file=file,
+                               where=f"{where}.limits", urdf=urdf)
+    mass, com = _link_mass(raw, units, file=file, where=where)
+    return Joint(
+        type=joint_type, beta=beta, limits=limits, mass=mass, com=com,  # type: ignore[arg-type]
+        has_beta=raw.get("beta") is not None, drive=_drive(raw, file=file, where=where),
+        **values,
+    )
+
+
+def _limits_from_dict(raw: Any, revolute: bool, units: Units, *, file, where: str,
+                      urdf: bool) -> tuple[float, float] | None:
+    """A joint's ``limits: [lower, upper]`` in SI [rad or m], or None when not given."""
+    if raw is None:
+        return None
+    scale = units.angle_scale if revolute else units.length_scale
+    lo, hi = quantities(raw, 2, scale, "angle" if revolute else "length",
+                        file=file, where=where,
+                        unit=units.angle if revolute else units.length)
+    if lo >= hi:
+        raise InputError(f"lower limit {lo / scale:g} is not below upper limit "
+                         f"{hi / scale:g}", file=file, where=where)
+    # A URDF is in radians by definition: wide limits there are the vendor's, not a unit slip.
+    if revolute and units.angle == "rad" and not urdf and max(abs(lo), abs(hi)) > MAX_LIMIT:
+        raise InputError(f"[{lo:g}, {hi:g}] rad allows more than two turns each way; "
+                         f"{DEGREES_HINT}", file=file, where=where)
+    return (lo, hi)
+
+
+def _link_mass(raw: dict, units: Units, *, file, where: str
+               ) -> tuple[float | None, tuple[float, ...] | None]:
+    """A joint's link ``mass`` [kg] and ``com`` [m] (its frame), both or neither."""
     mass = None
     if raw.get("mass") is not None:
         mass = number(raw["mass"], file=file, where=f"{where}.mass")
@@ -423,17 +450,13 @@ def _joint_from_dict(raw: Any, units: Units, *, file, where: str,
                              where=f"{where}.mass")
     com = None
     if raw.get("com") is not None:
-        com = tuple(quantities(raw["com"], 3, L, "length", file=file, where=f"{where}.com",
-                               unit=units.length))
+        com = tuple(quantities(raw["com"], 3, units.length_scale, "length", file=file,
+                               where=f"{where}.com", unit=units.length))
     if (mass is None) != (com is None):
         given, lacking = ("mass", "com") if com is None else ("com", "mass")
         raise InputError(f"{given} given without {lacking}: a link's gravity needs both",
                          file=file, where=f"{where}.{lacking}")
-    return Joint(
-        type=joint_type, beta=beta, limits=limits, mass=mass, com=com,  # type: ignore[arg-type]
-        has_beta=raw.get("beta") is not None, drive=_drive(raw, file=file, where=where),
-        **values,
-    )
+    return mass, com
 
 
 def _drive(raw: dict, *, file, where: str) -> str:

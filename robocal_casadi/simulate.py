@@ -484,42 +484,22 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     ``sphere_radius`` [m] shape the artifacts. ``out_dir`` is replaced as a whole: a
     non-empty folder that is no earlier output is refused unless ``force``.
     """
-    kind = choice(kind, KINDS, "kind")
-    readings = choice(readings, READINGS, "readings")
-    rows = count(rows, "rows")
-    noise = positive(noise, "noise", allow_zero=True)
-    sockets = count(sockets, "sockets", minimum=2)
-    touches = count(touches, "touches")
-    table_rows = table_rows_of(kind, rows, sockets, touches)
-    if table_rows > MAX_ROWS:
-        raise ArgumentError(f"{rows:,} units of {kind} make {table_rows:,} table rows, more than "
-                            f"the {MAX_ROWS:,} a simulated table may have", argument="rows")
+    kind, readings, rows, noise, sockets, touches = _checked_sizes(
+        kind, readings, rows, noise, sockets, touches)
     nominal = robot if isinstance(robot, Robot) else load_robot(
         path_argument(robot, "robot", what="a Robot or a robot file"))
     units = units or nominal.units
     out_dir = Path(out_dir)
     _check_out_dir(out_dir, force)
     rng = np.random.default_rng(seed)
-
     p_true, errors = true_parameters(nominal, geometric_errors, rng)
     true_robot = nominal.with_parameters(p_true)
-    length_std, angle_std = 0.0, 0.0
-    if geometric_errors is not None and not isinstance(geometric_errors, Mapping):
-        length_std, angle_std = (float(v) for v in geometric_errors)
-    if mounted_error is None:
-        mounted_error = length_std
-    true_effects = parse_effects(effects, nominal)
-    for effect, _ in true_effects.entries:
-        if effect.tracker_only and MODELS[kind].reach != "configuration":
-            raise InputError(f"{effect.name} is simulated only for data taken at any "
-                             f"configuration (absolute points), not for {kind}",
-                             where=f"effects.{effect.name}")
+    length_std, angle_std = _error_stds(geometric_errors)
+    mounted_error = length_std if mounted_error is None else mounted_error
+    true_effects = _true_effects(effects, nominal, kind)
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
-    if temperature is None and any("temperature" in effect.required_columns()
-                                   for effect, _ in true_effects.entries):
-        temperature = (reference_temperature - 2.0, reference_temperature + 6.0)
-
+    temperature = _temperature_span(temperature, true_effects, reference_temperature)
     setup = _Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
                    noise=float(noise), mounted_error=float(mounted_error), angle_std=angle_std,
                    payload=payload, temperature=temperature, readings=readings,
@@ -532,24 +512,87 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
                   mounted=generated.mounted, placement=generated.placement,
                   effects=true_effects, noise=float(noise), seed=int(seed),
                   reference_temperature=float(reference_temperature))
-    table_name = TABLES[kind]
-    with atomic_directory(out_dir, verb="simulate") as staging:
-        save_robot(nominal, staging / "robot.yaml")
-        dataset = dict(kind=kind, robot="robot.yaml", units=units.as_dict(),
-                       **generated.dataset_fields(units), data=table_name)
-        if payload is not None and payload_com is not None:
-            dataset["payload_com"] = [float(v) / units.length_scale for v in com]
-        (staging / "dataset.yaml").write_text(dump_yaml(dataset))
-        columns, table = generated.table(nominal, units)
-        write_table(staging / table_name, columns, table)
-        (staging / "truth.yaml").write_text(dump_yaml(_truth_dict(truth, units, payload_com)))
+    _write_dataset(out_dir, generated, truth, units,
+                   None if payload is None or payload_com is None else com, payload_com)
+    return _simulated(out_dir, truth, generated)
+
+
+def _temperature_span(temperature: tuple[float, float] | None, true_effects,
+                      reference_temperature: float) -> tuple[float, float] | None:
+    """``(start, end)`` [C] of the temperature column: as given, else ``T_ref - 2`` to
+    ``T_ref + 6`` when an effect reads the temperature, else None (no column)."""
+    if temperature is None and any("temperature" in effect.required_columns()
+                                   for effect, _ in true_effects.entries):
+        return (reference_temperature - 2.0, reference_temperature + 6.0)
+    return temperature
+
+
+def _checked_sizes(kind: str, readings: str, rows: int, noise: float, sockets: int,
+                   touches: int) -> tuple[str, str, int, float, int, int]:
+    """The arguments that size the dataset, checked; ``rows`` refused where the table
+    would pass ``MAX_ROWS``."""
+    kind = choice(kind, KINDS, "kind")
+    readings = choice(readings, READINGS, "readings")
+    rows = count(rows, "rows")
+    noise = positive(noise, "noise", allow_zero=True)
+    sockets = count(sockets, "sockets", minimum=2)
+    touches = count(touches, "touches")
+    table_rows = table_rows_of(kind, rows, sockets, touches)
+    if table_rows > MAX_ROWS:
+        raise ArgumentError(f"{rows:,} units of {kind} make {table_rows:,} table rows, more than "
+                            f"the {MAX_ROWS:,} a simulated table may have", argument="rows")
+    return kind, readings, rows, noise, sockets, touches
+
+
+def _error_stds(geometric_errors) -> tuple[float, float]:
+    """``(length std [m], angle std [rad])`` of random geometric errors (zero for none or
+    for errors given by name)."""
+    if geometric_errors is not None and not isinstance(geometric_errors, Mapping):
+        length_std, angle_std = (float(v) for v in geometric_errors)
+        return length_std, angle_std
+    return 0.0, 0.0
+
+
+def _simulated(out_dir: Path, truth: Truth, generated) -> SimulatedDataset:
+    """What ``simulate`` returns: the paths written and the truth behind them."""
     leading = generated.leading
+    table_name = TABLES[truth.kind]
     return SimulatedDataset(
         out_dir / "dataset.yaml", out_dir / "robot.yaml", out_dir / table_name,
         out_dir / "truth.yaml", truth, len(generated.Q_read), joints=generated.Q_read,
         measured=dict(generated.measured), extras=dict(generated.extras),
         pose=np.array(leading["pose"]) if "pose" in leading else None,
         point=tuple(leading.get("point", ())), pendant=generated.pendant)
+
+
+def _true_effects(effects: Mapping | None, nominal: Robot, kind: str):
+    """The effects of the true robot (``parse_effects``), refused where ``kind``'s data
+    cannot show them."""
+    true_effects = parse_effects(effects, nominal)
+    for effect, _ in true_effects.entries:
+        if effect.tracker_only and MODELS[kind].reach != "configuration":
+            raise InputError(f"{effect.name} is simulated only for data taken at any "
+                             f"configuration (absolute points), not for {kind}",
+                             where=f"effects.{effect.name}")
+    return true_effects
+
+
+def _write_dataset(out_dir: Path, generated, truth: Truth, units: Units,
+                   com: np.ndarray | None, payload_com) -> None:
+    """Write robot.yaml, dataset.yaml, the table and truth.yaml into ``out_dir`` at once;
+    ``com`` [m] the payload's centre of mass when the dataset file states it."""
+    nominal = truth.nominal
+    table_name = TABLES[truth.kind]
+    with atomic_directory(out_dir, verb="simulate") as staging:
+        save_robot(nominal, staging / "robot.yaml")
+        dataset = dict(kind=truth.kind, robot="robot.yaml", units=units.as_dict(),
+                       **generated.dataset_fields(units), data=table_name)
+        if com is not None:
+            dataset["payload_com"] = [float(v) / units.length_scale for v in com]
+        (staging / "dataset.yaml").write_text(dump_yaml(dataset))
+        columns, table = generated.table(nominal, units)
+        write_table(staging / table_name, columns, table)
+        (staging / "truth.yaml").write_text(dump_yaml(_truth_dict(truth, units, payload_com)))
 
 
 def _check_out_dir(out_dir: Path, force: bool) -> None:
@@ -748,17 +791,15 @@ def _socket_layout(setup: _Setup) -> tuple[list[str], np.ndarray, list, list]:
 
 def _touches(setup: _Setup) -> _Generated:
     """The cross bar or an artifact: place it, seat the probe in each socket."""
-    rng, world, robot = setup.rng, setup.world, setup.nominal
     probe = setup.mounted(DEFAULT_PROBE)
     names, local, distances, _ = _socket_layout(setup)
     per_socket = 1 if setup.cross else max(1, setup.touches)
-    ik = inverse_kinematics(world.kinematics, "point")
+    ik = inverse_kinematics(setup.world.kinematics, "point")
     bounds = setup.bounds()
     poses, points, Q_read, Q_true, payloads, temperatures = [], [], [], [], [], []
     sockets_truth: dict[int, dict[str, np.ndarray]] = {}
     attempts = 0
-    with Progress(f"simulate {setup.kind}", total=setup.rows,
-                  force=False) if setup.progress else _Quiet() as bar:
+    with _progress(setup) as bar:
         while len(sockets_truth) < setup.rows:
             attempts += 1
             if attempts > 20 * setup.rows + 20:
@@ -767,34 +808,8 @@ def _touches(setup: _Setup) -> _Generated:
                                  "placements", where="rows")
             index = len(sockets_truth)
             temperature = setup.temperature_at(index / max(setup.rows - 1, 1))
-            p_row = world.parameters(temperature)
-            q0 = random_joints(robot, 1, rng, margin=0.15)[0]
-            T0 = world.kinematics.flange_poses(q0, p_row)[0]
-            centre = T0[:3, :3] @ probe + T0[:3, 3]
-            if setup.cross:
-                R_artifact = _random_rotation(rng)
-            else:  # a plate on a table: level, turned about the vertical, slightly tilted
-                R_artifact = rot_z(rng.uniform(-math.pi, math.pi))[:3, :3] @ _tilt(rng, 0.1)
-            positions = centre + local @ R_artifact.T
-            placed = []
-            for name, position in zip(names, positions):
-                for touch in range(per_socket):
-                    preferred = T0[:3, :3] if setup.cross or touch == 0 else (
-                        _tilt(rng, 0.5) @ T0[:3, :3])
-                    seat = position + rng.normal(0.0, setup.noise, 3)
-                    payload = setup.payload_value()
-                    result = ik.solve(seat, seed=q0, p=p_row, offset=probe, orientation=preferred,
-                                      bounds=bounds, restarts=3, rng=rng,
-                                      orientation_tolerance=1e-3)
-                    if not result.success:
-                        break
-                    q_read = world.readings(result.q, payload)
-                    if not setup.within_limits(q_read):
-                        break
-                    placed.append((name, q_read, payload, result.q))
-                else:
-                    continue
-                break
+            positions, placed = _placement(setup, ik, bounds, probe, names, local,
+                                           per_socket, temperature)
             if len(placed) != len(names) * per_socket:
                 continue  # out of reach: skip this placement
             for name, q_read, payload, q_true in placed:
@@ -820,6 +835,47 @@ def _touches(setup: _Setup) -> _Generated:
         Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
         mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
         leading={"pose": poses, "point": points})
+
+
+def _placement(setup: _Setup, ik, bounds: tuple[np.ndarray, np.ndarray], probe: np.ndarray,
+               names: list[str], local: np.ndarray, per_socket: int,
+               temperature: float | None) -> tuple[np.ndarray, list]:
+    """One random placement of the bar or artifact near a random configuration: the
+    sockets' true positions [m] (world frame) and the touches seated so far, each
+    ``(socket, joint readings, payload [kg], true joints)``; fewer than all when one is
+    out of reach or outside the joint limits."""
+    rng, world = setup.rng, setup.world
+    p_row = world.parameters(temperature)
+    q0 = random_joints(setup.nominal, 1, rng, margin=0.15)[0]
+    T0 = world.kinematics.flange_poses(q0, p_row)[0]
+    centre = T0[:3, :3] @ probe + T0[:3, 3]
+    if setup.cross:
+        R_artifact = _random_rotation(rng)
+    else:  # a plate on a table: level, turned about the vertical, slightly tilted
+        R_artifact = rot_z(rng.uniform(-math.pi, math.pi))[:3, :3] @ _tilt(rng, 0.1)
+    positions = centre + local @ R_artifact.T
+    placed: list = []
+    for name, position in zip(names, positions):
+        for touch in range(per_socket):
+            preferred = T0[:3, :3] if setup.cross or touch == 0 else (
+                _tilt(rng, 0.5) @ T0[:3, :3])
+            seat = position + rng.normal(0.0, setup.noise, 3)
+            payload = setup.payload_value()
+            result = ik.solve(seat, seed=q0, p=p_row, offset=probe, orientation=preferred,
+                              bounds=bounds, restarts=3, rng=rng,
+                              orientation_tolerance=1e-3)
+            if not result.success:
+                return positions, placed
+            q_read = world.readings(result.q, payload)
+            if not setup.within_limits(q_read):
+                return positions, placed
+            placed.append((name, q_read, payload, result.q))
+    return positions, placed
+
+
+def _progress(setup: _Setup):
+    """A progress bar over the rows to simulate, or a silent stand-in."""
+    return Progress(f"simulate {setup.kind}", total=setup.rows) if setup.progress else _Quiet()
 
 
 class _Quiet:
@@ -865,6 +921,7 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _laser_scan(setup: _Setup) -> _Generated:
+    """A laser on the flange scanning a sphere placed where its beam points."""
     rng, world, robot = setup.rng, setup.world, setup.nominal
     radius = float(setup.sphere_radius)
     origin = setup.mounted(DEFAULT_LASER_ORIGIN)
@@ -873,24 +930,15 @@ def _laser_scan(setup: _Setup) -> _Generated:
     ik = inverse_kinematics(world.kinematics, "flange_pose")
     bounds = setup.bounds()
     standoff = (0.08, 0.2)  # [m] laser distances
-
-    # the sphere sits where the beam of a comfortable configuration points
-    for _ in range(200):
-        q0 = random_joints(robot, 1, rng, margin=0.2)[0]
-        T0 = world.kinematics.flange_poses(q0, world.parameters(setup.temperature_at(0.0)))[0]
-        beam0 = T0[:3, :3] @ direction
-        if beam0[2] < -0.3:  # pointing down at something on a table
-            break
+    q0, T0, beam0 = _comfortable_beam(setup, direction)
     centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
-
     Q_read: list[np.ndarray] = []
     Q_true: list[np.ndarray] = []
     payloads: list[float] = []
     temperatures: list[float | None] = []
     distances: list[float] = []
     attempts = 0
-    label = f"simulate {setup.kind}"
-    with Progress(label, total=setup.rows) if setup.progress else _Quiet() as bar:
+    with _progress(setup) as bar:
         while len(Q_read) < setup.rows:
             attempts += 1
             if attempts > 20 * setup.rows + 20:
@@ -898,23 +946,9 @@ def _laser_scan(setup: _Setup) -> _Generated:
                                  where="rows")
             temperature = setup.temperature_at(len(Q_read) / max(setup.rows - 1, 1))
             p_row = world.parameters(temperature)
-            beam = _tilt(rng, 0.5) @ beam0  # tilted up to about 30 degrees
-            lateral = rng.normal(size=3)
-            lateral -= (lateral @ beam) * beam
-            lateral *= rng.uniform(0.0, 0.7 * radius) / np.linalg.norm(lateral)
-            aim = centre + lateral
-            hit_from = aim - 2 * radius * beam
-            to_surface = ray_sphere_distance(hit_from, beam, centre, radius)
-            if not np.isfinite(to_surface):
+            T = _aimed_pose(rng, T0, beam0, centre, radius, direction, origin, standoff)
+            if T is None:
                 continue
-            hit = hit_from + to_surface * beam
-            laser_origin = hit - rng.uniform(*standoff) * beam
-            R = _rotation_between(T0[:3, :3] @ direction, beam) @ T0[:3, :3]
-            roll = rng.uniform(-0.5, 0.5)
-            R = _axis_rotation(beam, roll) @ R
-            T = np.eye(4)
-            T[:3, :3] = R
-            T[:3, 3] = laser_origin - R @ origin
             payload = setup.payload_value()
             result = ik.solve(T, seed=q0, p=p_row, bounds=bounds, restarts=2, rng=rng)
             if not result.success:
@@ -934,11 +968,7 @@ def _laser_scan(setup: _Setup) -> _Generated:
             distances.append(distance + rng.normal(0.0, setup.noise))
             bar.update(len(Q_read))
     Q_read_array = setup.in_order(Q_read, Q_true, payloads)
-    pendant = None
-    if setup.readings == "pendant":
-        flanges = Kinematics(robot).flange_poses(Q_read_array)
-        pendant = np.array([np.concatenate([F[:3, 3], quaternion_from_matrix(F[:3, :3])])
-                            for F in flanges])
+    pendant = _pendant_poses(robot, Q_read_array) if setup.readings == "pendant" else None
     centre_guess = centre + rng.normal(0.0, 0.005, 3)
     return _Generated(
         Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
@@ -950,6 +980,55 @@ def _laser_scan(setup: _Setup) -> _Generated:
             "laser": {"origin_guess": _in(units, DEFAULT_LASER_ORIGIN),
                       "direction_guess": [float(v) for v in DEFAULT_LASER_DIRECTION]}},
         measured={"distance": np.array(distances)}, pendant=pendant)
+
+
+def _comfortable_beam(setup: _Setup, direction: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A random configuration whose beam points down at something on a table (the last
+    one drawn after 200 tries): its joints [rad or m], flange pose (4x4, world frame, at
+    the run's first temperature) and beam direction (unit, world frame)."""
+    world = setup.world
+    for _ in range(200):
+        q0 = random_joints(setup.nominal, 1, setup.rng, margin=0.2)[0]
+        T0 = world.kinematics.flange_poses(q0, world.parameters(setup.temperature_at(0.0)))[0]
+        beam0 = T0[:3, :3] @ direction
+        if beam0[2] < -0.3:  # pointing down at something on a table
+            break
+    return q0, T0, beam0
+
+
+def _aimed_pose(rng: np.random.Generator, T0: np.ndarray, beam0: np.ndarray,
+                centre: np.ndarray, radius: float, direction: np.ndarray, origin: np.ndarray,
+                standoff: tuple[float, float]) -> np.ndarray | None:
+    """A random flange pose (4x4, world frame) [m] whose beam, tilted from ``beam0`` by up
+    to about 30 degrees, hits the sphere from a distance within ``standoff`` [m]; None
+    when the drawn beam misses it."""
+    beam = _tilt(rng, 0.5) @ beam0  # tilted up to about 30 degrees
+    lateral = rng.normal(size=3)
+    lateral -= (lateral @ beam) * beam
+    lateral *= rng.uniform(0.0, 0.7 * radius) / np.linalg.norm(lateral)
+    aim = centre + lateral
+    hit_from = aim - 2 * radius * beam
+    to_surface = ray_sphere_distance(hit_from, beam, centre, radius)
+    if not np.isfinite(to_surface):
+        return None
+    hit = hit_from + to_surface * beam
+    laser_origin = hit - rng.uniform(*standoff) * beam
+    R = _rotation_between(T0[:3, :3] @ direction, beam) @ T0[:3, :3]
+    roll = rng.uniform(-0.5, 0.5)
+    R = _axis_rotation(beam, roll) @ R
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = laser_origin - R @ origin
+    return T
+
+
+def _pendant_poses(robot: Robot, Q_read: np.ndarray) -> np.ndarray:
+    """The controller's nominal flange poses at the readings: (N, 7) x, y, z [m] and the
+    quaternion qw, qx, qy, qz (world frame)."""
+    flanges = Kinematics(robot).flange_poses(Q_read)
+    return np.array([np.concatenate([F[:3, 3], quaternion_from_matrix(F[:3, :3])])
+                     for F in flanges])
 
 
 def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -113,36 +113,12 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
     candidates = list(candidates)
     raw = J[:, candidates]
     raw_norms = np.linalg.norm(raw, axis=0)
-    scale_reference = raw_norms.max() if raw_norms.size else 1.0
-    if len(placement):
-        P = J[:, list(placement)]
-        U, s, _ = np.linalg.svd(P, full_matrices=False)
-        U = U[:, s > s.max() * 1e-10] if s.size and s.max() > 0 else U[:, :0]
-        projected = raw - U @ (U.T @ raw)
-    else:
-        projected = raw.copy()
+    projected = _without_placement(J, raw, placement)
     projected_norms = np.linalg.norm(projected, axis=0)
-
     unidentifiable: dict[str, str] = {}
     practical: list[str] = []  # held because the data barely see them, not exactly
-    usable = []
-    for k, index in enumerate(candidates):
-        name = names[index]
-        if raw_norms[k] <= 1e-12 * max(scale_reference, 1e-300):
-            if name.startswith("tool_"):
-                unidentifiable[name] = ("changes no residual: the measured point is fixed to the "
-                                        "flange, so the tool frame does not enter these data")
-            else:
-                unidentifiable[name] = f"changes no residual ({invisible_reason})"
-        elif projected_norms[k] <= RANK_TOLERANCE * raw_norms[k] * 10:
-            unidentifiable[name] = absorbed_reason
-        elif projected_norms[k] < tolerance * raw_norms[k]:
-            share = projected_norms[k] / raw_norms[k]
-            unidentifiable[name] = (f"{absorbed_reason}, all but {100 * share:.2g}% of its effect:"
-                                    f" too little for these data to determine it")
-            practical.append(name)
-        else:
-            usable.append(k)
+    usable = _screen([names[i] for i in candidates], raw_norms, projected_norms, tolerance,
+                     invisible_reason, absorbed_reason, unidentifiable, practical)
     # Own part of each column as a fraction of its full effect.
     fraction = projected[:, usable] / raw_norms[usable]
     unit = projected[:, usable] / projected_norms[usable]
@@ -151,35 +127,10 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
     rank_of = {j: r for r, j in enumerate(order)}
     chosen, remaining = pivoted_qr_order(fraction, [rank_of[j] for j in range(len(usable))],
                                          tolerance)
-    chosen_set = set(chosen)
     identifiable_local = [usable[j] for j in sorted(chosen, key=lambda j: usable[j])]
-
-    combinations = []
-    if chosen:
-        basis = unit[:, chosen]
-        for j in range(len(usable)):
-            if j in chosen_set:
-                continue
-            name = names[candidates[usable[j]]]
-            coefficients, *_ = np.linalg.lstsq(basis, unit[:, j], rcond=None)
-            # Back to unscaled columns: col_j = sum c_k (norm_j / norm_k) col_k.
-            terms = []
-            for c, k in sorted(zip(coefficients, chosen), key=lambda t: -abs(t[0])):
-                factor = c * projected_norms[usable[j]] / projected_norms[usable[k]]
-                if abs(c) > 1e-3:
-                    terms.append(f"{factor:+.4g}*{names[candidates[usable[k]]]}")
-            relation = " ".join(terms[:4]) + (" ..." if len(terms) > 4 else "")
-            if remaining[j] <= RANK_TOLERANCE * 10:
-                unidentifiable[name] = (f"a combination of parameters already identified "
-                                        f"({name} acts like {relation})")
-            else:
-                unidentifiable[name] = (
-                    f"nearly a combination of parameters already identified ({name} acts "
-                    f"like {relation}; only {100 * remaining[j]:.2g}% of its effect is its "
-                    f"own): too little for these data to determine it")
-                practical.append(name)
-            combinations.append(f"{name} ~ {relation}")
-
+    usable_names = [names[candidates[k]] for k in usable]
+    combinations = _combinations(unit, chosen, remaining, usable_names,
+                                 projected_norms[usable], unidentifiable, practical)
     if identifiable_local:
         s = np.linalg.svd(projected[:, identifiable_local] /
                           projected_norms[identifiable_local], compute_uv=False)
@@ -195,3 +146,78 @@ def analyse(jacobian: np.ndarray, names: Sequence[str], candidates: Sequence[int
         combinations=tuple(combinations),
         practical=tuple(practical),
     )
+
+
+def _without_placement(J: np.ndarray, raw: np.ndarray, placement: Sequence[int]) -> np.ndarray:
+    """The columns ``raw`` with what the ``placement`` columns of ``J`` can explain
+    projected out (a copy of them without placement columns)."""
+    if not len(placement):
+        return raw.copy()
+    P = J[:, list(placement)]
+    U, s, _ = np.linalg.svd(P, full_matrices=False)
+    U = U[:, s > s.max() * 1e-10] if s.size and s.max() > 0 else U[:, :0]
+    return raw - U @ (U.T @ raw)
+
+
+def _screen(names: list[str], raw_norms: np.ndarray, projected_norms: np.ndarray,
+            tolerance: float, invisible_reason: str, absorbed_reason: str,
+            unidentifiable: dict[str, str], practical: list[str]) -> list[int]:
+    """The candidate columns (positions in ``names``) worth ranking; the others go into
+    ``unidentifiable`` with the reason (and into ``practical`` when the data barely see
+    them): no effect at all, or all or nearly all of it absorbed by the placement."""
+    scale_reference = raw_norms.max() if raw_norms.size else 1.0
+    usable = []
+    for k, name in enumerate(names):
+        if raw_norms[k] <= 1e-12 * max(scale_reference, 1e-300):
+            if name.startswith("tool_"):
+                unidentifiable[name] = ("changes no residual: the measured point is fixed to the "
+                                        "flange, so the tool frame does not enter these data")
+            else:
+                unidentifiable[name] = f"changes no residual ({invisible_reason})"
+        elif projected_norms[k] <= RANK_TOLERANCE * raw_norms[k] * 10:
+            unidentifiable[name] = absorbed_reason
+        elif projected_norms[k] < tolerance * raw_norms[k]:
+            share = projected_norms[k] / raw_norms[k]
+            unidentifiable[name] = (f"{absorbed_reason}, all but {100 * share:.2g}% of its effect:"
+                                    f" too little for these data to determine it")
+            practical.append(name)
+        else:
+            usable.append(k)
+    return usable
+
+
+def _combinations(unit: np.ndarray, chosen: list[int], remaining: np.ndarray,
+                  names: list[str], norms: np.ndarray, unidentifiable: dict[str, str],
+                  practical: list[str]) -> list[str]:
+    """``name ~ relation`` for each usable column (``unit``, unit length; ``names``,
+    ``norms`` of the unscaled columns) left out of the ``chosen`` ones, which it
+    (nearly) is a combination of; its reason goes into ``unidentifiable`` (and
+    ``practical`` when only nearly)."""
+    combinations: list[str] = []
+    if not chosen:
+        return combinations
+    chosen_set = set(chosen)
+    basis = unit[:, chosen]
+    for j in range(len(names)):
+        if j in chosen_set:
+            continue
+        name = names[j]
+        coefficients, *_ = np.linalg.lstsq(basis, unit[:, j], rcond=None)
+        # Back to unscaled columns: col_j = sum c_k (norm_j / norm_k) col_k.
+        terms = []
+        for c, k in sorted(zip(coefficients, chosen), key=lambda t: -abs(t[0])):
+            factor = c * norms[j] / norms[k]
+            if abs(c) > 1e-3:
+                terms.append(f"{factor:+.4g}*{names[k]}")
+        relation = " ".join(terms[:4]) + (" ..." if len(terms) > 4 else "")
+        if remaining[j] <= RANK_TOLERANCE * 10:
+            unidentifiable[name] = (f"a combination of parameters already identified "
+                                    f"({name} acts like {relation})")
+        else:
+            unidentifiable[name] = (
+                f"nearly a combination of parameters already identified ({name} acts "
+                f"like {relation}; only {100 * remaining[j]:.2g}% of its effect is its "
+                f"own): too little for these data to determine it")
+            practical.append(name)
+        combinations.append(f"{name} ~ {relation}")
+    return combinations

@@ -23,7 +23,7 @@ from ..calibration.outliers import rejected_lines
 from ..datasets import load_dataset
 from ..effect_model import delivered_lines
 from ..errors import InputError
-from ..profiles import PROFILES
+from ..profiles import PROFILES, ProfileCost
 from ..results import CalibrationResult, Decision
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
@@ -126,8 +126,9 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
         lines.append("effects: none added")
     if result.effects:
         lines.append(f"recommended model: {result.recommended} ({result.recommendation})")
-    if result.profile is not None:
-        lines.append(result.profile.sentence(units, result.fit, result.validation))
+    profile: ProfileCost | None = result.profile  # the result types it loosely
+    if profile is not None:
+        lines.append(profile.sentence(units, result.fit, result.validation))
     if result.delivered is not None:
         lines += delivered_lines(result.delivered, s, units.length)
     if result.predicted_accuracy is not None:

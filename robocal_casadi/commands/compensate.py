@@ -115,7 +115,52 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
     robot, folder = robot_and_calibration(args)
     table = read_table(args.targets, required=POSITION)
-    L, A = robot.units.length_scale, robot.units.angle_scale
+    columns, targets = _targets(table, robot)
+    has_orientation = len(columns) > len(POSITION)
+    joint_names = [f"q{i}" for i in range(1, robot.dof + 1)]
+    seeds = seed_joints(table, robot, joint_names)
+    extras = [c for c in table.columns if c not in columns and c not in joint_names]
+    taken = [f"{SEED_PREFIX}{c}" for c in joint_names] if seeds is not None else []
+    clashes = [c for c in extras if c in taken or c in ("status", "position_error",
+                                                        "orientation_error")]
+    if clashes:
+        raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path,
+                         where="line 1")
+    start = _start_joints(args.start, robot)
+    model = extras_values = None
+    if args.with_effects:
+        if folder is None:
+            raise InputError("effects come from a calibration: give --calibrated DIR",
+                             where="--with-effects")
+        from ..effect_model import load_effects, row_values
+
+        model = load_effects(folder, robot)
+        extras_values = row_values(model, table, payload=args.payload,
+                                   temperature=args.temperature)
+    nominal = nominal_robot(folder if folder is not None else robot_argument, robot)
+    result = compensate(robot, targets, start=start, seeds=seeds, nominal=nominal,
+                        restarts=args.restarts, seed=args.seed, effects=model,
+                        extras=extras_values)
+    out_columns = extras + taken + joint_names + ["status", "position_error"]
+    if has_orientation:
+        out_columns.append("orientation_error")
+    rows = _output_rows(result, table, robot, extras, joint_names if seeds is not None else [],
+                        has_orientation)
+    with atomic_file(args.out) as staging:
+        write_table(staging, out_columns, rows)
+    unreachable = sum(s == STATUS_UNREACHABLE for s in result.status)
+    other = sum(s == STATUS_BRANCH for s in result.status)
+    print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable, {other} "
+          f"reachable only on another branch than their seed's)")
+    summarise(args, rows=len(result), unreachable=unreachable, other_branch=other,
+              out=str(args.out), calibrated=None if folder is None else str(folder))
+    return 0
+
+
+def _targets(table, robot: Robot) -> tuple[tuple[str, ...], np.ndarray]:
+    """The target columns read (x,y,z and, when present, all of qw,qx,qy,qz) and the
+    targets, one row each: position [m] in the world frame, then the unit quaternion."""
+    L = robot.units.length_scale
     has_orientation = [c for c in QUATERNION if table.has(c)]
     if has_orientation and len(has_orientation) != 4:
         missing = [c for c in QUATERNION if not table.has(c)]
@@ -138,74 +183,51 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[first]:.9g}, not 1 "
                              f"within {QUATERNION_TOLERANCE:g}", file=table.path,
                              where=f"line {table.line(first)}")
-    joint_names = [f"q{i}" for i in range(1, robot.dof + 1)]
-    scales = robot.reading_scales()
-    seeds = seed_joints(table, robot, joint_names)
-    extras = [c for c in table.columns if c not in columns and c not in joint_names]
-    taken = [f"{SEED_PREFIX}{c}" for c in joint_names] if seeds is not None else []
-    clashes = [c for c in extras if c in taken or c in ("status", "position_error",
-                                                        "orientation_error")]
-    if clashes:
-        raise InputError(f"input column(s) {clashes} clash with output columns", file=table.path,
-                         where="line 1")
-    start = None
-    if args.start:
-        try:
-            start = np.array([float(v) for v in args.start.split(",")])
-        except ValueError:
-            raise InputError(f"expected comma-separated numbers, got {args.start!r}",
-                             where="--start") from None
-        if len(start) != robot.dof:
-            raise InputError(f"expected {robot.dof} joint values, got {len(start)}",
-                             where="--start")
-        if not np.all(np.isfinite(start)):
-            raise InputError(f"expected finite numbers, got {args.start!r}", where="--start")
-        start = start * scales
-        outside = np.flatnonzero((start < robot.lower_limits) | (start > robot.upper_limits))
-        if outside.size:
-            k = int(outside[0])
-            raise InputError(f"q{k + 1} = {start[k] / scales[k]:g} is outside the robot's limits",
-                             where="--start")
-    if args.restarts < 0:
-        raise InputError(f"must not be negative, got {args.restarts}", where="--restarts")
-    model = extras_values = None
-    if args.with_effects:
-        if folder is None:
-            raise InputError("effects come from a calibration: give --calibrated DIR",
-                             where="--with-effects")
-        from ..effect_model import load_effects, row_values
+    return columns, targets
 
-        model = load_effects(folder, robot)
-        extras_values = row_values(model, table, payload=args.payload,
-                                   temperature=args.temperature)
-    nominal = nominal_robot(folder if folder is not None else robot_argument, robot)
-    result = compensate(robot, targets, start=start, seeds=seeds, nominal=nominal,
-                        restarts=args.restarts, seed=args.seed, effects=model,
-                        extras=extras_values)
-    out_columns = extras + taken + joint_names + ["status", "position_error"]
-    if has_orientation:
-        out_columns.append("orientation_error")
+
+def _start_joints(text: str | None, robot: Robot) -> np.ndarray | None:
+    """``--start`` (robot units) as joints [rad or m], checked against the limits."""
+    if not text:
+        return None
+    try:
+        start = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise InputError(f"expected comma-separated numbers, got {text!r}",
+                         where="--start") from None
+    if len(start) != robot.dof:
+        raise InputError(f"expected {robot.dof} joint values, got {len(start)}",
+                         where="--start")
+    if not np.all(np.isfinite(start)):
+        raise InputError(f"expected finite numbers, got {text!r}", where="--start")
+    scales = robot.reading_scales()
+    start = start * scales
+    outside = np.flatnonzero((start < robot.lower_limits) | (start > robot.upper_limits))
+    if outside.size:
+        k = int(outside[0])
+        raise InputError(f"q{k + 1} = {start[k] / scales[k]:g} is outside the robot's limits",
+                         where="--start")
+    return start
+
+
+def _output_rows(result, table, robot: Robot, extras: list[str], seed_columns: list[str],
+                 has_orientation: bool) -> list[list]:
+    """The rows of JOINTS.csv: copied columns, the given seeds, then the answer in the
+    robot's units."""
+    L, A = robot.units.length_scale, robot.units.angle_scale
+    scales = robot.reading_scales()
     rows = []
     text = {c: table.text(c) for c in extras}
     for i in range(len(result)):
         row: list = [text[c][i] for c in extras]
-        if seeds is not None:
-            row += [table.text(c)[i] for c in joint_names]
+        row += [table.text(c)[i] for c in seed_columns]
         row += list(result.joints[i] / scales)
         row += [result.status[i], result.position_error[i] / L]
         if has_orientation:
             error = result.orientation_error[i]
             row.append(error / A if math.isfinite(error) else math.nan)
         rows.append(row)
-    with atomic_file(args.out) as staging:
-        write_table(staging, out_columns, rows)
-    unreachable = sum(s == STATUS_UNREACHABLE for s in result.status)
-    other = sum(s == STATUS_BRANCH for s in result.status)
-    print(f"wrote {len(result)} rows to {args.out} ({unreachable} unreachable, {other} "
-          f"reachable only on another branch than their seed's)")
-    summarise(args, rows=len(result), unreachable=unreachable, other_branch=other,
-              out=str(args.out), calibrated=None if folder is None else str(folder))
-    return 0
+    return rows
 
 
 def seed_joints(table, robot: Robot, joint_names: list[str]) -> np.ndarray | None:

@@ -184,36 +184,9 @@ def run(args: argparse.Namespace) -> int:
     output_folder(args.out, verb="simulate", force=args.force, inputs=[args.robot])
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
     _check_options(args, robot)
-    L, A = robot.units.length_scale, robot.units.angle_scale
-    geometric_errors: tuple[float, float] | dict[str, float] | None = None
+    L = robot.units.length_scale
     mounted_error = None if args.mounted_error is None else args.mounted_error * L
-    if args.errors:
-        length_std, angle_std = _floats(args.errors, 2, "--errors")
-        if length_std < 0 or angle_std < 0:
-            raise InputError(f"standard deviations must not be negative, got {args.errors!r}",
-                             where="--errors")
-        check_magnitude(length_std * L, "length", file=None, where="--errors",
-                        shown=length_std, unit=robot.units.length)
-        check_magnitude(angle_std * A, "angle", file=None, where="--errors",
-                        shown=angle_std, unit=robot.units.angle)
-        geometric_errors = (length_std * L, angle_std * A)
-    elif args.error:
-        registry = robot.parameters()
-        per_parameter: dict[str, float] = {}
-        geometric_errors = per_parameter
-        for item in args.error:
-            name, _, value = item.partition("=")
-            name = name.strip()
-            if name not in registry:
-                raise InputError(f"unknown parameter {name!r}; valid names: "
-                                 f"{', '.join(registry.names)}", where=f"--error {item}")
-            number = _floats(value, 1, f"--error {item}")[0]
-            quantity_name = registry.quantity(name)
-            if quantity_name in ("length", "angle"):
-                check_magnitude(number * robot.units.scale(quantity_name), quantity_name,
-                                file=None, where=f"--error {item}", shown=number,
-                                unit=robot.units.unit_name(quantity_name))
-            per_parameter[name] = number * robot.units.scale(registry.quantity(name))
+    geometric_errors = _geometric_errors(args, robot)
     payload = None
     if args.payload:
         values = _floats(args.payload, None, "--payload")
@@ -253,3 +226,38 @@ def run(args: argparse.Namespace) -> int:
               dataset=str(result.dataset_path), table=str(result.table_path),
               truth=str(result.truth_path))
     return 0
+
+
+def _geometric_errors(args: argparse.Namespace, robot: Robot
+                      ) -> tuple[float, float] | dict[str, float] | None:
+    """``--errors`` as ``(length std [m], angle std [rad])``, ``--error`` as errors by
+    parameter name [SI], or None for neither."""
+    L, A = robot.units.length_scale, robot.units.angle_scale
+    if args.errors:
+        length_std, angle_std = _floats(args.errors, 2, "--errors")
+        if length_std < 0 or angle_std < 0:
+            raise InputError(f"standard deviations must not be negative, got {args.errors!r}",
+                             where="--errors")
+        check_magnitude(length_std * L, "length", file=None, where="--errors",
+                        shown=length_std, unit=robot.units.length)
+        check_magnitude(angle_std * A, "angle", file=None, where="--errors",
+                        shown=angle_std, unit=robot.units.angle)
+        return (length_std * L, angle_std * A)
+    if not args.error:
+        return None
+    registry = robot.parameters()
+    per_parameter: dict[str, float] = {}
+    for item in args.error:
+        name, _, value = item.partition("=")
+        name = name.strip()
+        if name not in registry:
+            raise InputError(f"unknown parameter {name!r}; valid names: "
+                             f"{', '.join(registry.names)}", where=f"--error {item}")
+        number = _floats(value, 1, f"--error {item}")[0]
+        quantity_name = registry.quantity(name)
+        if quantity_name in ("length", "angle"):
+            check_magnitude(number * robot.units.scale(quantity_name), quantity_name,
+                            file=None, where=f"--error {item}", shown=number,
+                            unit=robot.units.unit_name(quantity_name))
+        per_parameter[name] = number * robot.units.scale(registry.quantity(name))
+    return per_parameter

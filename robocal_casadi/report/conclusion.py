@@ -26,45 +26,9 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     When the model with effects did worse on held-out data than the geometric one (the
     result's ``recommended`` is ``"geometric"``), that comes first.
     """
-    # Errors and corrections are millimetre-sized: the report shows them in mm.
-    unit, scale = "mm", 1e-3
-
-    def length(value_si: float) -> str:
-        return f"{format_number(value_si / scale, 3)} {unit}"
-
     held_out = result.validation is not None
     summary = result.validation if result.validation is not None else result.fit
-    residuals = result.validation_residuals if held_out else result.residuals
-    noun = error_noun(residuals) if residuals else "error"
-    where = "on held-out data" if held_out else "on the data used for fitting"
-    verb = "fell" if summary.rms_final < summary.rms_nominal else "rose"
-    headline = (f"After calibration the {noun} {where} {verb} from {length(summary.rms_nominal)} "
-                f"to {length(summary.rms_final)} RMS")
-    if residuals:
-        before = ErrorStats.of(pooled(residuals, "nominal"))
-        after = ErrorStats.of(pooled(residuals, "final"))
-        headline += (f" (99th percentile from {length(before.p99)} to {length(after.p99)}, "
-                     f"over {after.count} measurements)")
-    paragraphs = [headline + "."]
-    if result.effects and recommended(result) == "geometric":
-        worse = ""
-        if result.validation is not None:
-            worse = (f" ({length(result.validation.rms_final)} RMS with the effects against "
-                     f"{length(result.validation.rms_geometric)} without)")
-        paragraphs.insert(0, f"Use the geometric calibration alone: on held-out data the "
-                             f"model with the effects diagnosis found predicts worse than "
-                             f"the geometry without them{worse}. robot_calibrated.yaml "
-                             f"carries that geometry; do not apply the effects.")
-        paragraphs[1] = paragraphs[1].replace(
-            f"to {length(summary.rms_final)} RMS",
-            f"to {length(summary.rms_final)} RMS with the effects, "
-            f"{length(summary.rms_geometric)} with the geometry alone")
-    delivery = getattr(result, "delivery", None)
-    if delivery is not None and delivery.refused:
-        paragraphs.insert(0, f"Do not load a calibrated model: {delivery.reason}. The robot "
-                             f"is better left as it is"
-                             + (" with only the mounted instrument calibrated" if
-                                delivery.recommended == "instrument_only" else "") + ".")
+    paragraphs = _opening(result)
     if not held_out:
         paragraphs.append("No held-out data was given, so this shows how well the model fits, "
                           "not how well it predicts new poses; calibrate with --validate to "
@@ -72,14 +36,70 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
 
     if result.effects:
         names = _and([_effect_words(e) for e in result.effects])
-        paragraphs.append(f"The geometric calibration alone reached {length(summary.rms_geometric)}"
-                          f" RMS; diagnosis then found {names} in what was left, and adding "
+        paragraphs.append(f"The geometric calibration alone reached "
+                          f"{_length(summary.rms_geometric)} RMS; diagnosis then found "
+                          f"{names} in what was left, and adding "
                           f"{'them' if len(result.effects) > 1 else 'it'} brought the error to "
-                          f"{length(summary.rms_final)} (see Effects found).")
+                          f"{_length(summary.rms_final)} (see Effects found).")
     else:
-        paragraphs.append(f"The geometric calibration reached {length(summary.rms_geometric)} RMS;"
+        paragraphs.append(f"The geometric calibration reached {_length(summary.rms_geometric)} RMS;"
                           f" diagnosis found no further effect that the data supports.")
+    paragraphs.append(_identifiability_paragraph(result))
+    unexplained = unexplained_sentence(result)
+    if unexplained:
+        paragraphs.append(unexplained)
+    warnings = _warnings(result)
+    if warnings:
+        paragraphs.append("Caution: " + " ".join(warnings))
+    return paragraphs
 
+
+def _length(value_si: float) -> str:
+    """A length [m] as the report shows errors and corrections: in mm."""
+    return f"{format_number(value_si / 1e-3, 3)} mm"
+
+
+def _opening(result: CalibrationResult) -> list[str]:
+    """The headline (error before and after), preceded by what not to load when the
+    effects or the whole calibration should not be used."""
+    held_out = result.validation is not None
+    summary = result.validation if result.validation is not None else result.fit
+    residuals = result.validation_residuals if held_out else result.residuals
+    noun = error_noun(residuals) if residuals else "error"
+    where = "on held-out data" if held_out else "on the data used for fitting"
+    verb = "fell" if summary.rms_final < summary.rms_nominal else "rose"
+    headline = (f"After calibration the {noun} {where} {verb} from {_length(summary.rms_nominal)} "
+                f"to {_length(summary.rms_final)} RMS")
+    if residuals:
+        before = ErrorStats.of(pooled(residuals, "nominal"))
+        after = ErrorStats.of(pooled(residuals, "final"))
+        headline += (f" (99th percentile from {_length(before.p99)} to {_length(after.p99)}, "
+                     f"over {after.count} measurements)")
+    paragraphs = [headline + "."]
+    if result.effects and recommended(result) == "geometric":
+        worse = ""
+        if result.validation is not None:
+            worse = (f" ({_length(result.validation.rms_final)} RMS with the effects against "
+                     f"{_length(result.validation.rms_geometric)} without)")
+        paragraphs.insert(0, f"Use the geometric calibration alone: on held-out data the "
+                             f"model with the effects diagnosis found predicts worse than "
+                             f"the geometry without them{worse}. robot_calibrated.yaml "
+                             f"carries that geometry; do not apply the effects.")
+        paragraphs[1] = paragraphs[1].replace(
+            f"to {_length(summary.rms_final)} RMS",
+            f"to {_length(summary.rms_final)} RMS with the effects, "
+            f"{_length(summary.rms_geometric)} with the geometry alone")
+    delivery = getattr(result, "delivery", None)
+    if delivery is not None and delivery.refused:
+        paragraphs.insert(0, f"Do not load a calibrated model: {delivery.reason}. The robot "
+                             f"is better left as it is"
+                             + (" with only the mounted instrument calibrated" if
+                                delivery.recommended == "instrument_only" else "") + ".")
+    return paragraphs
+
+
+def _identifiability_paragraph(result: CalibrationResult) -> str:
+    """How much of the model the data identified, and the largest corrections."""
     ident = result.identifiability
     held = len(ident.candidates) - len(ident.identifiable)
     text = (f"{len(ident.identifiable)} of {len(ident.candidates)} candidate parameters were "
@@ -89,13 +109,13 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     changes = _largest_changes(result)
     if changes:
         text += " Largest corrections: " + ", ".join(changes) + "."
-    paragraphs.append(text)
+    return text
 
-    unexplained = unexplained_sentence(result)
-    if unexplained:
-        paragraphs.append(unexplained)
 
+def _warnings(result: CalibrationResult) -> list[str]:
+    """Cautions the numbers call for: overfitting, poor conditioning, no convergence."""
     warnings = []
+    ident = result.identifiability
     if result.validation is not None and result.fit.rms_final > 0 and \
             result.validation.rms_final > OVERFIT_RATIO * result.fit.rms_final:
         ratio = result.validation.rms_final / result.fit.rms_final
@@ -110,9 +130,7 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     if status and not any(word in status for word in CONVERGED_WORDS):
         warnings.append(f"The solver ended with status '{result.solver.get('status')}'; "
                         f"treat the numbers with care.")
-    if warnings:
-        paragraphs.append("Caution: " + " ".join(warnings))
-    return paragraphs
+    return warnings
 
 
 def _largest_changes(result: CalibrationResult, per_quantity: int = 2) -> list[str]:

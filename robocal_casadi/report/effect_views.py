@@ -181,6 +181,7 @@ def _gather(residuals: DatasetResiduals, units: Units):
 
 
 def _joint_view(result, finding, title, models, residuals) -> EffectView:
+    """The view of an effect on joint readings: one panel per joint it acts on."""
     units, robot = display_units(result.units), result.robot_calibrated
     cls = EFFECTS.get(finding.name)
     variable = cls.plot_variable if cls is not None else "joint"
@@ -199,37 +200,58 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
             Q = np.asarray(r.joints, dtype=float)[rows]
             extras = _numeric_extras(r, rows)
             com = _payload_com(r)
-            if torque:
-                xs.append(gravity_torque_at(robot, Q, extras, com)[:, j])
-            elif variable == "direction" and model is not None:
-                xs.append(model.plot_values(robot, joint, Q, extras, com))
-            elif variable == "driver" and model is not None:
-                xs.append(model.plot_values(robot, joint, Q, extras, com)
-                          / joint_reading_unit(robot, _driver(model, joint) - 1, units)[0])
-            else:
-                xs.append(Q[:, j] / angle_scale)
+            xs.append(_abscissa(robot, model, variable, torque, joint, Q, extras, com, units))
             geo.append(g)
             fin.append(f)
             fits.append(_fitted_dq(robot, models, Q, extras, com, j, angle_scale))
         complete = [v for v in fits if v is not None]
         fitted = np.concatenate(complete) if fits and len(complete) == len(fits) else None
         fitted_any |= fitted is not None
-        if torque:
-            unit = "N m" if robot.joints[j].revolute else "N"
-            x_label = f"gravity {'torque' if robot.joints[j].revolute else 'force'} " \
-                      f"at joint {joint} [{unit}]"
-        elif variable == "direction":
-            x_label = f"direction of motion of q{joint} (-1, 0, +1)"
-        elif variable == "driver":
-            driver = _driver(model, joint)
-            x_label = f"q{driver} [{joint_reading_unit(robot, driver - 1, units)[1]}]"
-        else:
-            x_label = f"q{joint} [{angle_unit}]"
+        x_label = _x_label(robot, model, variable, torque, joint, units)
         what = cls.view_quantity if cls is not None else "reading error"
         curve = torque or (cls is not None and cls.view_curve)
         panels.append(EffectPanel(np.concatenate(xs), np.concatenate(geo), np.concatenate(fin),
                                   x_label, fitted, f"fitted {what} dq{joint} [{angle_unit}]",
                                   fitted_is_curve=curve))
+    caption = _joint_caption(title, cls, model, variable, torque, fitted_any)
+    return EffectView(finding.name, title, tuple(panels), caption,
+                      "torque" if torque else "joint")
+
+
+def _abscissa(robot, model, variable: str, torque: bool, joint: int, Q: np.ndarray,
+              extras, com, units: Units) -> np.ndarray:
+    """What the panel of ``joint`` (1-based) plots the errors against, one value per row:
+    the gravity torque [N m] or force [N], the direction of motion, the driving joint's
+    reading or the joint's own reading (display units)."""
+    j = joint - 1
+    if torque:
+        return gravity_torque_at(robot, Q, extras, com)[:, j]
+    if variable == "direction" and model is not None:
+        return model.plot_values(robot, joint, Q, extras, com)
+    if variable == "driver" and model is not None:
+        return (model.plot_values(robot, joint, Q, extras, com)
+                / joint_reading_unit(robot, _driver(model, joint) - 1, units)[0])
+    return Q[:, j] / joint_reading_unit(robot, j, units)[0]
+
+
+def _x_label(robot, model, variable: str, torque: bool, joint: int, units: Units) -> str:
+    """The horizontal axis label of the panel of ``joint`` (1-based), with its unit."""
+    j = joint - 1
+    if torque:
+        unit = "N m" if robot.joints[j].revolute else "N"
+        return f"gravity {'torque' if robot.joints[j].revolute else 'force'} " \
+               f"at joint {joint} [{unit}]"
+    if variable == "direction":
+        return f"direction of motion of q{joint} (-1, 0, +1)"
+    if variable == "driver":
+        driver = _driver(model, joint)
+        return f"q{driver} [{joint_reading_unit(robot, driver - 1, units)[1]}]"
+    return f"q{joint} [{joint_reading_unit(robot, j, units)[1]}]"
+
+
+def _joint_caption(title: str, cls, model, variable: str, torque: bool,
+                   fitted_any: bool) -> str:
+    """The caption of a joint effect's view: what is plotted against what."""
     before_after = ("Error before the effects (geometric calibration only, orange) and after "
                     "them (with every effect found, blue) on the fit data; lines are the RMS "
                     "in bins")
@@ -245,9 +267,7 @@ def _joint_view(result, finding, title, models, residuals) -> EffectView:
                        f"the black points (right axis) are the fitted reading error, "
                        f"{model.formula}")
     caption = f"{title}. {before_after}, {against}"
-    caption += f"; {fitted_text}." if fitted_any else "."
-    return EffectView(finding.name, title, tuple(panels), caption,
-                      "torque" if torque else "joint")
+    return caption + (f"; {fitted_text}." if fitted_any else ".")
 
 
 def _driver(model, joint: int) -> int:

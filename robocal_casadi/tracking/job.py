@@ -55,7 +55,12 @@ from ..robot import Robot
 from ..table import read_table
 from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy
 from ..units import Units, units_of
-from .conventions import MARKER_CONVENTIONS, method_observation, observation_rotation
+from .conventions import (
+    MARKER_CONVENTIONS,
+    MarkerConvention,
+    method_observation,
+    observation_rotation,
+)
 from .tracker import unit_up
 
 KEYS = ("kind", "robot", "units", "camera", "standoff", "up", "data", "marker_convention",
@@ -129,28 +134,53 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
     camera_xyz = np.array(quantities(require(camera, "xyz", file=path, where="camera"), 3, L,
                                      "length", file=path, where="camera.xyz", unit=units.length))
     camera_rotation = _camera_rotation(camera, units, path)
-    given = content.get("marker_convention")
-    given = "method" if given is None else given
-    convention = next((c for c in MARKER_CONVENTIONS if c == given), None)
-    if convention is None:
-        raise InputError(f"expected one of {', '.join(MARKER_CONVENTIONS)}, got "
-                         f"{str(given)[:40]!r}", file=path, where="marker_convention")
+    convention = _marker_convention(content, path)
     standoff = quantity(require(content, "standoff", file=path), L, "length", file=path,
                         where="standoff", unit=units.length)
     if standoff <= 0:
         raise InputError(f"the standoff must be a positive length, got {standoff / L:g} "
                          f"{units.length}", file=path, where="standoff")
-    up_value = content.get("up")
-    up = np.array(vector([0.0, 0.0, 1.0] if up_value is None else up_value, 3, file=path,
-                         where="up"))
-    largest = float(np.abs(up).max())
-    up = unit_up(up / largest if largest > 0 else up, file=path)  # scaled first: no overflow
+    up = _up(content, path)
     data_path = referenced_file(content, "data", file=path, allow_outside=allow_outside_data)
     if not data_path.is_file() and not data_path.is_symlink():  # a loop: named below
         raise InputError(f"observation table {data_path} not found", file=path, where="data")
     table = read_table(data_path, required=("time", "x", "y", "z"))
     orientation = _orientation_columns(table, convention, data_path)
     joints = checked_joint_readings(table, robot, units, set(), robot_path)
+    time = _times(table, data_path)
+    observations = _observations(table, orientation, convention, camera_xyz, camera_rotation,
+                                 units, data_path)
+    return TrackingJob(path=path, robot=robot, robot_path=robot_path, units=units,
+                       camera_xyz=camera_xyz, camera_rotation=camera_rotation,
+                       marker_convention=convention, standoff=standoff, up=up,
+                       data_path=data_path, time=time, joints=joints,
+                       observations=observations,
+                       max_velocity=_max_velocity(content.get("max_velocity"), robot, units,
+                                                  path))
+
+
+def _marker_convention(content: dict, path: Path) -> MarkerConvention:
+    """``marker_convention`` (default ``method``), one of ``MARKER_CONVENTIONS``."""
+    given = content.get("marker_convention")
+    given = "method" if given is None else given
+    convention = next((c for c in MARKER_CONVENTIONS if c == given), None)
+    if convention is None:
+        raise InputError(f"expected one of {', '.join(MARKER_CONVENTIONS)}, got "
+                         f"{str(given)[:40]!r}", file=path, where="marker_convention")
+    return convention
+
+
+def _up(content: dict, path: Path) -> np.ndarray:
+    """The worktable normal ``up`` (default +z) as a unit vector in the world frame."""
+    up_value = content.get("up")
+    up = np.array(vector([0.0, 0.0, 1.0] if up_value is None else up_value, 3, file=path,
+                         where="up"))
+    largest = float(np.abs(up).max())
+    return unit_up(up / largest if largest > 0 else up, file=path)  # scaled first: no overflow
+
+
+def _times(table, data_path: Path) -> np.ndarray:
+    """The ``time`` column [s], refused where it goes backwards."""
     time = table.numbers("time")
     backwards = np.flatnonzero(np.diff(time) < 0)
     if backwards.size:
@@ -158,6 +188,15 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
         raise InputError(f"time goes backwards ({time[row - 1]:g} s, then {time[row]:g} s): rows "
                          "are solved in order, as captured", file=data_path,
                          where=f"line {table.line(row)}")
+    return time
+
+
+def _observations(table, orientation: tuple[str, ...], convention: MarkerConvention,
+                  camera_xyz: np.ndarray, camera_rotation: np.ndarray, units: Units,
+                  data_path: Path) -> np.ndarray:
+    """The observations (N x 6) as the method's ``x, y, z`` [m], ``roll, pitch, yaw``
+    [rad] for a camera at ``camera_xyz`` with axes parallel to the end frame."""
+    L = units.length_scale
     angular = len(orientation) == 3  # rpy or rvec, in the job's angle unit
     names = ("x", "y", "z", *orientation)
     scales = np.array([L] * 3 + [units.angle_scale if angular else 1.0] * len(orientation))
@@ -172,24 +211,17 @@ def load_tracking_job(path: str | Path, *, robot: Robot | None = None,
                             where=f"line {table.line(int(row))}, column {name!r}",
                             shown=raw[row, col], unit=units.unit_name(kind_of))
     if angular and convention == "method" and np.array_equal(camera_rotation, np.eye(3)):
-        observations = values  # the method's own form: nothing to convert
-    else:
-        observations = np.empty((len(values), 6))
-        for row, value in enumerate(values):
-            if angular:
-                rotation = observation_rotation(value, convention)
-            else:
-                rotation = matrix_from_quaternion(_unit_quaternion(
-                    value[3:], data_path, f"line {table.line(row)}, columns qw..qz"))
-            observations[row] = method_observation(camera_xyz, camera_rotation, value[:3],
-                                                   rotation, convention)
-    return TrackingJob(path=path, robot=robot, robot_path=robot_path, units=units,
-                       camera_xyz=camera_xyz, camera_rotation=camera_rotation,
-                       marker_convention=convention, standoff=standoff, up=up,
-                       data_path=data_path, time=time, joints=joints,
-                       observations=observations,
-                       max_velocity=_max_velocity(content.get("max_velocity"), robot, units,
-                                                  path))
+        return values  # the method's own form: nothing to convert
+    observations = np.empty((len(values), 6))
+    for row, value in enumerate(values):
+        if angular:
+            rotation = observation_rotation(value, convention)
+        else:
+            rotation = matrix_from_quaternion(_unit_quaternion(
+                value[3:], data_path, f"line {table.line(row)}, columns qw..qz"))
+        observations[row] = method_observation(camera_xyz, camera_rotation, value[:3],
+                                               rotation, convention)
+    return observations
 
 
 def _max_velocity(value, robot: Robot, units: Units, path: Path) -> np.ndarray | None:

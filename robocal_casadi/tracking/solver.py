@@ -105,6 +105,8 @@ class GaussNewtonSolver:
         return (f"GaussNewtonSolver({self.problem.robot.name!r}, "
                 f"max_iterations={self.max_iterations}, compiled={self.compiled})")
 
+    # long: one real-time loop over arrays bound to the step function once; its active
+    # set, history and errors would only be passed to and fro by a split, every cycle.
     def solve(self, previous: np.ndarray, goal: np.ndarray, lower: np.ndarray,
               upper: np.ndarray, start: np.ndarray | None = None) -> SolveOutcome:
         """Joints meeting ``goal`` (12-vector) closest to ``previous``, within bounds.

@@ -167,11 +167,7 @@ class Tracker:
         self.camera_xyz = _vector(camera_xyz, 3, "camera_xyz")
         if not np.all(np.isfinite(self.camera_xyz)):
             raise InputError(f"expected finite numbers, got {camera_xyz!r}", where="camera_xyz")
-        standoff = float(standoff)
-        if not (math.isfinite(standoff) and standoff > 0):
-            raise InputError(f"the standoff must be a positive length, got {standoff}",
-                             where="standoff")
-        self.standoff = standoff
+        self.standoff = _positive_standoff(standoff)
         self.up = unit_up(up)
         self.marker_convention = choice(marker_convention, MARKER_CONVENTIONS,
                                         "marker_convention")
@@ -180,17 +176,7 @@ class Tracker:
         # The method's own description needs no conversion per cycle.
         self._converts = (self.marker_convention != "method"
                           or not np.array_equal(self.camera_rotation, np.eye(3)))
-        self.max_step = None
-        if max_step is not None:
-            try:
-                steps = np.broadcast_to(np.asarray(max_step, dtype=float), (n,)).copy()
-            except ValueError:
-                raise InputError(f"expected one value or {n}, got {max_step!r}",
-                                 where="max_step") from None
-            if not (np.all(np.isfinite(steps)) and np.all(steps > 0)):
-                raise InputError(f"max_step must be positive, got {max_step}",
-                                 where="max_step")
-            self.max_step = steps
+        self.max_step = _positive_steps(max_step, n)
         self.p = (robot.parameter_vector() if p is None
                   else _vector(p, self.problem.parameter_count, "p"))
         self.weights = np.ones(n) if weights is None else _vector(weights, n, "weights")
@@ -213,7 +199,11 @@ class Tracker:
         self._base_origin = np.asarray(
             self.problem.kinematics.joint_frames(np.zeros(n), self.p)[0])[:3, 3]
         self._previous: np.ndarray | None = None
-        # Goal function through the buffer interface: arrays bound once.
+        self._bind_goal(compiled)
+
+    def _bind_goal(self, compiled: bool) -> None:
+        """The goal function through the buffer interface: its arrays bound once."""
+        n = self.robot.dof
         self._goal_in = [np.zeros(n), np.zeros(6), self.p.copy(), self.camera_xyz.copy(),
                          np.array([self.standoff]), self.up.copy()]
         self._goal_out = np.zeros(12)
@@ -310,25 +300,33 @@ class Tracker:
                 status = "unreachable" if outcome.infeasible or self.seed_from_ik else "failed"
                 q = previous
             else:
-                q, position_error, angle_error = far
-                status = "ok"
-                if steps is not None:
-                    move = np.abs(q - previous)
-                    share = float(np.min(np.where(move > 0, steps / np.where(
-                        move > 0, move, 1.0), np.inf), initial=1.0))
-                    if share < 1.0:
-                        q = previous + share * (q - previous)
-                        np.maximum(q, self.lower, out=q)
-                        np.minimum(q, self.upper, out=q)
-                        errors = self.problem.errors(q, goal, self.up, self.p)
-                        position_error, angle_error = float(errors[0]), float(errors[1])
-                        status = "limited"
+                q, position_error, angle_error, status = self._approach(previous, far, goal,
+                                                                        steps)
         if status in ("ok", "limited"):
             q.setflags(write=False)  # shared by the answer and the tracker's memory
             self._previous = q
         constraint_error = max(position_error, angle_error)
         return TrackStep(q, status, (time.perf_counter() - start) * 1e3, constraint_error,
                          position_error, angle_error, iterations)
+
+    def _approach(self, previous: np.ndarray, far: tuple[np.ndarray, float, float],
+                  goal: np.ndarray, steps: np.ndarray | None
+                  ) -> tuple[np.ndarray, float, float, str]:
+        """``(q, position error [m], angle error [rad], status)`` of a move towards the
+        joints ``far`` found within the limits alone: all the way (``ok``), or the
+        largest step the bound allows along the straight line (``limited``)."""
+        q, position_error, angle_error = far
+        if steps is not None:
+            move = np.abs(q - previous)
+            share = float(np.min(np.where(move > 0, steps / np.where(
+                move > 0, move, 1.0), np.inf), initial=1.0))
+            if share < 1.0:
+                q = previous + share * (q - previous)
+                np.maximum(q, self.lower, out=q)
+                np.minimum(q, self.upper, out=q)
+                errors = self.problem.errors(q, goal, self.up, self.p)
+                return q, float(errors[0]), float(errors[1]), "limited"
+        return q, position_error, angle_error, "ok"
 
     def _cycle_steps(self, max_step) -> np.ndarray | None:
         """This cycle's step bound (n) [rad or m]: the smaller of the tracker's and
@@ -450,3 +448,27 @@ class Tracker:
                         moved[j] - previous[j]):
                     moved[j] = value
         return q if np.array_equal(moved, q) else moved
+
+
+def _positive_standoff(standoff: float) -> float:
+    """The standoff Z [m], refused unless a positive finite length."""
+    standoff = float(standoff)
+    if not (math.isfinite(standoff) and standoff > 0):
+        raise InputError(f"the standoff must be a positive length, got {standoff}",
+                         where="standoff")
+    return standoff
+
+
+def _positive_steps(max_step: float | Sequence[float] | None, n: int) -> np.ndarray | None:
+    """``max_step`` (one value or ``n``) as ``n`` positive bounds [rad or m], or None."""
+    if max_step is None:
+        return None
+    try:
+        steps = np.broadcast_to(np.asarray(max_step, dtype=float), (n,)).copy()
+    except ValueError:
+        raise InputError(f"expected one value or {n}, got {max_step!r}",
+                         where="max_step") from None
+    if not (np.all(np.isfinite(steps)) and np.all(steps > 0)):
+        raise InputError(f"max_step must be positive, got {max_step}",
+                         where="max_step")
+    return steps

@@ -82,30 +82,11 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
         if np.linalg.norm(cross) < PARALLEL:
             parallel[i - 1] = True  # row i's beta tilts axis i+1 against axis i
             previous = origins[i - 1] if i > 1 else pa
-            foot = pb + np.dot(previous - pb, zb) * zb
-            offset = foot - previous
-            offset -= np.dot(offset, za) * za
-            if np.linalg.norm(offset) < 1e-12:  # the same line: keep the previous x
-                x = xs[i - 1] if xs[i - 1] is not None else _any_normal(za)
-            else:
-                x = offset / np.linalg.norm(offset)
-            origins[i], xs[i] = foot, x
+            origins[i], xs[i] = _parallel_frame(za, zb, pb, _placed(previous), xs[i - 1])
             notes.append(f"axes {i} and {i + 1} are parallel: DH is degenerate there; "
                          f"joint {i} carries the Hayati beta")
-            continue
-        # closest points of the two lines
-        w = pa - pb
-        b = np.dot(za, zb)
-        denominator = 1 - b * b
-        s = (b * np.dot(zb, w) - np.dot(za, w)) / denominator
-        t = (np.dot(zb, w) - b * np.dot(za, w)) / denominator
-        on_a, on_b = pa + s * za, pb + t * zb
-        normal = on_b - on_a
-        if np.linalg.norm(normal) < 1e-12:
-            x = cross / np.linalg.norm(cross)
         else:
-            x = normal / np.linalg.norm(normal)
-        origins[i], xs[i] = on_b, x
+            origins[i], xs[i] = _normal_frame(za, zb, pa, pb, cross)
     # frame 0 on axis 1 with frame 1's x; frame n on axis n under the tip, frame n-1's x
     placed_x = [_placed(v) for v in xs[1:]]  # frames 1..n-1, every one set above
     placed_origin = [_placed(v) for v in origins[1:]]
@@ -117,6 +98,47 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
     last = frames[-1]
     height = np.dot(tip[:3, 3] - last[:3, 3], last[:3, 2])
     frames.append(_frame(last[:3, 0], last[:3, 2], last[:3, 3] + height * last[:3, 2]))
+    joints = _dh_joints(robot, frames, parallel)
+    dh = Robot(name=robot.name, convention="dh", joints=joints, base=frame_of(frames[0]),
+               tool=frame_of(invert(frames[-1]) @ tip), gravity=robot.gravity,
+               has_base=True, has_tool=True, has_gravity=robot.has_gravity)
+    return DhEquivalent(dh, tuple(notes))
+
+
+def _parallel_frame(za: np.ndarray, zb: np.ndarray, pb: np.ndarray, previous: np.ndarray,
+                    previous_x: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Origin [m] and x axis of the frame on axis ``zb`` (through ``pb``) parallel to the
+    axis ``za`` before it: the normal through the ``previous`` origin (``d = 0``); on the
+    same line, the previous x axis."""
+    foot = pb + np.dot(previous - pb, zb) * zb
+    offset = foot - previous
+    offset -= np.dot(offset, za) * za
+    if np.linalg.norm(offset) < 1e-12:  # the same line: keep the previous x
+        return foot, previous_x if previous_x is not None else _any_normal(za)
+    return foot, offset / np.linalg.norm(offset)
+
+
+def _normal_frame(za: np.ndarray, zb: np.ndarray, pa: np.ndarray, pb: np.ndarray,
+                  cross: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Origin [m] and x axis of the frame on axis ``zb`` (through ``pb``): where the
+    common normal from axis ``za`` (through ``pa``) meets it, x along that normal, or along
+    ``cross = za x zb`` where the axes intersect."""
+    # closest points of the two lines
+    w = pa - pb
+    b = np.dot(za, zb)
+    denominator = 1 - b * b
+    s = (b * np.dot(zb, w) - np.dot(za, w)) / denominator
+    t = (np.dot(zb, w) - b * np.dot(za, w)) / denominator
+    on_a, on_b = pa + s * za, pb + t * zb
+    normal = on_b - on_a
+    if np.linalg.norm(normal) < 1e-12:
+        return on_b, cross / np.linalg.norm(cross)
+    return on_b, normal / np.linalg.norm(normal)
+
+
+def _dh_joints(robot: Robot, frames: list[np.ndarray], parallel: list[bool]
+               ) -> tuple[Joint, ...]:
+    """The DH rows from frame i-1 to frame i, with the source joints' types and limits."""
     joints = []
     for i, source in enumerate(robot.joints):
         T = invert(frames[i]) @ frames[i + 1]
@@ -126,10 +148,7 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
         alpha = float(np.arctan2(T[2, 1], T[2, 2]))
         joints.append(Joint(source.type, theta, d, a, alpha, limits=source.limits,
                             has_beta=parallel[i], drive=source.drive))
-    dh = Robot(name=robot.name, convention="dh", joints=tuple(joints), base=frame_of(frames[0]),
-               tool=frame_of(invert(frames[-1]) @ tip), gravity=robot.gravity,
-               has_base=True, has_tool=True, has_gravity=robot.has_gravity)
-    return DhEquivalent(dh, tuple(notes))
+    return tuple(joints)
 
 
 def _any_normal(z: np.ndarray) -> np.ndarray:
