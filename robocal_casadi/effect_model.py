@@ -23,7 +23,15 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .effects import EFFECTS, Effect, JointCompliance, RowContext, ThermalDrift
+from .effects import (
+    EFFECTS,
+    LEARNED,
+    Effect,
+    JointCompliance,
+    ResidualMap,
+    RowContext,
+    ThermalDrift,
+)
 from .effects.coupling import JointCoupling
 from .effects.deflection import LinkDeflection
 from .effects.motion import is_derived_column, with_directions
@@ -58,6 +66,8 @@ def effects_to_dict(result) -> dict | None:
             entry["payload"] = effect.payload
         if isinstance(effect, JointCoupling):
             entry["drivers"] = [int(d) for d in effect.drivers]
+        if isinstance(effect, ResidualMap):
+            entry.update(effect.to_entry())
         entries.append(entry)
     com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
     # The geometry fitted together with the effects belongs with them: robot_calibrated.yaml
@@ -171,10 +181,13 @@ def load_effects(folder: Path, robot: Robot) -> EffectModel:
         elif name == "thermal_drift":
             effect = ThermalDrift(joints, column=entry.get("column", "temperature"),
                                   reference_value=float(entry["reference"]))
+        elif name == ResidualMap.name:
+            effect = ResidualMap.from_entry(joints, entry, path, where)
         elif name in EFFECTS:
             effect = EFFECTS[name](joints)
         else:
-            raise InputError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", file=path,
+            known = ", ".join([*EFFECTS, *LEARNED])
+            raise InputError(f"unknown effect {name!r}; known: {known}", file=path,
                              where=where)
         names = effect.parameter_names()
         if set(names) != set(parameters):

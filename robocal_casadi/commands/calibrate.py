@@ -22,9 +22,10 @@ from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..calibration.outliers import rejected_lines
 from ..datasets import load_dataset
 from ..effect_model import delivered_lines
+from ..effects import is_learned
 from ..errors import InputError
 from ..profiles import PROFILES
-from ..results import CalibrationResult
+from ..results import CalibrationResult, mean_square_shares
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -118,7 +119,13 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
             lines.append(f"data selection dropped {len(dropped)} unit(s) of {label}: "
                          f"{', '.join(map(str, dropped))}")
     for effect in result.effects:
-        lines.append(f"effect: {effect.summary or effect.name}")
+        kind = "learned" if is_learned(effect.name) else "physical"
+        lines.append(f"effect ({kind}): {effect.summary or effect.name}")
+    parts = mean_square_shares(fit.rms_nominal, fit.rms_geometric, fit.rms_final,
+                               result.effects)
+    if parts is not None:
+        lines.append("shares of the nominal fit's mean square: " + ", ".join(
+            f"{name} {100 * value:.3g}%" for name, value in parts.items()))
     if not diagnosed:
         lines.append("diagnosis: not run (--no-diagnose); the residual was not tested for "
                      "effects the model lacks")
