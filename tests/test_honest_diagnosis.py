@@ -118,6 +118,23 @@ def test_region_folds_hold_out_contiguous_joint_ranges(tmp_path):
         assert high < low  # the ranges do not overlap: each fold is a region
 
 
+def test_region_folds_also_hold_out_each_half_of_a_joint_range(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=80, noise=NOISE,
+                    seed=2, progress=False).load()
+    problem = Problem(robot, models_for([data]))
+    schemes = {s.name: s for s in fold_schemes(problem, 5, 0)}
+    for j in range(1, robot.dof + 1):
+        halves = schemes[f"q{j} halves"]
+        assert halves.extrapolating and halves.count == 2
+        fold = halves.fold[::3]  # three entries per tracker row
+        values = data.joints[:, j - 1]
+        assert values[fold == 0].max() < values[fold == 1].min()  # the lower, the upper half
+        assert abs(int(np.sum(fold == 0)) - int(np.sum(fold == 1))) <= 1
+        # a far half may grow more than a quarter before it refuses an effect
+        assert halves.tolerance is not None and schemes[f"q{j} ranges"].tolerance is None
+
+
 def test_recommendation_follows_the_held_out_data():
     fit = RmsSummary(1.0, 0.1, 0.05)
     assert recommend(fit, None, added=False)[0] == "final"
