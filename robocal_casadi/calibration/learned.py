@@ -54,7 +54,7 @@ RANK_TOLERANCE = 1e-6  # of a row's largest sensitivity: below, a direction is n
 
 @dataclass(frozen=True)
 class LearnedMap:
-    """What ``offer`` found: the ``effect`` (None when it does not pay), the held-out RMS
+    """What ``learn`` found: the ``effect`` (None when it does not pay), the held-out RMS
     [m] on the random folds without and with it, the summed held-out error ratio of the
     extrapolating schemes, the chosen ``length_scale`` and ``smoothing``, and why not."""
 
