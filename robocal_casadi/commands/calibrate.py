@@ -151,7 +151,10 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if confounded:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
     if result.unexplained is not None:
-        lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
+        taken = any(is_learned(e.name) for e in result.effects)
+        lines.append("unexplained: " + result.unexplained.sentence(s, units.length)
+                     + ("; the learned map corrects it inside the region it was trained on"
+                        if taken else ""))
     elif diagnosed:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
@@ -172,6 +175,7 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
             "condition_number": float(result.condition_number), "fit_rms": rms(result.fit),
             "validation_rms": rms(result.validation), "diagnosed": diagnosed,
             "effects": [e.name for e in result.effects],
+            "learned_effects": [e.name for e in result.effects if is_learned(e.name)],
             "recommended": result.recommended, "warning": result.warning or None,
             "delivered_model": (result.delivered or {}).get("model"),
             "predicted_accuracy": None if result.predicted_accuracy is None else {
