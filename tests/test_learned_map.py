@@ -7,6 +7,7 @@ read back from the effects file, and tracker data computed here through pinocchi
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from robocal_casadi import load_dataset
 from robocal_casadi.calibration import Problem, calibrate, models_for
 from robocal_casadi.calibration.evaluation import refit_placement
 from robocal_casadi.calibration.learned import fit_map, joints_named, learn
+from robocal_casadi.cli import main
 from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.effect_model import EFFECTS_FILE, load_effects
 from robocal_casadi.effects import ResidualMap, is_learned
@@ -203,3 +205,23 @@ def test_fitted_on_half_of_joint_1_the_other_half_is_not_made_worse(tmp_path):
     result = calibrate([dataset_rows(data, low)], [dataset_rows(data, ~low)])
     held_out = result.validation_all
     assert held_out.rms_final <= held_out.rms_geometric, [e.summary for e in result.effects]
+
+
+@pytest.mark.slow
+def test_the_job_delivers_the_map_and_reads_it_back(tmp_path):
+    """On an error no effect names, the calibration keeps the map, says it is learned,
+    writes it into effects_calibrated.yaml, and what the file delivers when read back is
+    what the final model scored on the held-out data."""
+    fit = tracker_data(tmp_path / "fit", 300, 1, sines, geometry_error=5e-4)
+    held = tracker_data(tmp_path / "held", 150, 2, sines, geometry_error=5e-4)
+    out = tmp_path / "out"
+    assert main(["calibrate", str(fit.path), "--validate", str(held.path), "--out", str(out),
+                 "--no-report"]) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert "residual_map" in {e["name"] for e in result["effects"]}
+    validation = result["validation"]["all"]
+    assert validation["rms_final"] < 0.7 * validation["rms_geometric"], validation
+    delivered = result["delivered"]["effects_calibrated.yaml"]["validation"]
+    assert delivered == pytest.approx(result["validation"]["rms_final"], rel=1e-6)
+    written = load_effects(out, ROBOTS["industrial_6r"]())
+    assert any(isinstance(e, ResidualMap) for e in written.effects)
