@@ -166,14 +166,14 @@ class ResidualMap(Effect):
         return ca.SX.zeros(robot.dof), column(entries, len(row.registry))
 
     def describe(self, values, units: Units) -> str:
-        region = ", ".join(f"q{j} in [{units.angle_text(lo, hi)}]"
-                           if hasattr(units, "angle_text") else
-                           f"q{j} in [{lo:.3g}, {hi:.3g}]"
+        """Where the map holds, in the file's angle unit (revolute joints assumed)."""
+        scale = units.angle_scale
+        region = ", ".join(f"q{j} {lo / scale:.3g} .. {hi / scale:.3g} {units.angle}"
                            for j, lo, hi in zip(self.joints, self.lower, self.upper))
         return (f"a learned correction of the tool position over "
                 f"{', '.join(f'q{j}' for j in self.joints)} ({len(self.centres)} centres, "
-                f"length scale {self.length_scale:.3g} of the trained span; trained on "
-                f"{region} (SI), fading to zero outside)")
+                f"length scale {self.length_scale:.3g} of the trained span), trained on "
+                f"{region} and fading to zero outside")
 
     # ----------------------------------------------------------------- the file
 
