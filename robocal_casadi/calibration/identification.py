@@ -608,8 +608,7 @@ def _learned(final: DiagnosedFit, structure, *, method: Method, loss: Loss) -> D
     before, after = final.problem.rms(final.solution.x), problem.rms(solution.x)
     if not after < before:
         return final
-    units = problem.robot.units
-    finding = learned.finding(outcome, (before, after), units.length, units.length_scale)
+    finding = learned.finding(outcome, (before, after), problem.robot.units)
     return replace(final, problem=problem, solution=solution, added=final.added + (finding,))
 
 

@@ -40,6 +40,7 @@ from scipy.linalg import cho_factor, cho_solve, eigh
 
 from ..effects.residual_map import FADE, GAIN, SHIFT, ResidualMap, fade_weight, gaussian
 from ..results import EffectFinding
+from ..units import Units
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
 from .folds import fold_schemes
 from .problem import Problem
@@ -269,16 +270,13 @@ def with_map(problem: Problem, solution: Solution, effect: ResidualMap, *,
     return mapped, solve(mapped, x, free, method=method, loss=loss)
 
 
-def finding(learned: LearnedMap, fit_rms: tuple[float, float], length: str,
-            scale: float) -> EffectFinding:
-    """The map as a finding of the result: its gain, evidence and one sentence."""
+def finding(learned: LearnedMap, fit_rms: tuple[float, float], units: Units) -> EffectFinding:
+    """The map as a finding of the result: its gain, evidence and one sentence (lengths
+    and angles in ``units``); ``fit_rms`` [m] the fit RMS without and with it."""
     effect = learned.effect
     assert effect is not None
-    region = ", ".join(f"q{j} {lo:.3g} .. {hi:.3g}"
-                       for j, lo, hi in zip(effect.joints, effect.lower, effect.upper))
-    summary = (f"a smooth correction of the tool position over "
-               f"{', '.join(f'q{j}' for j in effect.joints)}, trained on {region} (rad or m) "
-               f"and fading to zero outside; it lowers the held-out RMS from "
+    scale, length = units.length_scale, units.length
+    summary = (f"{effect.describe({}, units)}; it lowers the held-out RMS from "
                f"{learned.cv_before / scale:.3g} {length} to {learned.cv_after / scale:.3g} "
                f"{length}")
     evidence = {"rms_drop": 1.0 - fit_rms[1] / fit_rms[0], "fit_rms_without": fit_rms[0],
