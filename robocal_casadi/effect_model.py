@@ -23,7 +23,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .effects import EFFECTS, Effect, RowContext
+from .effects import EFFECTS, LEARNED, Effect, RowContext
 from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
@@ -152,11 +152,14 @@ def _read_entry(entry, robot: Robot, path: Path, where: str) -> tuple[Effect, di
         parameters = {str(n): float(v) for n, v in entry["parameters"].items()}
     except (KeyError, TypeError, ValueError, AttributeError):
         raise InputError("expected {name, joints, parameters}", file=path, where=where) from None
-    if name not in EFFECTS:
-        raise InputError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}", file=path,
+    known = {**EFFECTS, **LEARNED}
+    if name not in known:
+        raise InputError(f"unknown effect {name!r}; known: {', '.join(known)}", file=path,
                          where=where)
     try:
-        effect = EFFECTS[name].from_dict(entry, robot)
+        effect = known[name].from_dict(entry, robot)
+    except InputError as error:  # the class names what is wrong; the file and entry are ours
+        raise InputError(error.what, file=path, where=where) from None
     except (KeyError, TypeError, ValueError) as error:
         raise InputError(f"{name}: malformed entry ({error})", file=path, where=where) from None
     names = effect.parameter_names()

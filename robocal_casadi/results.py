@@ -589,3 +589,21 @@ def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
                                                      "--with-effects)",
                                           **scaled(delivered["with_effects"])}
     return out
+
+
+def mean_square_shares(nominal: float, geometric: float, final: float,
+                       findings: Sequence[EffectFinding]) -> dict[str, float] | None:
+    """How the fit's mean square at nominal divides: removed by the geometry, by the
+    physical effects, by a learned map, and what remains (fractions summing to 1), from
+    the fit RMS values [m] (nominal, geometric, final). A learned finding records the fit
+    RMS without it (``evidence["fit_rms_without"]``); None without effects or at a zero
+    nominal error."""
+    if not findings or not nominal > 0:
+        return None
+    mapped = next((f for f in findings if "fit_rms_without" in f.evidence), None)
+    physical = float(mapped.evidence["fit_rms_without"]) if mapped is not None else final
+    total = nominal ** 2
+    return {"geometry": (nominal ** 2 - geometric ** 2) / total,
+            "physical effects": (geometric ** 2 - physical ** 2) / total,
+            "learned map": (physical ** 2 - final ** 2) / total,
+            "remaining": final ** 2 / total}

@@ -118,6 +118,23 @@ def test_region_folds_hold_out_contiguous_joint_ranges(tmp_path):
         assert high < low  # the ranges do not overlap: each fold is a region
 
 
+def test_region_folds_also_hold_out_each_half_of_a_joint_range(tmp_path):
+    robot = ROBOTS["industrial_6r"]()
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=80, noise=NOISE,
+                    seed=2, progress=False).load()
+    problem = Problem(robot, models_for([data]))
+    schemes = {s.name: s for s in fold_schemes(problem, 5, 0)}
+    for j in range(1, robot.dof + 1):
+        halves = schemes[f"q{j} halves"]
+        assert halves.extrapolating and halves.count == 2
+        fold = halves.fold[::3]  # three entries per tracker row
+        values = data.joints[:, j - 1]
+        assert values[fold == 0].max() < values[fold == 1].min()  # the lower, the upper half
+        assert abs(int(np.sum(fold == 0)) - int(np.sum(fold == 1))) <= 1
+        # a far half may grow more than a quarter before it refuses an effect
+        assert halves.tolerance is not None and schemes[f"q{j} ranges"].tolerance is None
+
+
 def test_recommendation_follows_the_held_out_data():
     fit = RmsSummary(1.0, 0.1, 0.05)
     assert recommend(fit, None, added=False)[0] == "final"
@@ -247,13 +264,17 @@ def test_an_effect_that_stood_in_for_a_later_one_is_taken_out(tmp_path, monkeypa
     of its signal. Once the gear ratio and the compliance are in, the coupling no longer
     pays its way; it is taken out, and the record says so. (The candidates are those of
     a geared arm's joints; with link deflection and transmission coupling on offer these
-    data take another path to the same two effects, and nothing needs taking out.)"""
+    data take another path to the same two effects, and nothing needs taking out. The
+    halves of each joint's range are held back too: they refuse the coupling at once, and
+    this test is about taking an effect out again.)"""
     from robocal_casadi.calibration import diagnosis
     from robocal_casadi.effects import EFFECTS
 
     joint_effects = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift",
                      "joint_coupling", "backlash")
     monkeypatch.setattr(diagnosis, "EFFECTS", {k: EFFECTS[k] for k in joint_effects})
+    monkeypatch.setattr(diagnosis, "fold_schemes", lambda *args, **options: [
+        s for s in fold_schemes(*args, **options) if not s.name.endswith("halves")])
     truth = {"joint_compliance": {2: 1.057e-6, 3: 0.879e-6}, "joint_scale": {3: 5.44e-4}}
     data = simulate(ROBOTS["industrial_6r"](), "tracker_points", out_dir=tmp_path / "t",
                     rows=500, noise=1e-5, geometric_errors=(0.243e-3, 1.2036e-3),

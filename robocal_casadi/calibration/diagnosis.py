@@ -379,8 +379,13 @@ class _Screening:
         if not pairs:
             return float("nan"), "", float("nan")
         total = sum(a for _, _, a in pairs) / sum(b for _, b, _ in pairs)
-        name, b, a = max(pairs, key=lambda p: p[2] / p[1])
+        name, b, a = max(pairs, key=lambda p: p[2] / p[1] / (1.0 + self.tolerance(p[0])))
         return total, name, a / b
+
+    def tolerance(self, scheme: str) -> float:
+        """How much an effect may grow the held-out squared error of ``scheme``."""
+        own = next((s.tolerance for s in self.schemes if s.name == scheme), None)
+        return EXTRAPOLATION_TOLERANCE if own is None else own
 
     def screen(self, candidate: _Candidate) -> _Screen:
         names = candidate.names
@@ -422,7 +427,7 @@ class _Screening:
             return (f"too small to matter (held-out RMS -{100 * (1 - after / self.cv_before):.2g}"
                     f"%, below {100 * MIN_GAIN:.2g}%)")
         total, worst, ratio = self.extrapolation(held_out)
-        if np.isfinite(total) and (total >= 1.0 or ratio > 1.0 + EXTRAPOLATION_TOLERANCE):
+        if np.isfinite(total) and (total >= 1.0 or ratio > 1.0 + self.tolerance(worst)):
             return (f"does not extrapolate (held out {worst}: squared error x{ratio:.3g}; "
                     f"all extrapolating folds x{total:.3g})")
         return ""

@@ -10,6 +10,17 @@ for artifacts and bars, whose socket positions belong to the placement).
 * ``q<j> ranges``: contiguous ranges of joint j (by the mean reading of the unit), each
   held out in turn. The fit never sees the range it is judged on, so an effect must
   extrapolate along that joint, as it must when the robot later works elsewhere.
+* ``q<j> halves``: the lower and the upper half of joint j's range, each held out in
+  turn: the fit sees one half and must predict the other, as when a robot calibrated in
+  one part of its workspace later works in another. The quarters of ``q<j> ranges`` are
+  too close to their training data to expose an effect the geometry mostly imitates:
+  on the fit data the two cancel (a bending term of millimetres paired with a link
+  length changed by as much), and only a held-out region far enough away breaks the
+  cancellation. Half the data is a weak fit, and while other effects are still
+  missing the geometry refitted on it extrapolates their signal poorly: a true effect
+  found early may leave a half's error somewhat larger. So a half may grow its squared
+  error up to ``HALVES_TOLERANCE`` (double) before it refuses an effect; a cancellation
+  breaking down far away grows it by orders of magnitude.
 * ``clusters``: groups of nearby configurations (k-means over all joint readings), each
   held out in turn: regions of the workspace rather than ranges of one joint.
 * ``datasets``: each dataset held out in turn, when there are several (another
@@ -27,6 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 RANGES = 4  # contiguous ranges per joint
+HALVES = 2  # the coarsest split of a joint's range: fit one half, predict the other
+HALVES_TOLERANCE = 1.0  # an effect may at most double a held-out half's squared error
 CLUSTERS = 5
 MIN_UNITS_PER_FOLD = 3  # a scheme needs at least this many units in every fold
 MIN_SPAN = {True: 0.05, False: 0.005}  # [rad] revolute, [m] prismatic: below, a joint is still
@@ -34,11 +47,16 @@ MIN_SPAN = {True: 0.05, False: 0.005}  # [rad] revolute, [m] prismatic: below, a
 
 @dataclass(frozen=True)
 class FoldScheme:
-    """Fold number per residual entry (-1: always trained on) and what it holds out."""
+    """Fold number per residual entry (-1: always trained on) and what it holds out.
+
+    ``tolerance``: for an extrapolating scheme, by how much (relative) an effect may grow
+    its held-out squared error; None: the judge's default.
+    """
 
     name: str
     fold: np.ndarray
     extrapolating: bool
+    tolerance: float | None = None  # growth of its held-out squared error an effect may cause
 
     @property
     def count(self) -> int:
@@ -124,6 +142,13 @@ def _kmeans(points: np.ndarray, count: int, seed: int, iterations: int = 30) -> 
     return labels
 
 
+def _contiguous(values: np.ndarray, parts: int) -> np.ndarray:
+    """Fold per unit: ``parts`` contiguous ranges of ``values`` with equal numbers of
+    units (ties broken by order)."""
+    rank = np.argsort(np.argsort(values, kind="stable"), kind="stable")
+    return (rank * parts) // len(values)
+
+
 def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
     """Every fold scheme the problem's data allow (see the module docstring)."""
     units = _units(problem)
@@ -141,12 +166,13 @@ def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
             values = units.joints[:, j]
             if np.ptp(values) < MIN_SPAN[joint.revolute]:
                 continue
-            # Contiguous ranges with equal numbers of units (ties broken by order).
-            rank = np.argsort(np.argsort(values, kind="stable"), kind="stable")
-            unit_fold = (rank * RANGES) // n_units
-            if _enough(unit_fold, RANGES):
-                schemes.append(FoldScheme(f"q{j + 1} ranges", _entry_folds(units, unit_fold),
-                                          True))
+            for parts, word, tolerance in ((RANGES, "ranges", None),
+                                           (HALVES, "halves", HALVES_TOLERANCE)):
+                unit_fold = _contiguous(values, parts)
+                if _enough(unit_fold, parts):
+                    schemes.append(FoldScheme(f"q{j + 1} {word}",
+                                              _entry_folds(units, unit_fold), True,
+                                              tolerance=tolerance))
         if n_units >= CLUSTERS * MIN_UNITS_PER_FOLD:
             scale = np.array([1.0 if j.revolute else 10.0 for j in problem.robot.joints])
             labels = _kmeans(units.joints * scale, CLUSTERS, seed)

@@ -7,7 +7,10 @@
 2. identifiability at that point (``identifiability.analyse``);
 3. the geometric fit of every identifiable robot and mounted parameter, jointly with the
    placements (``rms_geometric``);
-4. diagnosis of what the residual still holds (``diagnosis``), when asked;
+4. diagnosis of what the residual still holds (``diagnosis``), when asked; where the
+   physical effects leave a structured residual (``unexplained``), a learned map of the
+   tool position over the joints it follows, kept only when the folds confirm it
+   (``learned``);
 5. validation on held-out datasets: robot, effects and mounted instrument from the
    calibration, placements fitted again.
 """
@@ -43,7 +46,7 @@ from ..results import (
     SphereEstimate,
 )
 from ..robot import Robot
-from . import diagnosis, outliers, unexplained
+from . import diagnosis, learned, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
@@ -332,6 +335,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
             break
         kept, rejected = revised
         nominal = _refitted(nominal, kept, effects, method=method)
+    structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
+    if diagnose:
+        final = _learned(final, structure, method=method, loss=fit_loss)
     x_nominal_final = _embed(problem, nominal.solution.x, final.problem)
     x_geometric_final = _embed(problem, geometric.solution.x, final.problem)
     residuals = _residuals(final.problem, x_nominal_final, x_geometric_final, final.solution.x)
@@ -356,7 +362,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
         residuals=residuals, validation_residuals=held_out.residuals,
         spheres=_spheres(final.problem, final.solution.x, std, "fit") + held_out.spheres,
         selection=nominal.selection,
-        unexplained=find_unexplained(final.problem, final.solution.x, final.solution.free),
+        unexplained=structure,
         recommended=recommended, recommendation=recommendation, prior=prior_summary,
         notes=geometric.notes + notes, method=method, loss=loss)
     return replace(result, rejected=rejected + held_out.rejected, validation_all=held_out.all)
@@ -586,6 +592,24 @@ def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[Da
                             loss=loss, available_columns=available)
     final = geometric.solution if outcome.solution is searched else outcome.solution
     return DiagnosedFit(outcome.problem, final, outcome.added, outcome.tested)
+
+
+def _learned(final: DiagnosedFit, structure, *, method: Method, loss: Loss) -> DiagnosedFit:
+    """Stage 4, last: the learned map over the joints the unexplained ``structure``
+    follows, added when the folds confirm it (``learned``); else ``final`` unchanged."""
+    if structure is None:
+        return final
+    with stage("learned map"):
+        outcome = learned.learn(final.problem, final.solution.x, structure.variables)
+    if outcome is None or outcome.effect is None:
+        return final
+    problem, solution = learned.with_map(final.problem, final.solution, outcome.effect,
+                                         method=method, loss=loss)
+    before, after = final.problem.rms(final.solution.x), problem.rms(solution.x)
+    if not after < before:
+        return final
+    finding = learned.finding(outcome, (before, after), problem.robot.units)
+    return replace(final, problem=problem, solution=solution, added=final.added + (finding,))
 
 
 def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,

@@ -22,9 +22,10 @@ from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..calibration.outliers import rejected_lines
 from ..datasets import load_dataset
 from ..effect_model import delivered_lines
+from ..effects import is_learned
 from ..errors import InputError
 from ..profiles import PROFILES, ProfileCost
-from ..results import CalibrationResult, Decision
+from ..results import CalibrationResult, Decision, mean_square_shares
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -117,8 +118,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
         if dropped:
             lines.append(f"data selection dropped {len(dropped)} unit(s) of {label}: "
                          f"{', '.join(map(str, dropped))}")
-    for effect in result.effects:
-        lines.append(f"effect: {effect.summary or effect.name}")
+    lines += _effect_lines(result)
     if not diagnosed:
         lines.append("diagnosis: not run (--no-diagnose); the residual was not tested for "
                      "effects the model lacks")
@@ -133,6 +133,37 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
         lines += delivered_lines(result.delivered, s, units.length)
     if result.predicted_accuracy is not None:
         lines.append(result.predicted_accuracy.sentence(s, units.length))
+    lines += _refusal_lines(result)
+    if result.unexplained is not None:
+        taken = any(is_learned(e.name) for e in result.effects)
+        lines.append("unexplained: " + result.unexplained.sentence(s, units.length)
+                     + ("; the learned map corrects it inside the region it was trained on"
+                        if taken else ""))
+    elif diagnosed:
+        lines.append("unexplained: none (what remains is consistent with noise)")
+    return "\n".join(lines)
+
+
+def _effect_lines(result: CalibrationResult) -> list[str]:
+    """Each effect added, physical or learned, and the shares of the nominal fit's mean
+    square that geometry, physical effects and a learned map took."""
+    lines = []
+    for effect in result.effects:
+        kind = "learned" if is_learned(effect.name) else "physical"
+        lines.append(f"effect ({kind}): {effect.summary or effect.name}")
+    fit = result.fit
+    parts = mean_square_shares(fit.rms_nominal, fit.rms_geometric, fit.rms_final,
+                               result.effects)
+    if parts is not None:
+        lines.append("shares of the nominal fit's mean square: " + ", ".join(
+            f"{name} {100 * value:.3g}%" for name, value in parts.items()))
+    return lines
+
+
+def _refusal_lines(result: CalibrationResult) -> list[str]:
+    """The effects diagnosis refused for a reason the user should hear (stand-ins of sizes
+    no robot shows, taken out again, confounded with a rival)."""
+    lines = []
     stand_ins = _rejected(result, Decision.IMPLAUSIBLE)
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
@@ -144,11 +175,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     confounded = _rejected(result, Decision.CONFOUNDED)
     if confounded:
         lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
-    if result.unexplained is not None:
-        lines.append("unexplained: " + result.unexplained.sentence(s, units.length))
-    elif diagnosed:
-        lines.append("unexplained: none (what remains is consistent with noise)")
-    return "\n".join(lines)
+    return lines
 
 
 def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict:
@@ -166,6 +193,7 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
             "condition_number": float(result.condition_number), "fit_rms": rms(result.fit),
             "validation_rms": rms(result.validation), "diagnosed": diagnosed,
             "effects": [e.name for e in result.effects],
+            "learned_effects": [e.name for e in result.effects if is_learned(e.name)],
             "recommended": result.recommended, "warning": result.warning or None,
             "delivered_model": (result.delivered or {}).get("model"),
             "predicted_accuracy": None if result.predicted_accuracy is None else {

@@ -6,6 +6,11 @@ command and the report read. Adding an effect means writing its module and addin
 class to ``REGISTERED`` below (an effect defined elsewhere calls ``register``).
 ``make_effect`` builds one for a robot and the fit data (lumped compliance without masses,
 a thermal reference from the data's mean, the driving joints of a coupling).
+
+``LEARNED`` registers the effects learned from the data rather than derived from a
+physical law (``residual_map``): no candidate of diagnosis, nothing the simulator
+injects, fitted last by ``calibration.learned``; result files and the effects file name
+them like the others, and the terminal and report say they are learned.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from .deflection import LinkDeflection
 from .gravity import GravityModel, gravity_torque
 from .hysteresis import Hysteresis
 from .motion import direction_column, directions_of_motion, with_directions
+from .residual_map import ResidualMap
 from .scale import JointScale
 from .thermal import ThermalDrift
 from .transmission import TransmissionCoupling
@@ -32,6 +38,12 @@ REGISTERED: tuple[type[Effect], ...] = (JointCompliance, JointCyclic, JointScale
                                         JointCoupling, TransmissionCoupling, Backlash, Hysteresis,
                                         LinkDeflection)
 EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in REGISTERED}
+LEARNED: dict[str, type[Effect]] = {ResidualMap.name: ResidualMap}
+
+
+def is_learned(name: str) -> bool:
+    """Whether effect ``name`` is learned from the data (not a physical law)."""
+    return name in LEARNED
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -60,7 +72,7 @@ def effect_class(name: str, where: str = "effects") -> type[Effect]:
 
 def effect_title(name: str) -> str:
     """The effect's name in words (``joint_cyclic`` -> ``Periodic joint error``)."""
-    cls = EFFECTS.get(name)
+    cls = EFFECTS.get(name) or LEARNED.get(name)
     return cls.title if cls is not None else name.replace("_", " ").capitalize()
 
 
@@ -80,7 +92,8 @@ def make_effect(name: str, joints=(), robot: Robot | None = None,
 
 __all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Hysteresis",
            "Implausible",
-           "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LinkDeflection",
+           "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LEARNED",
+           "LinkDeflection", "ResidualMap", "is_learned",
            "Plausible",
            "REGISTERED", "RowContext", "ThermalDrift", "TransmissionCoupling", "TrueWorld",
            "data_columns", "direction_column", "directions_of_motion", "effect_class",

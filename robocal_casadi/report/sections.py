@@ -16,8 +16,9 @@ from functools import partial
 
 import numpy as np
 
+from ..effects import is_learned
 from ..measurement import MODELS, SphereLaserModel
-from ..results import CalibrationResult, Decision, DiagnosisRecord
+from ..results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from ..units import Units
 from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
@@ -451,10 +452,14 @@ def effects_section(result: CalibrationResult) -> Section:
         blocks.append(Paragraph("Diagnosis added no effect beyond the geometric model: "
                                 "nothing left in the residual was explained well enough by a "
                                 "candidate effect to justify its parameters."))
+    blocks += _shares_blocks(result)
     for effect in result.effects:
-        view = effect_view(result, effect)
+        # a learned map follows no joint's law: its words say where it holds, no plot
+        view = None if is_learned(effect.name) else effect_view(result, effect)
         title = view.title if view is not None else effect_title(effect.name)
-        blocks.append(Paragraph(title, "heading"))
+        kind = "learned from the data, not physical" if is_learned(effect.name) \
+            else "physical"
+        blocks.append(Paragraph(f"{title} ({kind})", "heading"))
         if effect.summary:
             blocks.append(Paragraph(f"{effect.summary[:1].upper()}{effect.summary[1:]}"
                                     .rstrip(".") + "."))
@@ -471,6 +476,20 @@ def effects_section(result: CalibrationResult) -> Section:
     if result.diagnosis:
         blocks += diagnosis_blocks(result.diagnosis, units)
     return Section("effects", "Effects found", tuple(blocks))
+
+
+def _shares_blocks(result: CalibrationResult) -> list:
+    """The shares of the nominal fit's mean square the geometry, the physical effects and
+    a learned map remove (none without effects)."""
+    fit = result.fit
+    parts = mean_square_shares(fit.rms_nominal, fit.rms_geometric, fit.rms_final,
+                               result.effects)
+    if parts is None:
+        return []
+    return [Table("shares", "What removes the fit's error: shares of its mean square at "
+                  "nominal", ("part", "share"),
+                  tuple((name, f"{100 * value:.3g} %") for name, value in parts.items()),
+                  numeric=(False, True))]
 
 
 def _effect_parameters(result: CalibrationResult, effect) -> Table:
@@ -654,6 +673,10 @@ EVIDENCE_TITLES = {
     "bic_drop": "BIC drop (positive favours the effect)",
     "cv_rms_before": "held-out RMS without it",
     "cv_rms_after": "held-out RMS with it",
+    "fit_rms_without": "fit RMS without it",
+    "extrapolation": "held-out squared error with / without it, extrapolating folds",
+    "length_scale": "length scale, of the trained span",
+    "smoothing": "smoothing (against the kernel's unit diagonal)",
 }
 
 
