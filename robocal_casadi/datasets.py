@@ -55,7 +55,8 @@ BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
 COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
-               "base_link", "tip_link")
+               "base_link", "tip_link", "station")
+MAX_STATION_CHARACTERS = 200
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
 BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),
@@ -80,6 +81,9 @@ class DatasetBase:
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read
     lines: np.ndarray | None = field(default=None, repr=False)  # table line of each reading
+    # the instrument station (one tracker placement, socket plate or sphere) the readings
+    # were taken from; datasets of one station share its placement unknowns
+    station: str | None = None
 
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``
@@ -232,7 +236,8 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
                                           file=path, where="payload_com", unit=units.length))
     lines = None if table is None else np.array([table.line(i) for i in range(len(table))])
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
-                  data_path=data_path, payload_com=payload_com, raw=content, lines=lines)
+                  data_path=data_path, payload_com=payload_com, raw=content, lines=lines,
+                  station=station_name(content.get("station"), path))
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}
@@ -240,6 +245,24 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if table is not None:
         dataset = replace(dataset, lines=np.array([table.line(i) for i in range(len(table))]))
     return dataset
+
+
+def station_name(value: Any, path: Path) -> str | None:
+    """The ``station`` key: None when absent, else a non-empty single line of text (a
+    number is accepted and read as its text, ``station: 3`` naming station ``"3"``)."""
+    if value is None:
+        return None
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = str(value)
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(f"expected a station name (text), got {cut(value)}", file=path,
+                         where="station")
+    name = value.strip()
+    if len(name) > MAX_STATION_CHARACTERS or "\n" in name or "\x00" in name:
+        raise InputError(f"expected a station name on one line of at most "
+                         f"{MAX_STATION_CHARACTERS} characters, got {cut(name, 40)}", file=path,
+                         where="station")
+    return name
 
 
 # The planning block's angles (file units) must lie in (0, limit] degrees.

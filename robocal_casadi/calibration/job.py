@@ -35,8 +35,8 @@ from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult
 from ..robot import load_robot, save_robot
+from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
-from .identification import evaluate
 from .outliers import kept_datasets
 
 ROBOT_FILE = "robot_calibrated.yaml"
@@ -149,8 +149,8 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     errors: dict[str, np.ndarray] = {}
     for role, data in (("fit", datasets), ("validation", validation)):
         if data:
-            problem, x = evaluate(robot, list(data), (), mounted,
-                                  label_prefix="validation:" if role == "validation" else "")
+            problem, x = evaluate(robot, list(data), (), mounted) if role == "fit" else \
+                held_out(robot, list(data), (), mounted, anchors=datasets)
             figures[ROBOT_FILE][role] = problem.rms(x)
             errors[role] = np.concatenate(problem.errors(x))
     with_effects = _with_effects(result, robot, datasets, validation, effects_folder)
@@ -197,8 +197,9 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
     out = {}
     for role, data in (("fit", datasets), ("validation", validation)):
         if data:
-            problem, x = evaluate(model.robot, list(data), model.effects, values,
-                                  label_prefix="validation:" if role == "validation" else "")
+            problem, x = evaluate(model.robot, list(data), model.effects, values) \
+                if role == "fit" else held_out(model.robot, list(data), model.effects, values,
+                                               anchors=datasets)
             out[role] = problem.rms(x)
     return out
 

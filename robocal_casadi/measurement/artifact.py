@@ -75,7 +75,8 @@ class ArtifactModel(MeasurementModel):
                 index = None
                 if len(rows) > 1:
                     index = len(names)
-                    names += [f"{label}/pose{pose}/{socket}_{axis}" for axis in "xyz"]
+                    names += [f"{self.placement_prefix}/pose{pose}/{socket}_{axis}"
+                              for axis in "xyz"]
                 sockets.append(_Socket(pose, socket, rows, index))
         self.sockets = tuple(sockets)
         self._placement = ParameterRegistry(tuple(names), ("length",) * len(names))
