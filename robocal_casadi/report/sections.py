@@ -175,9 +175,27 @@ def accuracy_section(result: CalibrationResult) -> Section:
             + ("Held-out data were not used in the fit: they show what a customer will see "
                "on new poses." if result.validation is not None else
                "No held-out data were given: these figures show how well the model fits "
-               "the data it was fitted on."))
+               "the data it was fitted on.")) + _validation_frames(result)
     return Section("accuracy", "Accuracy summary", (Paragraph(text), table,
                                                      *iso9283_blocks(result, units)))
+
+
+def _validation_frames(result: CalibrationResult) -> str:
+    """A sentence per kind of instrument placement the held-out data were judged in."""
+    fixed = [r.label for r in result.validation_residuals if r.placement_frame.endswith("(fixed)")]
+    refitted = [r.label for r in result.validation_residuals
+                if r.placement_frame and r.label not in fixed]
+    text = ""
+    if fixed:
+        frames = {r.placement_frame for r in result.validation_residuals if r.label in fixed}
+        text += (f" Held-out data {', '.join(fixed)} keep the instrument placement the fit "
+                 f"data of the same station gave ({'; '.join(sorted(frames))}): their errors "
+                 f"are measured in the robot's own frame.")
+    if refitted:
+        text += (f" Held-out data {', '.join(refitted)} have the instrument placement refitted "
+                 f"on themselves: a rigid motion of the robot against the instrument does not "
+                 f"show in their errors.")
+    return text
 
 
 def applying_section(result: CalibrationResult) -> Section:
