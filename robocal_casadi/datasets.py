@@ -55,7 +55,7 @@ BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
 COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
-               "base_link", "tip_link", "station")
+               "base_link", "tip_link", "station", "work_cell")
 MAX_STATION_CHARACTERS = 200
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
@@ -84,6 +84,9 @@ class DatasetBase:
     # the instrument station (one tracker placement, socket plate or sphere) the readings
     # were taken from; datasets of one station share its placement unknowns
     station: str | None = None
+    # the joint ranges [rad or m] the robot works in, per joint (low, high), where the
+    # file declares them (``work_cell``); the predicted accuracy is stated over them
+    work_cell: tuple[tuple[float, float] | None, ...] | None = None
 
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``
@@ -237,7 +240,8 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     lines = None if table is None else np.array([table.line(i) for i in range(len(table))])
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
                   data_path=data_path, payload_com=payload_com, raw=content, lines=lines,
-                  station=station_name(content.get("station"), path))
+                  station=station_name(content.get("station"), path),
+                  work_cell=work_cell_of(content.get("work_cell"), robot, units, path))
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}
@@ -263,6 +267,43 @@ def station_name(value: Any, path: Path) -> str | None:
                          f"{MAX_STATION_CHARACTERS} characters, got {cut(name, 40)}", file=path,
                          where="station")
     return name
+
+
+def work_cell_of(value: Any, robot: Robot, units: Units,
+                 path: Path) -> tuple[tuple[float, float] | None, ...] | None:
+    """The ``work_cell`` key: per joint column ``q1..qn`` a range ``[low, high]`` in the
+    file's units (angles for revolute joints, lengths for prismatic ones), within the
+    robot's limits. Returned in SI, per joint ``(low, high)`` or None for a joint it
+    does not name (the prediction then takes the range the fit data cover); None when
+    the key is absent."""
+    if value is None:
+        return None
+    block = mapping(value, file=path, where="work_cell", hint="{q1: [low, high], ...}")
+    names = [f"q{i}" for i in range(1, robot.dof + 1)]
+    unknown = [k for k in block if k not in names]
+    if unknown:
+        raise InputError(f"unknown joint(s) {[cut(k) for k in unknown]}; expected some of "
+                         f"{names}", file=path, where="work_cell")
+    cell: list[tuple[float, float] | None] = []
+    for i, (name, joint) in enumerate(zip(names, robot.joints)):
+        if block.get(name) is None:
+            cell.append(None)
+            continue
+        low, high = float(robot.lower_limits[i]), float(robot.upper_limits[i])
+        kind = "angle" if joint.revolute else "length"
+        scale = units.angle_scale if joint.revolute else units.length_scale
+        where = f"work_cell.{name}"
+        given = quantities(block[name], 2, scale, kind, file=path, where=where,
+                           unit=units.unit_name(kind))
+        if not given[0] < given[1]:
+            raise InputError(f"expected [low, high] with low below high, got "
+                             f"{cut(block[name])}", file=path, where=where)
+        if given[0] < low - 1e-9 or given[1] > high + 1e-9:
+            raise InputError(f"{cut(block[name])} {units.unit_name(kind)} reaches beyond the "
+                             f"robot's limits [{low / scale:g}, {high / scale:g}]", file=path,
+                             where=where)
+        cell.append((given[0], given[1]))
+    return tuple(cell)
 
 
 # The planning block's angles (file units) must lie in (0, limit] degrees.

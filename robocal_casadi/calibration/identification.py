@@ -602,7 +602,8 @@ def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,
     prior = _prior_in(problem, geometric.prior)
     distinct, _, _ = duplicate_rows(problem)
     statistics = posterior(problem.jacobian(solution.x, free), problem.residual(solution.x),
-                           np.flatnonzero(free), prior, rows=distinct)
+                           np.flatnonzero(free), prior, rows=distinct,
+                           certified=problem.certified_entries())
     std = np.full(len(problem.unknowns), np.nan)
     std[free] = statistics.std
     notes: tuple[str, ...] = ()
@@ -700,7 +701,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
         x = solution.x
         r = problem.residual(x)
         statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,
-                               rows=distinct)
+                               rows=distinct, certified=problem.certified_entries())
         settled = abs(statistics.sigma / prior.sigma - 1.0) < SIGMA_SETTLED
         if not np.isfinite(statistics.sigma) or settled:
             break

@@ -654,6 +654,12 @@ class Problem:
             start += size
         return out
 
+    def certified_entries(self) -> np.ndarray:
+        """Mask over the stacked residual of the entries that compare fitted unknowns with
+        an instrument's certified geometry (``MeasurementModel.certified_entries``)."""
+        parts = [np.asarray(m.certified_entries(), bool) for m in self.models]
+        return np.concatenate(parts) if parts else np.zeros(0, bool)
+
     def errors(self, x: np.ndarray) -> list[np.ndarray]:
         """Per-dataset per-measurement error lengths [m] at ``x``."""
         return [model.errors(r) for model, r in zip(self.models, self.split(self.residual(x)))]

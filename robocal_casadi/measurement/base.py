@@ -165,6 +165,13 @@ class MeasurementModel(ABC):
     def residual_size(self) -> int:
         """Length of the residual column."""
 
+    def certified_entries(self) -> np.ndarray:
+        """Mask over the residual of the entries that hold no reading: they compare fitted
+        placement unknowns with the instrument's certified geometry (an artifact's known
+        distances between sockets located by repeated touches), so they carry no reading
+        noise of their own. Default: none."""
+        return np.zeros(self.residual_size(), dtype=bool)
+
     def residual_groups(self) -> np.ndarray:
         """For each residual entry, the unit of data it belongs to (-1: none).
 
