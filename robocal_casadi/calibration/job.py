@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..delivery.accuracy import predict
+from ..delivery.accuracy import predict, work_cell
 from ..delivery.choice import Delivery, choose
 from ..effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..output import atomic_directory
@@ -157,7 +157,9 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     structured = _effects_left_out(result, robot)
     names = list(mounted)[:3]  # the instrument's point on the flange comes first
     point = [mounted[n] for n in names] if len(names) == 3 else [0.0, 0.0, 0.0]
-    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured)
+    region, region_kind = work_cell(result, datasets)
+    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured,
+                        region, region_kind) if region is not None else None
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None

@@ -228,7 +228,7 @@ def applying_section(result: CalibrationResult) -> Section:
 
 def work_cell_section(result: CalibrationResult) -> Section | None:
     """The tool-position error predicted for robot_calibrated.yaml away from the measured
-    points, over the joint ranges the data cover (``delivery.accuracy``)."""
+    points, over the work cell (``delivery.accuracy``)."""
     predicted = result.predicted_accuracy
     if predicted is None:
         return None
@@ -241,8 +241,8 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     text = (f"The measured points say how well the model fits where the robot was measured. "
             f"Away from them, the error of robot_calibrated.yaml is predicted from the "
             f"uncertainty left in every parameter (the data and the tolerances together) and "
-            f"from what the model still lacks, at {predicted.samples} poses spread over the "
-            f"joint ranges the data cover, after the robot's placement in the cell (a rigid "
+            f"from what the model still lacks, at {predicted.samples} poses spread over "
+            f"{predicted.region_words}, after the robot's placement in the cell (a rigid "
             f"motion of its base) is registered. Directions the data barely see keep the "
             f"uncertainty of their tolerances: where this figure is well above the held-out "
             f"error, the data determine the robot only near the measured region.")
@@ -252,7 +252,8 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     if len(predicted.errors):
         blocks.append(Plot("predicted-error", "Predicted tool-position error over the poses "
                            "sampled in the work cell.",
-                           partial(figures.predicted_errors, predicted.errors, scale, unit)))
+                           partial(figures.predicted_errors, predicted.errors, scale, unit,
+                                   predicted.region_words)))
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
 
 
