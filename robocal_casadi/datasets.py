@@ -86,7 +86,8 @@ class DatasetBase:
     station: str | None = None
     # the joint ranges [rad or m] the robot works in, per joint (low, high), where the
     # file declares them (``work_cell``); the predicted accuracy is stated over them
-    work_cell: tuple[tuple[float, float] | None, ...] | None = None
+    # (or the text ``"measured"``: the poses the fit data were measured in)
+    work_cell: tuple[tuple[float, float] | None, ...] | str | None = None
 
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``
@@ -269,16 +270,23 @@ def station_name(value: Any, path: Path) -> str | None:
     return name
 
 
+MEASURED_CELL = "measured"
+
+
 def work_cell_of(value: Any, robot: Robot, units: Units,
-                 path: Path) -> tuple[tuple[float, float] | None, ...] | None:
+                 path: Path) -> tuple[tuple[float, float] | None, ...] | str | None:
     """The ``work_cell`` key: per joint column ``q1..qn`` a range ``[low, high]`` in the
     file's units (angles for revolute joints, lengths for prismatic ones), within the
     robot's limits. Returned in SI, per joint ``(low, high)`` or None for a joint it
     does not name (the prediction then takes the range the fit data cover); None when
-    the key is absent."""
+    the key is absent. ``work_cell: measured`` names the poses the fit data were
+    measured in (returned as that text)."""
     if value is None:
         return None
-    block = mapping(value, file=path, where="work_cell", hint="{q1: [low, high], ...}")
+    if value == MEASURED_CELL:
+        return MEASURED_CELL
+    block = mapping(value, file=path, where="work_cell",
+                    hint="{q1: [low, high], ...} or the text 'measured'")
     names = [f"q{i}" for i in range(1, robot.dof + 1)]
     unknown = [k for k in block if k not in names]
     if unknown:

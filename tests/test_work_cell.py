@@ -14,7 +14,14 @@ from robocal_casadi.calibration.job import JobOptions, calibrate_job, measured
 from robocal_casadi.calibration.prior import Prior, posterior
 from robocal_casadi.cli import main
 from robocal_casadi.datasets import load_dataset
-from robocal_casadi.delivery.accuracy import DATA_RANGES, PARTLY_DECLARED, predict, region_of
+from robocal_casadi.delivery.accuracy import (
+    DATA_RANGES,
+    MEASURED,
+    PARTLY_DECLARED,
+    SAMPLES,
+    predict,
+    region_of,
+)
 from robocal_casadi.simulate import simulate
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
@@ -66,7 +73,19 @@ def test_declared_work_cell_is_the_prediction_region(tracker, tmp_path):
     assert block["kind"] == PARTLY_DECLARED
 
 
+def test_measured_poses_as_the_work_cell(tracker, tmp_path):
+    """``work_cell: measured``: the prediction is made at the fit data's own readings."""
+    path = _with(tracker, tmp_path / "measured", work_cell="measured")
+    dataset = load_dataset(path, allow_outside_data=True)
+    result = calibrate_job([dataset], (), JobOptions(diagnose=False, loss="linear"))
+    predicted = measured(result, [dataset]).predicted_accuracy
+    assert predicted.region_kind == MEASURED
+    assert predicted.samples == len(predicted.errors) == min(SAMPLES, dataset.rows)
+    assert "measured in" in predicted.sentence(1e-3, "mm")
+
+
 @pytest.mark.parametrize("cell, fragment", [
+    ("everywhere", "'measured'"),
     ({"q6": [30, -20]}, "low below high"),
     ({"q6": [-20, 30, 40]}, "work_cell.q6"),
     ({"q9": [0, 1]}, "'q9'"),

@@ -53,6 +53,7 @@ SEED = 9283  # fixed: a prediction is repeatable
 DATA_RANGES = "joint ranges of the fit data"
 DECLARED = "declared work cell"
 PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
+MEASURED = "poses of the fit data"
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,9 @@ class PredictedAccuracy:
         """Where the prediction holds, for sentences."""
         return {DECLARED: "the declared work cell",
                 PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
-                                 "cover)"}.get(self.region_kind, "the joint ranges the data cover")
+                                 "cover)",
+                MEASURED: "the poses the fit data were measured in"}.get(
+            self.region_kind, "the joint ranges the data cover")
 
     def sentence(self, length_scale: float, unit: str) -> str:
         return (f"predicted tool-position error over {self.region_words}: RMS "
@@ -115,6 +118,8 @@ def work_cell(result, datasets: Sequence = ()
     ``(None, kind)`` when a joint is left to data that carry no joint readings."""
     cells = [d.work_cell for d in datasets if getattr(d, "work_cell", None) is not None]
     data = region_of(result)
+    if any(isinstance(c, str) for c in cells):  # "measured": the fit data's own poses
+        return data, MEASURED
     if not cells:
         return data, DATA_RANGES
     region: list[tuple[float, float]] = []
@@ -144,8 +149,7 @@ def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
         region, region_kind = region_of(result), DATA_RANGES
     if region is None:
         return None
-    low, high = np.array(region).T
-    Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))
+    Q = _poses(result, region, region_kind)
     kinematics = Kinematics(delivered)
     G, positions = _point_jacobians(kinematics, Q, np.asarray(point, dtype=float))
     names = tuple(kinematics.registry.names) + tuple(point_names)
@@ -156,7 +160,21 @@ def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
     errors = np.sqrt(np.clip(per_pose, 0.0, None) + s2)
     return PredictedAccuracy(float(np.sqrt(np.mean(errors**2))),
                              float(np.percentile(errors, 95)), float(errors.max()),
-                             float(np.sqrt(s2)), region, SAMPLES, errors, region_kind)
+                             float(np.sqrt(s2)), region, len(Q), errors, region_kind)
+
+
+def _poses(result, region: tuple[tuple[float, float], ...], region_kind: str) -> np.ndarray:
+    """The joint readings (N x dof) [rad or m] the prediction is made at: ``SAMPLES``
+    drawn uniformly in the box ``region``, or, for ``MEASURED``, the fit data's own
+    readings (at most ``SAMPLES`` of them, evenly spread over the table)."""
+    if region_kind == MEASURED:
+        blocks = [np.asarray(r.joints, float) for r in result.residuals
+                  if r.joints is not None and len(r.joints)]
+        Q = np.vstack(blocks)
+        Q = Q[np.all(np.isfinite(Q), axis=1)]
+        return Q[np.unique(np.linspace(0, len(Q) - 1, min(SAMPLES, len(Q))).astype(int))]
+    low, high = np.array(region).T
+    return np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))
 
 
 def _point_jacobians(kinematics: Kinematics, Q: np.ndarray,
