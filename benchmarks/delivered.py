@@ -12,9 +12,10 @@ One more case is the point laser on the example 6R arm with four errors, 60 read
 0.01 mm noise.
 
 Prints one JSON object: per case and seed the exit status, ``recommended``, the true error
-of the delivered and of the nominal robot, the predicted error and their ratio; and per kind
-how many seeds are never worse than nominal without exit 3 and how many predictions lie
-within a factor 1.5 of the truth.
+of the delivered and of the nominal robot, the predicted error and their ratio (a case whose
+data the calibration refuses has exit status 2 and the reason); and per kind how many seeds
+were refused, how many are never worse than nominal without exit 3 and how many
+predictions lie within a factor 1.5 of the truth.
 
     python benchmarks/delivered.py [--seeds 10] [--diagnose]
 """
@@ -33,6 +34,7 @@ from robocal_casadi import examples
 from robocal_casadi.calibration.job import JobOptions, run_job
 from robocal_casadi.datasets import load_dataset
 from robocal_casadi.delivery.accuracy import SAMPLES, SEED, region_of
+from robocal_casadi.errors import RobocalError
 from robocal_casadi.kinematics import Kinematics
 from robocal_casadi.robot import load_robot, save_robot
 from robocal_casadi.simulate import simulate, true_parameters
@@ -91,8 +93,11 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
                    mounted_error=mounted_error)
     fit_path, held_path = split(fit.dataset_path, fit.table_path, rows[1] / sum(rows))
     truth = fit.truth.robot
-    outcome = run_job([load_dataset(fit_path)], [load_dataset(held_path)],
-                      JobOptions(diagnose=diagnose), folder / "out")
+    try:
+        outcome = run_job([load_dataset(fit_path)], [load_dataset(held_path)],
+                          JobOptions(diagnose=diagnose), folder / "out")
+    except RobocalError as error:  # refused data: what a user would get (exit status 2)
+        return {"seed": seed, "exit_status": 2, "refused": str(error).split(": ", 1)[-1]}
     result = outcome.result
     delivered = load_robot(folder / "out" / "robot_calibrated.yaml")
     low, high = np.array(region_of(result)).T
@@ -119,11 +124,12 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
 
 
 def summarise(rows: list[dict]) -> dict:
-    honest = sum(1 for r in rows if r["true_error_delivered_mm"] <= r["true_error_nominal_mm"]
-                 or r["exit_status"] == 3)
+    refused = sum(1 for r in rows if "refused" in r)
+    honest = sum(1 for r in rows if "refused" not in r and (
+        r["true_error_delivered_mm"] <= r["true_error_nominal_mm"] or r["exit_status"] == 3))
     ratios = [r["predicted_over_true"] for r in rows if "predicted_over_true" in r]
     within = sum(1 for x in ratios if 1 / 1.5 <= x <= 1.5)
-    return {"seeds": len(rows), "never_worse_without_exit_3": honest,
+    return {"seeds": len(rows), "refused": refused, "never_worse_without_exit_3": honest,
             "predicted_within_1.5x": within, "predictions": len(ratios),
             "median_predicted_over_true": float(np.median(ratios)) if ratios else None}
 

@@ -55,7 +55,8 @@ BAR_POINTS = ("A", "B", "C", "D")
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 QUATERNION_TOLERANCE = 1e-6
 COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
-               "base_link", "tip_link")
+               "base_link", "tip_link", "station", "work_cell")
+MAX_STATION_CHARACTERS = 200
 KIND_KEYS = {"cross_bar": ("bar", "probe"), "artifact_touches": ("probe", "artifact"),
              "sphere_laser": ("sphere", "laser"), "tracker_points": ("target", "instrument")}
 BLOCK_KEYS = {"bar": ("length",), "probe": ("xyz",), "artifact": ("distances", "perpendicular"),
@@ -80,6 +81,13 @@ class DatasetBase:
     payload_com: np.ndarray | None = None  # [m], flange frame
     raw: dict = field(default_factory=dict, repr=False)  # the YAML mapping as read
     lines: np.ndarray | None = field(default=None, repr=False)  # table line of each reading
+    # the instrument station (one tracker placement, socket plate or sphere) the readings
+    # were taken from; datasets of one station share its placement unknowns
+    station: str | None = None
+    # the joint ranges [rad or m] the robot works in, per joint (low, high), where the
+    # file declares them (``work_cell``); the predicted accuracy is stated over them
+    # (or the text ``"measured"``: the poses the fit data were measured in)
+    work_cell: tuple[tuple[float, float] | None, ...] | str | None = None
 
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``
@@ -232,7 +240,9 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
                                           file=path, where="payload_com", unit=units.length))
     lines = None if table is None else np.array([table.line(i) for i in range(len(table))])
     common = dict(path=path, kind=kind, robot=robot, robot_path=robot_path, units=units,
-                  data_path=data_path, payload_com=payload_com, raw=content, lines=lines)
+                  data_path=data_path, payload_com=payload_com, raw=content, lines=lines,
+                  station=station_name(content.get("station"), path),
+                  work_cell=work_cell_of(content.get("work_cell"), robot, units, path))
     readers: dict[str, Callable[[dict, Table | None, dict], Dataset]] = {
         "cross_bar": _cross_bar, "artifact_touches": _artifact,
         "sphere_laser": _sphere_laser, "tracker_points": _tracker}
@@ -240,6 +250,68 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     if table is not None:
         dataset = replace(dataset, lines=np.array([table.line(i) for i in range(len(table))]))
     return dataset
+
+
+def station_name(value: Any, path: Path) -> str | None:
+    """The ``station`` key: None when absent, else a non-empty single line of text (a
+    number is accepted and read as its text, ``station: 3`` naming station ``"3"``)."""
+    if value is None:
+        return None
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = str(value)
+    if not isinstance(value, str) or not value.strip():
+        raise InputError(f"expected a station name (text), got {cut(value)}", file=path,
+                         where="station")
+    name = value.strip()
+    if len(name) > MAX_STATION_CHARACTERS or "\n" in name or "\x00" in name:
+        raise InputError(f"expected a station name on one line of at most "
+                         f"{MAX_STATION_CHARACTERS} characters, got {cut(name, 40)}", file=path,
+                         where="station")
+    return name
+
+
+MEASURED_CELL = "measured"
+
+
+def work_cell_of(value: Any, robot: Robot, units: Units,
+                 path: Path) -> tuple[tuple[float, float] | None, ...] | str | None:
+    """The ``work_cell`` key: per joint column ``q1..qn`` a range ``[low, high]`` in the
+    file's units (angles for revolute joints, lengths for prismatic ones), within the
+    robot's limits. Returned in SI, per joint ``(low, high)`` or None for a joint it
+    does not name (the prediction then takes the range the fit data cover); None when
+    the key is absent. ``work_cell: measured`` names the poses the fit data were
+    measured in (returned as that text)."""
+    if value is None:
+        return None
+    if value == MEASURED_CELL:
+        return MEASURED_CELL
+    block = mapping(value, file=path, where="work_cell",
+                    hint="{q1: [low, high], ...} or the text 'measured'")
+    names = [f"q{i}" for i in range(1, robot.dof + 1)]
+    unknown = [k for k in block if k not in names]
+    if unknown:
+        raise InputError(f"unknown joint(s) {[cut(k) for k in unknown]}; expected some of "
+                         f"{names}", file=path, where="work_cell")
+    cell: list[tuple[float, float] | None] = []
+    for i, (name, joint) in enumerate(zip(names, robot.joints)):
+        if block.get(name) is None:
+            cell.append(None)
+            continue
+        low, high = float(robot.lower_limits[i]), float(robot.upper_limits[i])
+        kind = "angle" if joint.revolute else "length"
+        scale = units.angle_scale if joint.revolute else units.length_scale
+        where = f"work_cell.{name}"
+        given = quantities(block[name], 2, scale, kind, file=path, where=where,
+                           unit=units.unit_name(kind))
+        if not given[0] < given[1]:
+            raise InputError(f"expected [low, high] with low below high, got "
+                             f"{cut(block[name])}", file=path, where=where)
+        if given[0] < low - 1e-9 or given[1] > high + 1e-9:
+            raise InputError(f"{cut(block[name])} {units.unit_name(kind)} reaches beyond the "
+                             f"robot's limits [{low / scale:g}, {high / scale:g}]", file=path,
+                             where=where)
+        cell.append((given[0], given[1]))
+    return tuple(cell)
 
 
 # The planning block's angles (file units) must lie in (0, limit] degrees.

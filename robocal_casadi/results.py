@@ -223,6 +223,8 @@ def _per_dataset(residuals, units: Units) -> list[dict]:
                for stage in ("nominal", "geometric", "final")}
         out.append({"dataset": r.label, "kind": r.kind, **rms,
                     "final": error_statistics(r.errors_final, s)})
+        if r.placement_frame:
+            out[-1]["validation_frame"] = r.placement_frame
     return out
 
 
@@ -320,6 +322,9 @@ class DatasetResiduals:
     terms: tuple[ErrorTerm, ...] = ()  # what each error is (empty: not recorded)
     frame: str = ""  # frame of the position components: "instrument" or "base"
     lines: np.ndarray | None = None  # per data row, its line in the CSV table (1-based)
+    # held-out data: how the instrument's placement was obtained ("station cell-A (fixed)"
+    # or "fitted on these data"); empty for fit data
+    placement_frame: str = ""
 
     def __repr__(self) -> str:
         rms = lambda e: float(np.sqrt(np.mean(e**2))) if len(e) else float("nan")  # noqa: E731

@@ -61,7 +61,7 @@ from .prior import (
     posterior,
     tolerance_of,
 )
-from .problem import Problem
+from .problem import Problem, StationFrames
 from .selection import Selection, select_by_condition
 from .solver import CONVERGED_DECREASE, METHODS, Loss, Method, Solution, solve
 from .start_state import settle_start
@@ -345,8 +345,9 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
                      final.problem.rms(final.solution.x))
     held_out = Validation()
     if validation:
-        held_out = _validate(robot, validation, problem, geometric.solution.x, final.problem,
-                             final.solution.x, robust=robust,
+        held_out = _validate(robot, validation, problem, (nominal.solution.x,
+                                                           geometric.solution.x),
+                             final.problem, final.solution.x, robust=robust,
                              identifiable=nominal.identifiability.identifiable)
     std, prior_summary, notes = _standard_errors(final, geometric, rule)
     recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
@@ -625,7 +626,8 @@ def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,
     prior = _prior_in(problem, geometric.prior)
     distinct, _, _ = duplicate_rows(problem)
     statistics = posterior(problem.jacobian(solution.x, free), problem.residual(solution.x),
-                           np.flatnonzero(free), prior, rows=distinct)
+                           np.flatnonzero(free), prior, rows=distinct,
+                           certified=problem.certified_entries())
     std = np.full(len(problem.unknowns), np.nan)
     std[free] = statistics.std
     notes: tuple[str, ...] = ()
@@ -723,7 +725,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
         x = solution.x
         r = problem.residual(x)
         statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,
-                               rows=distinct)
+                               rows=distinct, certified=problem.certified_entries())
         settled = abs(statistics.sigma / prior.sigma - 1.0) < SIGMA_SETTLED
         if not np.isfinite(statistics.sigma) or settled:
             break
@@ -852,13 +854,17 @@ def _embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:
 
 
 def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
-              x_geometric: np.ndarray, final_problem: Problem, x_final: np.ndarray, *,
-              robust: bool = False, identifiable: Sequence[str] = ()) -> Validation:
-    """Stage 5: the held-out data under the nominal, geometric and final models.
+              x_fits: tuple[np.ndarray, np.ndarray], final_problem: Problem,
+              x_final: np.ndarray, *, robust: bool = False,
+              identifiable: Sequence[str] = ()) -> Validation:
+    """Stage 5: the held-out data under the nominal, geometric and final models
+    (``x_fits``: the nominal and geometric fits in ``problem``).
 
     Robot, effects and mounted instrument come from the calibration; the placements are
-    fitted again on the held-out data. ``robust``: the units that are gross errors are
-    set aside, the placements of every model fitted on the rest; the statistics are given
+    fitted again on the held-out data, except those of an instrument station the fit data
+    share, which each model keeps as its fit left them (``StationFrames``). ``robust``:
+    the units that are gross errors are set aside, the placements of every model fitted
+    on the rest; the statistics are given
     over the readings kept (``summary``) and over all of them (``all``). Gross errors are
     judged as in the fit (``outliers.screen``, the ``identifiable`` parameters free with
     the placements): a reading the calibrated model merely predicts less well than the
@@ -869,12 +875,15 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
     # placement (start_state)
     settled = settle_start(robot, validation, final_problem.effects,
                            _values(final_problem, x_final), problem.kinematics)
-    for stage_problem, x in ((problem, None), (problem, x_geometric), (final_problem, x_final)):
-        values = {} if x is None else _values(stage_problem, x)
+    x_nominal, x_geometric = x_fits
+    for stage_problem, x, nominal in ((problem, x_nominal, True), (problem, x_geometric, False),
+                                      (final_problem, x_final, False)):
+        values = {} if nominal else _values(stage_problem, x)
         with stage("validation"):
             val_problem, x_val = evaluate(robot, settled, stage_problem.effects, values,
                                           kinematics=problem.kinematics,
-                                          label_prefix="validation:")
+                                          label_prefix="validation:",
+                                          frames=StationFrames.of(stage_problem, x))
         stages.append((val_problem, x_val))
     rejected: tuple[RejectedReading, ...] = ()
     kept = [np.ones(len(m.error_rows()), dtype=bool) for m in stages[-1][0].models]
@@ -884,7 +893,7 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
         if screening.rejected:
             rejected = outliers.rejected_readings(last, screening, role="validation")
             kept = screening.kept_errors(last)
-            stages = [(p, outliers.refit(p, x, p.mask("placement"), screening.weights))
+            stages = [(p, outliers.refit(p, x, p.free_placement(), screening.weights))
                       for p, x in stages]
     errors = [p.errors(x) for p, x in stages]
     every = RmsSummary(*(_rms(e) for e in errors))
@@ -898,7 +907,8 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
             errors_geometric=errors[1][k], errors_final=errors[2][k], rows=model.error_rows(),
             joints=dataset.joints, extras=dict(validation[k].extras),
             payload_com=dataset.payload_com, components=parts[k], terms=model.error_terms(),
-            frame=model.component_frame, lines=dataset.lines))
+            frame=model.component_frame, lines=dataset.lines,
+            placement_frame=stages[-1][0].placement_frame(model)))
     validation_problem, x_validation = stages[-1]
     return Validation(summary, tuple(residuals),
                       _spheres(validation_problem, x_validation, None, "validation"),
@@ -908,7 +918,7 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
 def _screened_unknowns(problem: Problem, identifiable: Sequence[str]) -> np.ndarray:
     """The placements and the ``identifiable`` parameters, when the data are enough for
     them (twice as many residual entries); else the placements alone."""
-    free = problem.mask("placement")
+    free = problem.free_placement()
     wider = free.copy()
     wider[problem.unknowns.indices([n for n in identifiable if n in problem.unknowns])] = True
     return wider if problem.size >= 2 * int(wider.sum()) else free

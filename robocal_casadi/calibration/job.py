@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..delivery.accuracy import predict
+from ..delivery.accuracy import predict, work_cell
 from ..delivery.choice import Delivery, choose
 from ..effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..output import atomic_directory
@@ -35,8 +35,8 @@ from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult
 from ..robot import load_robot, save_robot
+from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
-from .identification import evaluate
 from .outliers import kept_datasets
 
 ROBOT_FILE = "robot_calibrated.yaml"
@@ -149,15 +149,17 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     errors: dict[str, np.ndarray] = {}
     for role, data in (("fit", datasets), ("validation", validation)):
         if data:
-            problem, x = evaluate(robot, list(data), (), mounted,
-                                  label_prefix="validation:" if role == "validation" else "")
+            problem, x = evaluate(robot, list(data), (), mounted) if role == "fit" else \
+                held_out(robot, list(data), (), mounted, anchors=datasets)
             figures[ROBOT_FILE][role] = problem.rms(x)
             errors[role] = np.concatenate(problem.errors(x))
     with_effects = _with_effects(result, robot, datasets, validation, effects_folder)
     structured = _effects_left_out(result, robot)
     names = list(mounted)[:3]  # the instrument's point on the flange comes first
     point = [mounted[n] for n in names] if len(names) == 3 else [0.0, 0.0, 0.0]
-    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured)
+    region, region_kind = work_cell(result, datasets)
+    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured,
+                        region, region_kind) if region is not None else None
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None
@@ -197,8 +199,9 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
     out = {}
     for role, data in (("fit", datasets), ("validation", validation)):
         if data:
-            problem, x = evaluate(model.robot, list(data), model.effects, values,
-                                  label_prefix="validation:" if role == "validation" else "")
+            problem, x = evaluate(model.robot, list(data), model.effects, values) \
+                if role == "fit" else held_out(model.robot, list(data), model.effects, values,
+                                               anchors=datasets)
             out[role] = problem.rms(x)
     return out
 

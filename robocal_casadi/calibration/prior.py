@@ -167,16 +167,26 @@ class Posterior:
 
 
 def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior | None,
-              sigma: float | None = None, rows: np.ndarray | None = None) -> Posterior:
+              sigma: float | None = None, rows: np.ndarray | None = None,
+              certified: np.ndarray | None = None) -> Posterior:
     """Posterior at an estimate from the data Jacobian ``J`` (columns ``free_index``) and
     residual ``r`` [m].
 
     ``rows`` (boolean over ``r``) keeps only the entries that are independent information
     (duplicated readings left out). ``sigma`` [m] fixes the noise for the prior's weight;
     the returned ``sigma`` is re-estimated from the kept residual.
+
+    ``certified`` (boolean over ``r``) marks entries that compare fitted unknowns with an
+    instrument's certified geometry (an artifact's known socket distances): they weigh in
+    the fit like readings but carry no reading noise. The covariance is then that of the
+    estimate the fit computes, ``A^-1 (J_n^T J_n + s^2 P) A^-1 sigma^2`` with
+    ``A = J^T J + s^2 P`` (``P`` the prior's precision, ``s`` the noise it was weighed
+    with, ``J_n`` the rows with reading noise), instead of ``A^-1 sigma^2``, which would
+    count every certified entry as one more noisy reading and overstate the uncertainty.
     """
     if rows is not None:
         J, r = J[rows], r[rows]
+        certified = None if certified is None else np.asarray(certified, bool)[rows]
     free_index = np.asarray(free_index, int)
     n = len(free_index)
     precision_prior = np.zeros(n)
@@ -208,7 +218,8 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     covariance = np.full((n, n), np.nan)
     scale = sigma_new**2
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
-    covariance[sub] = scale * inverse
+    covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_prior[reached],
+                                        sigma_prior)
     # Data share: the diagonal of the resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e.
     # 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2 with the noise s the prior was weighed with.
     share = np.full(len(prior_position), np.nan)
@@ -219,6 +230,20 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
             if position >= 0 and np.isfinite(diagonal[position]):
                 share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
     return Posterior(covariance, share, sigma_new, dof)
+
+
+def _sandwich(inverse: np.ndarray, J: np.ndarray, certified: np.ndarray | None,
+              precision: np.ndarray, s: float | None) -> np.ndarray:
+    """``A^-1 (J_n^T J_n + s^2 P) A^-1`` (see ``posterior``); ``A^-1`` itself when no entry
+    is certified (the two are then equal)."""
+    if certified is None or not np.any(certified):
+        return inverse
+    noisy = J[~np.asarray(certified, bool)]
+    middle = noisy.T @ noisy
+    if s is not None and np.isfinite(s):
+        middle = middle + np.diag(s**2 * precision)
+    out = inverse @ middle @ inverse
+    return 0.5 * (out + out.T)
 
 
 def duplicate_rows(problem) -> tuple[np.ndarray, int, int]:

@@ -5,7 +5,13 @@ Unknown vector ``x`` (``Problem.unknowns``), in this order:
 1. every geometric parameter of the robot (``ParameterRegistry`` names, SI),
 2. the parameters of each effect (``Effect.parameter_names``),
 3. the mounted instrument unknowns, shared by name across datasets (probe, target, laser),
-4. the placement unknowns of each dataset (sockets, instrument frame, sphere centre).
+4. the placement unknowns of each dataset (sockets, instrument frame, sphere centre);
+   datasets of one instrument station (``station:`` in the dataset file) share theirs by
+   name, as the mounted unknowns are shared.
+
+Placement values fitted on other data of the same station (``StationFrames``) may be
+given; they are then held (``free_placement`` leaves them out), so that held-out data are
+measured in the frame the calibration fitted.
 
 Which of them are free is decided by the caller (identifiability, nominal fit,
 validation); the residual and Jacobian are built once per problem as CasADi functions.
@@ -13,8 +19,8 @@ validation); the residual and Jacobian are built once per problem as CasADi func
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import casadi as ca
@@ -25,7 +31,7 @@ from ..effects.base import Effect, RowContext
 from ..effects.motion import direction_values, is_derived_column
 from ..errors import InputError
 from ..kinematics import Kinematics
-from ..measurement.base import MeasurementModel
+from ..measurement.base import STATION_PREFIX, MeasurementModel
 from ..parameters import ParameterRegistry
 from ..robot import Robot
 
@@ -170,16 +176,46 @@ def _compile(model: MeasurementModel, x: ca.MX, mounted_indices: np.ndarray,
         g_x_rows=g_x_rows, g_x_columns=g_x_columns)
 
 
+@dataclass(frozen=True)
+class StationFrames:
+    """Placement unknowns of instrument stations, fitted on some data, to be held where
+    other data of the same stations are evaluated.
+
+    ``values`` maps placement names (``station:<name>/...``) to values [SI]; ``leaders``
+    maps a station to the model whose reference those values are expressed in (a
+    tracker's reference rotation), which the models of that station then follow.
+    """
+
+    values: Mapping[str, float] = field(default_factory=dict)
+    leaders: Mapping[str, MeasurementModel] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, problem: Problem, x: np.ndarray) -> StationFrames:
+        """The station placements of ``problem`` at ``x``."""
+        names = problem.unknowns.names
+        values = {names[i]: float(x[i]) for i in np.flatnonzero(problem.mask("placement"))
+                  if names[i].startswith(STATION_PREFIX)}
+        leaders: dict[str, MeasurementModel] = {}
+        for model in problem.models:
+            if model.station is not None:
+                leaders.setdefault(model.station, model)
+        return cls(values, leaders)
+
+    def __repr__(self) -> str:
+        return f"StationFrames(stations={sorted(self.leaders)}, values={len(self.values)})"
+
+
 class Problem:
     """Residuals of ``models`` for ``robot`` with ``effects``; see the module docstring.
 
     ``start`` optionally gives starting values by name (robot, effect or mounted
-    parameters, SI); placement unknowns are always initialised from the data.
+    parameters, SI); placement unknowns are initialised from the data, except those
+    ``frames`` holds (see ``StationFrames``), which take its values and stay fixed.
     """
 
     def __init__(self, robot: Robot, models: Sequence[MeasurementModel],
                  effects: Sequence[Effect] = (), start: dict[str, float] | None = None,
-                 kinematics: Kinematics | None = None):
+                 kinematics: Kinematics | None = None, frames: StationFrames | None = None):
         self.robot = robot
         self.models = tuple(models)
         self.effects = tuple(effects)
@@ -196,9 +232,15 @@ class Problem:
                     mounted_names.append(name)
                     mounted_quantities.append(model.mounted.quantity(name))
         mounted_registry = ParameterRegistry(tuple(mounted_names), tuple(mounted_quantities))
-        placement_registry = ParameterRegistry((), ())
-        for model in self.models:
-            placement_registry = placement_registry.concat(model.placement)
+        placement_names: list[str] = []
+        placement_quantities: list[str] = []
+        for model in self.models:  # one station's unknowns are shared by name
+            for name in model.placement.names:
+                if name not in placement_names:
+                    placement_names.append(name)
+                    placement_quantities.append(model.placement.quantity(name))
+        placement_registry = ParameterRegistry(tuple(placement_names),
+                                               tuple(placement_quantities))
         self.unknowns = (robot_registry.concat(effect_registry).concat(mounted_registry)
                          .concat(placement_registry))
         sizes = [len(robot_registry), len(effect_registry), len(mounted_registry),
@@ -212,7 +254,10 @@ class Problem:
         self._maps: dict[tuple[int, int], ca.Function] = {}
         self._separable_functions: dict[int, SeparableResidual | None] = {}
         self._data_cache: dict[int, tuple] = {}
+        self.frames = frames or StationFrames()
         self._x0 = self._initial(start or {})
+        self.held = np.isin(np.asarray(self.unknowns.names, dtype=object),
+                            list(self.frames.values)) & self.mask("placement")
 
     def __repr__(self) -> str:
         counts = {k: s.stop - s.start for k, s in self.slices.items()}
@@ -226,6 +271,20 @@ class Problem:
 
     def placement_indices(self, model: MeasurementModel) -> np.ndarray:
         return self.unknowns.indices(model.placement.names)
+
+    def free_placement(self) -> np.ndarray:
+        """Mask over ``x`` of the placement unknowns that are fitted (not held)."""
+        return self.mask("placement") & ~self.held
+
+    def placement_frame(self, model: MeasurementModel) -> str:
+        """How held-out ``model``'s placement is obtained: held as the calibration fitted
+        its station, or refitted on the held-out data themselves."""
+        held = bool(self.held[self.placement_indices(model)].any())
+        if model.station is not None and held:
+            return f"station {model.station} (fixed)"
+        if model.station is not None:
+            return f"station {model.station}, refitted on the validation data"
+        return "refitted on the validation data"
 
     def mask(self, *keys: str) -> np.ndarray:
         """Boolean mask over ``x`` selecting whole blocks ('robot', 'placement', ...)."""
@@ -295,11 +354,24 @@ class Problem:
         for name, value in start.items():
             if name in self.unknowns:
                 x[self.unknowns.index(name)] = value
+        leaders = dict(self.frames.leaders)
+        assigned = np.zeros(len(x), dtype=bool)
         for model in self.models:
             mounted = x[self.mounted_indices(model)]
             # Pendant-pose data carry their own flange poses: no robot points to offer.
             points = self.points_numeric(model, x) if model.uses_robot else None
-            x[self.placement_indices(model)] = model.initial_placement(points, mounted)
+            values = model.initial_placement(points, mounted)
+            if model.station is not None:  # the station's first model sets its reference
+                leader = leaders.setdefault(model.station, model)
+                if leader is not model:
+                    model.follow(leader)
+            for index, name, value in zip(self.placement_indices(model), model.placement.names,
+                                          values):
+                if name in self.frames.values:
+                    x[index] = self.frames.values[name]
+                elif not assigned[index]:
+                    x[index] = value
+                assigned[index] = True
         return x
 
     def initial(self) -> np.ndarray:
@@ -581,6 +653,12 @@ class Problem:
             out.append(r[start:start + size])
             start += size
         return out
+
+    def certified_entries(self) -> np.ndarray:
+        """Mask over the stacked residual of the entries that compare fitted unknowns with
+        an instrument's certified geometry (``MeasurementModel.certified_entries``)."""
+        parts = [np.asarray(m.certified_entries(), bool) for m in self.models]
+        return np.concatenate(parts) if parts else np.zeros(0, bool)
 
     def errors(self, x: np.ndarray) -> list[np.ndarray]:
         """Per-dataset per-measurement error lengths [m] at ``x``."""

@@ -1,16 +1,23 @@
 """The tool-position error the delivered model is predicted to have over the work cell.
 
-The work cell is the box of joint ranges the fit data cover (``region``), sampled
-uniformly at ``SAMPLES`` poses with a fixed seed. The error is predicted at the point the
-instrument located on the flange (probe tip, tracker reflector, laser origin: the first
-three mounted unknowns), which is what the data can vouch for: a tool frame offset the
-instrument cannot tell from its own offset is the user's declaration, not calibrated. At
-each pose ``k`` that point moves with the robot and mounted parameters as
-``G_k = d p_world / d theta`` (3 x n, CasADi's exact Jacobian of the delivered geometry).
+The work cell is the box of joint ranges a fit dataset declares (``work_cell:``, joints it
+does not name keep the range the fit data cover), else the box of joint ranges the fit
+data cover (``region_of``); it is sampled uniformly at ``SAMPLES`` poses with a fixed
+seed. The box, not the neighbourhood of the measured poses, is the default: the figure is
+a statement about where the robot may be sent within what it was measured over, and
+every joint combination inside the box is one it may be sent to.
+
+The error is predicted at the point the instrument located on the flange (probe tip,
+tracker reflector, laser origin: the first three mounted unknowns), which is what the
+data can vouch for: a tool frame offset the instrument cannot tell from its own offset is
+the user's declaration, not calibrated. At each pose ``k`` that point moves with the robot
+and mounted parameters as ``G_k = d p_world / d theta`` (3 x n, CasADi's exact Jacobian of
+the delivered geometry).
 The parameter error after calibration has covariance ``Sigma``:
 
 * for the parameters the calibration fitted (robot and instrument point), the posterior
-  covariance of the geometric fit (data and tolerance prior together);
+  covariance of the geometric fit (data and tolerance prior together; an artifact's
+  certified socket distances count as free of reading noise, ``prior.posterior``);
 * for those it held at nominal because the data barely see them (the 1% rule), their
   tolerance squared (``calibration.prior``), counted only for the part of their effect
   that the fitted parameters cannot take up over the region; those held by an exact
@@ -43,6 +50,10 @@ from ..robot import Robot
 
 SAMPLES = 400
 SEED = 9283  # fixed: a prediction is repeatable
+DATA_RANGES = "joint ranges of the fit data"
+DECLARED = "declared work cell"
+PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
+MEASURED = "poses of the fit data"
 
 
 @dataclass(frozen=True)
@@ -58,16 +69,26 @@ class PredictedAccuracy:
     region: tuple[tuple[float, float], ...]
     samples: int = SAMPLES
     errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
+    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
         return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
                 "max": self.max / length_scale, "structured": self.structured / length_scale,
                 "unit": unit,
-                "region": {"kind": "joint ranges of the fit data", "samples": self.samples,
+                "region": {"kind": self.region_kind, "samples": self.samples,
                            "joints_rad_or_m": [list(r) for r in self.region]}}
 
+    @property
+    def region_words(self) -> str:
+        """Where the prediction holds, for sentences."""
+        return {DECLARED: "the declared work cell",
+                PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
+                                 "cover)",
+                MEASURED: "the poses the fit data were measured in"}.get(
+            self.region_kind, "the joint ranges the data cover")
+
     def sentence(self, length_scale: float, unit: str) -> str:
-        return (f"predicted tool-position error over the joint ranges the data cover: RMS "
+        return (f"predicted tool-position error over {self.region_words}: RMS "
                 f"{self.rms / length_scale:.4g}, 95% {self.p95 / length_scale:.4g}, max "
                 f"{self.max / length_scale:.4g} {unit}")
 
@@ -89,18 +110,46 @@ def region_of(result) -> tuple[tuple[float, float], ...] | None:
     return tuple((float(lo), float(hi)) for lo, hi in zip(Q.min(axis=0), Q.max(axis=0)))
 
 
+def work_cell(result, datasets: Sequence = ()
+              ) -> tuple[tuple[tuple[float, float], ...] | None, str]:
+    """The region [rad or m per joint] the prediction is stated over, and its kind: the
+    union of the ``work_cell`` boxes the fit ``datasets`` declare, a joint none of them
+    names taking the range the fit data cover; without a declaration, ``region_of``.
+    ``(None, kind)`` when a joint is left to data that carry no joint readings."""
+    cells = [d.work_cell for d in datasets if getattr(d, "work_cell", None) is not None]
+    data = region_of(result)
+    if any(isinstance(c, str) for c in cells):  # "measured": the fit data's own poses
+        return data, MEASURED
+    if not cells:
+        return data, DATA_RANGES
+    region: list[tuple[float, float]] = []
+    partly = False
+    for joint, declared in enumerate(zip(*cells)):
+        given = [c for c in declared if c is not None]
+        if given:
+            region.append((min(c[0] for c in given), max(c[1] for c in given)))
+        elif data is None:
+            return None, PARTLY_DECLARED
+        else:
+            region.append(data[joint])
+            partly = True
+    return tuple(region), PARTLY_DECLARED if partly else DECLARED
+
+
 def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
             structured: float = 0.0,
-            region: tuple[tuple[float, float], ...] | None = None) -> PredictedAccuracy | None:
+            region: tuple[tuple[float, float], ...] | None = None,
+            region_kind: str = DATA_RANGES) -> PredictedAccuracy | None:
     """The ``PredictedAccuracy`` of the ``delivered`` geometry of a ``CalibrationResult`` at
     the instrument's ``point`` [m] (flange frame; its unknowns ``point_names``, x, y, z);
     ``structured`` [m] the model error beyond the unexplained residual (module docstring).
-    None when the data give no joint readings to define the region."""
-    region = region if region is not None else region_of(result)
+    ``region`` (per joint ``(low, high)`` [rad or m], of kind ``region_kind``) defaults to
+    the joint ranges of the fit data. None when there is no region."""
+    if region is None:
+        region, region_kind = region_of(result), DATA_RANGES
     if region is None:
         return None
-    low, high = np.array(region).T
-    Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))
+    Q = _poses(result, region, region_kind)
     kinematics = Kinematics(delivered)
     G, positions = _point_jacobians(kinematics, Q, np.asarray(point, dtype=float))
     names = tuple(kinematics.registry.names) + tuple(point_names)
@@ -111,7 +160,21 @@ def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
     errors = np.sqrt(np.clip(per_pose, 0.0, None) + s2)
     return PredictedAccuracy(float(np.sqrt(np.mean(errors**2))),
                              float(np.percentile(errors, 95)), float(errors.max()),
-                             float(np.sqrt(s2)), region, SAMPLES, errors)
+                             float(np.sqrt(s2)), region, len(Q), errors, region_kind)
+
+
+def _poses(result, region: tuple[tuple[float, float], ...], region_kind: str) -> np.ndarray:
+    """The joint readings (N x dof) [rad or m] the prediction is made at: ``SAMPLES``
+    drawn uniformly in the box ``region``, or, for ``MEASURED``, the fit data's own
+    readings (at most ``SAMPLES`` of them, evenly spread over the table)."""
+    if region_kind == MEASURED:
+        blocks = [np.asarray(r.joints, float) for r in result.residuals
+                  if r.joints is not None and len(r.joints)]
+        Q = np.vstack(blocks)
+        Q = Q[np.all(np.isfinite(Q), axis=1)]
+        return Q[np.unique(np.linspace(0, len(Q) - 1, min(SAMPLES, len(Q))).astype(int))]
+    low, high = np.array(region).T
+    return np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))
 
 
 def _point_jacobians(kinematics: Kinematics, Q: np.ndarray,

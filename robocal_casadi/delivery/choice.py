@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..calibration.evaluation import held_out
 from ..calibration.folds import FoldGrams, fold_schemes
 from ..calibration.identification import evaluate, models_for
 from ..calibration.problem import Problem
@@ -105,8 +106,8 @@ def choose(result, datasets: Sequence, validation: Sequence = ()) -> Delivery:
     geometry = _geometry_candidates(result, datasets)
     nothing = _nothing_candidates(result, datasets)
     if validation:
-        geometry = [_held_out(c, validation) for c in geometry]
-        nothing = [_held_out(c, validation) for c in nothing]
+        geometry = [_held_out(c, validation, datasets) for c in geometry]
+        nothing = [_held_out(c, validation, datasets) for c in nothing]
         basis = "held-out data"
     else:
         nothing = _cross_validated(result, datasets, nothing)
@@ -174,9 +175,11 @@ def _scored(name: str, robot: Robot, mounted: dict[str, float], datasets) -> Can
     return Candidate(name, robot, mounted, problem.rms(x))
 
 
-def _held_out(candidate: Candidate, validation: Sequence) -> Candidate:
-    problem, x = evaluate(candidate.robot, list(validation), (), candidate.mounted,
-                          label_prefix="validation:")
+def _held_out(candidate: Candidate, validation: Sequence, datasets: Sequence) -> Candidate:
+    """``candidate`` with its RMS [m] on the ``validation`` data; the stations they share
+    with the fit ``datasets`` keep the placement those give for this candidate."""
+    problem, x = held_out(candidate.robot, list(validation), (), candidate.mounted,
+                          anchors=datasets)
     return Candidate(candidate.name, candidate.robot, candidate.mounted, candidate.fit_rms,
                      problem.rms(x))
 

@@ -75,7 +75,8 @@ class ArtifactModel(MeasurementModel):
                 index = None
                 if len(rows) > 1:
                     index = len(names)
-                    names += [f"{label}/pose{pose}/{socket}_{axis}" for axis in "xyz"]
+                    names += [f"{self.placement_prefix}/pose{pose}/{socket}_{axis}"
+                              for axis in "xyz"]
                 sockets.append(_Socket(pose, socket, rows, index))
         self.sockets = tuple(sockets)
         self._placement = ParameterRegistry(tuple(names), ("length",) * len(names))
@@ -187,6 +188,20 @@ class ArtifactModel(MeasurementModel):
             rows += [-1] * n
             sizes += [1] * n
         return np.array(rows, dtype=int), np.array(sizes, dtype=int)
+
+    def certified_entries(self) -> np.ndarray:
+        """The distances and perpendicularities between sockets that are all placement
+        unknowns (touched more than once): they compare the fitted socket positions with
+        the artifact's certified geometry and hold no touch of their own. Where a socket
+        is touched once, its touch enters the entry, which then carries its noise."""
+        located = {(s.pose, s.name) for s in self.sockets if s.unknown_index is not None}
+        out = [False] * sum(3 * len(s.rows) for s in self.sockets if s.unknown_index is not None)
+        for pose in self._poses():
+            for a, b, _ in self._distances(pose):
+                out.append((pose, a) in located and (pose, b) in located)
+            for names in self._perpendiculars(pose):
+                out.append(all((pose, n) in located for n in names))
+        return np.array(out, dtype=bool)
 
     def residual_groups(self) -> np.ndarray:
         """The placement (pose id) of every residual entry."""

@@ -7,7 +7,9 @@ minimum is the calibration. Its unknowns besides the robot are of two sorts:
   and beam). Shared by name between datasets, carried from calibration into validation.
 * ``placement``: where the instrument sits in the room (socket positions, the tracker's
   frame, the sphere centre). Per dataset (names carry the dataset label) and fitted
-  again on validation data.
+  again on validation data, unless the dataset names its instrument ``station``: then
+  the names carry the station (``station:<name>/...``), datasets of one station share
+  them, and data of a station the calibration fitted keep its placement.
 
 Each model class is also the one home of what its instrument means to the rest of the
 toolkit (``MODELS`` in ``__init__`` maps a dataset kind to its class; nothing else
@@ -37,6 +39,13 @@ from ..parameters import ParameterRegistry
 from ..results import ErrorTerm
 
 PointsFunction = Callable[[ca.MX], ca.MX]
+
+STATION_PREFIX = "station:"
+
+
+def station_prefix(station: str) -> str:
+    """The prefix of the placement names of instrument station ``station``."""
+    return f"{STATION_PREFIX}{station}"
 
 
 class MeasurementModel(ABC):
@@ -74,7 +83,20 @@ class MeasurementModel(ABC):
 
     def __init__(self, dataset, label: str):
         self.dataset = dataset
-        self.label = label  # prefix of placement names, unique among the datasets solved
+        self.label = label  # unique among the datasets solved
+        self.station: str | None = getattr(dataset, "station", None)
+
+    @property
+    def placement_prefix(self) -> str:
+        """Prefix of the placement names: the station when the dataset names one (shared
+        with the other datasets of that station), else the dataset's label."""
+        return station_prefix(self.station) if self.station is not None else self.label
+
+    def follow(self, leader: MeasurementModel) -> None:
+        """Take the reference of the placement unknowns from ``leader``, a model of the
+        same station whose placement values this one shares (e.g. the tracker's
+        reference rotation). Models whose placement needs no reference do nothing."""
+        return None
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}({self.label!r}, rows={self.dataset.rows}, "
@@ -142,6 +164,13 @@ class MeasurementModel(ABC):
     @abstractmethod
     def residual_size(self) -> int:
         """Length of the residual column."""
+
+    def certified_entries(self) -> np.ndarray:
+        """Mask over the residual of the entries that hold no reading: they compare fitted
+        placement unknowns with the instrument's certified geometry (an artifact's known
+        distances between sockets located by repeated touches), so they carry no reading
+        noise of their own. Default: none."""
+        return np.zeros(self.residual_size(), dtype=bool)
 
     def residual_groups(self) -> np.ndarray:
         """For each residual entry, the unit of data it belongs to (-1: none).

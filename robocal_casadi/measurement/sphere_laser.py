@@ -60,7 +60,7 @@ class SphereLaserModel(MeasurementModel):
                              file=dataset.path, where="data")
         self.count = len(dataset.distance)
         self._placement = ParameterRegistry(
-            tuple(f"{label}/sphere_{axis}" for axis in "xyz"), ("length",) * 3)
+            tuple(f"{self.placement_prefix}/sphere_{axis}" for axis in "xyz"), ("length",) * 3)
         self._scan = None if dataset.flange_poses is None else Scan.from_poses(
             dataset.flange_poses, dataset.distance, dataset.radius)
         self._sensor: SensorFit | None = None

@@ -2,7 +2,8 @@
 
 Unknowns: the reflector centre in the flange frame (mounted: ``target_x, target_y,
 target_z`` [m]) and the tracker's frame (placement: ``<label>/instrument_x, _y, _z`` [m]
-and ``<label>/instrument_rx, _ry, _rz`` [rad]). The instrument rotation is
+and ``<label>/instrument_rx, _ry, _rz`` [rad], ``<label>`` the station's prefix when the
+dataset names one). The instrument rotation is
 ``R = R0 Rz(rz) Ry(ry) Rx(rx)`` with ``R0`` from a closed-form rigid registration of the
 nominal positions to the measured ones (Kabsch), so the angles stay small and far from
 gimbal lock.
@@ -49,7 +50,8 @@ class TrackerModel(MeasurementModel):
 
     def __init__(self, dataset, label: str):
         super().__init__(dataset, label)
-        names = tuple(f"{label}/instrument_{k}" for k in ("x", "y", "z", "rx", "ry", "rz"))
+        names = tuple(f"{self.placement_prefix}/instrument_{k}"
+                      for k in ("x", "y", "z", "rx", "ry", "rz"))
         self._placement = ParameterRegistry(names, ("length",) * 3 + ("angle",) * 3)
         self.R0 = np.eye(3)
 
@@ -69,6 +71,11 @@ class TrackerModel(MeasurementModel):
         R, t = rigid_registration(world, self.dataset.measured)
         self.R0 = R
         return np.concatenate([t, np.zeros(3)])
+
+    def follow(self, leader: MeasurementModel) -> None:
+        """Share ``leader``'s reference rotation ``R0`` (same station, same placement)."""
+        if isinstance(leader, TrackerModel):
+            self.R0 = leader.R0.copy()
 
     def instrument_transform(self, placement: np.ndarray) -> np.ndarray:
         """``T_instrument_world`` (4x4) of a placement vector."""

@@ -340,7 +340,8 @@ def effect_evidence(view: EffectView, units: Units) -> Figure:
     return figure
 
 
-def predicted_errors(errors: np.ndarray, scale: float, unit: str) -> Figure:
+def predicted_errors(errors: np.ndarray, scale: float, unit: str,
+                     region: str = "the joint ranges the data cover") -> Figure:
     """Histogram of the predicted tool-position error [``unit``] over the sampled poses of
     the work cell (``delivery.accuracy``)."""
     with report_style():
@@ -354,6 +355,6 @@ def predicted_errors(errors: np.ndarray, scale: float, unit: str) -> Figure:
                      linestyle=":", linewidth=1.0, label="95th percentile")
         axes.set_xlabel(f"predicted tool-position error [{unit}]")
         axes.set_ylabel("poses")
-        axes.set_title("Predicted error over the joint ranges the data cover")
+        axes.set_title(f"Predicted error over {region}")
         axes.legend(loc="upper right")
     return figure

@@ -176,9 +176,27 @@ def accuracy_section(result: CalibrationResult) -> Section:
             + ("Held-out data were not used in the fit: they show what a customer will see "
                "on new poses." if result.validation is not None else
                "No held-out data were given: these figures show how well the model fits "
-               "the data it was fitted on."))
+               "the data it was fitted on.")) + _validation_frames(result)
     return Section("accuracy", "Accuracy summary", (Paragraph(text), table,
                                                      *iso9283_blocks(result, units)))
+
+
+def _validation_frames(result: CalibrationResult) -> str:
+    """A sentence per kind of instrument placement the held-out data were judged in."""
+    fixed = [r.label for r in result.validation_residuals if r.placement_frame.endswith("(fixed)")]
+    refitted = [r.label for r in result.validation_residuals
+                if r.placement_frame and r.label not in fixed]
+    text = ""
+    if fixed:
+        frames = {r.placement_frame for r in result.validation_residuals if r.label in fixed}
+        text += (f" Held-out data {', '.join(fixed)} keep the instrument placement the fit "
+                 f"data of the same station gave ({'; '.join(sorted(frames))}): their errors "
+                 f"are measured in the robot's own frame.")
+    if refitted:
+        text += (f" Held-out data {', '.join(refitted)} have the instrument placement refitted "
+                 f"on themselves: a rigid motion of the robot against the instrument does not "
+                 f"show in their errors.")
+    return text
 
 
 def applying_section(result: CalibrationResult) -> Section:
@@ -211,7 +229,7 @@ def applying_section(result: CalibrationResult) -> Section:
 
 def work_cell_section(result: CalibrationResult) -> Section | None:
     """The tool-position error predicted for robot_calibrated.yaml away from the measured
-    points, over the joint ranges the data cover (``delivery.accuracy``)."""
+    points, over the work cell (``delivery.accuracy``)."""
     predicted = result.predicted_accuracy
     if predicted is None:
         return None
@@ -224,8 +242,8 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     text = (f"The measured points say how well the model fits where the robot was measured. "
             f"Away from them, the error of robot_calibrated.yaml is predicted from the "
             f"uncertainty left in every parameter (the data and the tolerances together) and "
-            f"from what the model still lacks, at {predicted.samples} poses spread over the "
-            f"joint ranges the data cover, after the robot's placement in the cell (a rigid "
+            f"from what the model still lacks, at {predicted.samples} poses spread over "
+            f"{predicted.region_words}, after the robot's placement in the cell (a rigid "
             f"motion of its base) is registered. Directions the data barely see keep the "
             f"uncertainty of their tolerances: where this figure is well above the held-out "
             f"error, the data determine the robot only near the measured region.")
@@ -235,7 +253,8 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     if len(predicted.errors):
         blocks.append(Plot("predicted-error", "Predicted tool-position error over the poses "
                            "sampled in the work cell.",
-                           partial(figures.predicted_errors, predicted.errors, scale, unit)))
+                           partial(figures.predicted_errors, predicted.errors, scale, unit,
+                                   predicted.region_words)))
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
 
 
