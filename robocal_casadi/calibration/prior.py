@@ -220,16 +220,24 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
     covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_prior[reached],
                                         sigma_prior)
-    # Data share: the diagonal of the resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e.
-    # 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2 with the noise s the prior was weighed with.
-    share = np.full(len(prior_position), np.nan)
-    if prior is not None and len(prior_position) and sigma_prior is not None:
-        diagonal = np.full(n, np.nan)
-        diagonal[reached] = np.diag(inverse)
-        for k, position in enumerate(prior_position):
-            if position >= 0 and np.isfinite(diagonal[position]):
-                share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
+    share = _data_share(inverse, reached, prior_position, precision_prior, sigma_prior)
     return Posterior(covariance, share, sigma_new, dof)
+
+
+def _data_share(inverse: np.ndarray, reached: np.ndarray, prior_position: np.ndarray,
+                precision_prior: np.ndarray, sigma_prior: float | None) -> np.ndarray:
+    """Per prior entry, the share of its estimate the data decide: the diagonal of the
+    resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e. 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2
+    with the noise s the prior was weighed with; NaN where no prior or no data reach."""
+    share = np.full(len(prior_position), np.nan)
+    if not len(prior_position) or sigma_prior is None:
+        return share
+    diagonal = np.full(len(reached), np.nan)
+    diagonal[reached] = np.diag(inverse)
+    for k, position in enumerate(prior_position):
+        if position >= 0 and np.isfinite(diagonal[position]):
+            share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
+    return share
 
 
 def _sandwich(inverse: np.ndarray, J: np.ndarray, certified: np.ndarray | None,
