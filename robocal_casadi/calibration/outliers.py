@@ -38,6 +38,7 @@ would go, the data are bad rather than the robot: ``InputError``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -224,17 +225,33 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
     statistic = np.zeros(len(units))
     quantile = np.zeros(len(units))
     residual = np.zeros(len(units))
-    for k, unit in enumerate(units):
-        e = unit.entries
-        z = r[e] / sigma[e]
-        H = W[e] @ W[e].T
-        V = np.eye(len(e)) + (H if not kept[e].all() else -H)
-        quantile[k] = chi2.ppf(1.0 - FALSE_ALARM, len(e))
-        residual[k] = float(np.linalg.norm(r[e]))
-        if np.linalg.eigvalsh(V).min() < UNTESTABLE:
-            continue
-        statistic[k] = float(z @ np.linalg.solve(V, z))
+    sizes = np.array([len(unit.entries) for unit in units], dtype=int)
+    for size in np.unique(sizes):
+        members = np.flatnonzero(sizes == size)
+        E = np.stack([units[k].entries for k in members])  # (units, entries)
+        t, ok = _statistics(r[E] / sigma[E], W[E], kept[E].all(axis=1))
+        statistic[members] = np.where(ok, t, 0.0)
+        quantile[members] = _quantile(int(size))
+        residual[members] = np.linalg.norm(r[E], axis=1)
     return statistic, quantile, residual, sigma
+
+
+def _statistics(z: np.ndarray, W: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``t = z^T V^-1 z`` for a stack of units of one size (``z`` (units, m) residual
+    entries over their noise, ``W`` (units, m, rank) their rows of the hat factor,
+    ``kept`` per unit), and whether ``V`` lets the unit be tested at all."""
+    H = W @ np.swapaxes(W, 1, 2)
+    V = np.eye(z.shape[1]) + np.where(kept[:, None, None], -H, H)
+    ok = np.linalg.eigvalsh(V).min(axis=1) >= UNTESTABLE
+    V[~ok] = np.eye(z.shape[1])  # untestable: not solved (its t stays 0)
+    y = np.linalg.solve(V, z[:, :, None])[:, :, 0]
+    return np.einsum("ij,ij->i", z, y), ok
+
+
+@functools.cache
+def _quantile(entries: int) -> float:
+    """The ``1 - FALSE_ALARM`` quantile of chi^2 with ``entries`` degrees of freedom."""
+    return float(chi2.ppf(1.0 - FALSE_ALARM, entries))
 
 
 def _hat_factor(J: np.ndarray, kept: np.ndarray) -> np.ndarray:
