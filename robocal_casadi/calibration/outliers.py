@@ -232,7 +232,7 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
         t, ok = _statistics(r[E] / sigma[E], W[E], kept[E].all(axis=1))
         statistic[members] = np.where(ok, t, 0.0)
         quantile[members] = _quantile(int(size))
-        residual[members] = np.linalg.norm(r[E], axis=1)
+        residual[members] = np.sqrt(_dots(r[E], r[E]))
     return statistic, quantile, residual, sigma
 
 
@@ -245,7 +245,12 @@ def _statistics(z: np.ndarray, W: np.ndarray, kept: np.ndarray) -> tuple[np.ndar
     ok = np.linalg.eigvalsh(V).min(axis=1) >= UNTESTABLE
     V[~ok] = np.eye(z.shape[1])  # untestable: not solved (its t stays 0)
     y = np.linalg.solve(V, z[:, :, None])[:, :, 0]
-    return np.einsum("ij,ij->i", z, y), ok
+    return _dots(z, y), ok
+
+
+def _dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of two stacks of vectors, each as ``a[k] @ b[k]`` rounds."""
+    return np.matmul(a[:, None, :], b[:, :, None])[:, 0, 0]
 
 
 @functools.cache
@@ -402,9 +407,10 @@ def kept_datasets(datasets: Sequence, rejected: Sequence[RejectedReading], role:
     out = []
     for dataset in datasets:
         keep = np.ones(readings(dataset), dtype=bool)
-        for entry in rejected:
-            if entry.role == role and entry.path == str(dataset.path):
-                lines = list(entry.lines)
-                keep &= ~np.isin([dataset.line(i) for i in range(len(keep))], lines)
+        mine = [entry for entry in rejected
+                if entry.role == role and entry.path == str(dataset.path)]
+        if mine:
+            table_lines = [dataset.line(i) for i in range(len(keep))]
+            keep &= ~np.isin(table_lines, [line for entry in mine for line in entry.lines])
         out.append(dataset if keep.all() else dataset_rows(dataset, keep))
     return out

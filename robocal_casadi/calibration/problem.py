@@ -78,6 +78,17 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
 COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
 
 
+def _runs(source: np.ndarray, target: np.ndarray
+          ) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """Pairs of half-open ranges ``((a, b), (c, d))`` covering ``source -> target``
+    (equal-length index arrays) where both step by one: ``out[c:d] = in[a:b]``."""
+    breaks = np.flatnonzero((np.diff(source) != 1) | (np.diff(target) != 1)) + 1
+    starts = np.r_[0, breaks].astype(int) if len(source) else np.zeros(0, int)
+    stops = np.r_[breaks, len(source)].astype(int) if len(source) else np.zeros(0, int)
+    return [((int(source[i]), int(source[j - 1]) + 1), (int(target[i]), int(target[j - 1]) + 1))
+            for i, j in zip(starts, stops)]
+
+
 def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of the nonzeros of ``sparsity``, in CasADi's nonzero order."""
     rows, columns = sparsity.get_triplet()
@@ -379,13 +390,16 @@ class Problem:
                             x: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Residual and Jacobian ``columns`` of a separable model, row by row."""
         r, J_rows = functions.jacobian(*self._separable_arguments(model, x))
-        J_rows = J_rows.reshape(r.size, -1)
+        J_rows = J_rows.reshape(len(r), r.size // len(r), -1)  # rows x entries x columns
         position = np.full(len(self.unknowns), -1)
         position[columns] = np.arange(len(columns))
-        keep = position[functions.columns] >= 0
-        J = np.zeros((r.size, len(columns)))
-        J[:, position[functions.columns[keep]]] = J_rows[:, keep]
-        return r.ravel(), J
+        source = np.flatnonzero(position[functions.columns] >= 0)
+        target = position[functions.columns[source]]
+        J = np.zeros((len(r), J_rows.shape[1], len(columns)))
+        # Copied run by run of consecutive columns: no full-size temporary.
+        for (a, b), (c, d) in _runs(source, target):
+            J[:, :, c:d] = J_rows[:, :, a:b]
+        return r.ravel(), J.reshape(r.size, len(columns))
 
     def _model_values(self, compiled: CompiledModel, x: np.ndarray) -> np.ndarray:
         """Residual of one model at ``x``."""
@@ -486,8 +500,8 @@ class Problem:
         if columns is not None and np.asarray(columns).dtype == bool:
             columns = np.flatnonzero(columns)
         x = np.asarray(x, float)
-        return np.vstack([self._model_jacobian(compiled, x, columns)[1]
-                          for compiled in self._compiled])
+        parts = [self._model_jacobian(compiled, x, columns)[1] for compiled in self._compiled]
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int] | np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
