@@ -60,7 +60,7 @@ import functools
 import math
 import time
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -321,7 +321,8 @@ class _Screening:
         A = J[:, self.free_index]
         norms = np.linalg.norm(A, axis=0)
         norms[norms == 0] = 1.0
-        self.A = A / norms
+        A /= norms  # a copy of J's columns: scaled in place
+        self.A = A
         self.gram_A = self.A.T @ self.A
         self.candidates = list(candidates)
         names = sorted({n for c in candidates for n in c.names},
@@ -330,7 +331,8 @@ class _Screening:
         E = J[:, [self.effect_index[n] for n in names]] if names else np.zeros((self.n, 0))
         self.raw_norm = dict(zip(names, np.linalg.norm(E, axis=0)))
         E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
-        self.E = E / E_norms
+        E /= E_norms  # a copy of J's columns: scaled in place
+        self.E = E
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
         Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
@@ -502,6 +504,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
         schemes = fold_schemes(big, folds, seed)
         r, J = _residual_and_jacobian(big, x)
+        jacobian = [J]
+        del J
     effect_of = {c: next(e for e in candidate_effects if set(c.names) <= set(e.parameter_names()))
                  for c in candidates}
     free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
@@ -510,11 +514,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     for rounds in range(1, max_rounds + 1):
         with stage(f"diagnosis round {rounds} ({len(steps)} effect(s) added)"):
             with stage(f"screening {len(remaining)} candidates"):
-                screening = _Screening(big, r, J, free, remaining, schemes, n_errors)
+                # The screening copies the columns it needs: J is not held meanwhile.
+                screening = _Screening(big, r, jacobian.pop(), free, remaining, schemes,
+                                       n_errors)
                 screens = []
                 for k, candidate in enumerate(remaining):
                     note(f"{k + 1}/{len(remaining)} {_label(candidate)}")
-                    screens.append(screening.screen(candidate))
+                    screens.append(_unless_supported(screening.screen(candidate),
+                                                     bic_threshold))
             decisions: dict[int, str] = {}
             for s in screens:
                 decisions[id(s)] = s.decision or screening.verdict(
@@ -579,7 +586,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
             s, solution, r_new, J_new, trial_free, bic, after = accepted
             steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
                                screening.cv_before, after, bic))
-            x, r, J, free = solution.x, r_new, J_new, trial_free
+            x, r, free = solution.x, r_new, trial_free
+            jacobian.append(J_new)
             remaining = [c for c in remaining if c is not s.candidate]
             if not remaining:
                 break
@@ -615,6 +623,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)
+
+
+def _unless_supported(screen: _Screen, bic_threshold: float) -> _Screen:
+    """``screen`` without its projected columns unless its BIC drop passes the threshold:
+    only such candidates are ever compared with each other (``_Screening.overlap``)."""
+    if screen.P is None or screen.bic_drop > bic_threshold:
+        return screen
+    return replace(screen, P=None)
 
 
 def _no_longer_supported(numbers: dict, bic_threshold: float) -> str:

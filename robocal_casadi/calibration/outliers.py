@@ -228,7 +228,7 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
     sizes = np.array([len(unit.entries) for unit in units], dtype=int)
     for size in np.unique(sizes):
         members = np.flatnonzero(sizes == size)
-        E = np.stack([units[k].entries for k in members])  # (units, entries)
+        E = np.stack([units[int(k)].entries for k in members])  # (units, entries)
         t, ok = _statistics(r[E] / sigma[E], W[E], kept[E].all(axis=1))
         statistic[members] = np.where(ok, t, 0.0)
         quantile[members] = _quantile(int(size))
