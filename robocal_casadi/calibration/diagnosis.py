@@ -313,12 +313,14 @@ class _Screening:
 
     def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray, free: np.ndarray,
                  candidates: Sequence[_Candidate], schemes: Sequence[FoldScheme],
-                 n_errors: int):
+                 n_errors: int, free_columns: bool = False):
+        """``free_columns``: ``J`` holds the ``free`` columns only (no ``candidates``);
+        it is then scaled in place."""
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
         self.free_index = np.flatnonzero(free)
-        A = J[:, self.free_index]
+        A = J if free_columns else J[:, self.free_index]
         norms = np.linalg.norm(A, axis=0)
         norms[norms == 0] = 1.0
         A /= norms  # a copy of J's columns: scaled in place
@@ -548,9 +550,11 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 trial_free = free | _mask_of(big, s.kept)
                 with stage(f"refit with {_label(s.candidate)}"):
                     solution = solve(big, x, trial_free, method=method, loss=loss)
-                    r_new, J_new = _residual_and_jacobian(big, solution.x)
-                    # The refit's own held-out numbers, on the same folds.
-                    refit = _Screening(big, r_new, J_new, trial_free, [], schemes, n_errors)
+                    # The refit's own held-out numbers, on the same folds (its free
+                    # columns only: the whole Jacobian is formed once a candidate is added).
+                    r_new = big.residual(solution.x)
+                    refit = _Screening(big, r_new, big.jacobian(solution.x, trial_free),
+                                       trial_free, [], schemes, n_errors, free_columns=True)
                 rss_new = float(r_new @ r_new)
                 bic = screening.bic_drop(rss_new, len(s.kept))
                 numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
@@ -564,7 +568,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                                    f"something else")
                 if not verdict:
                     decisions[id(s)] = "added"
-                    accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)
+                    accepted = (s, solution, r_new, trial_free, bic, refit.cv_before)
                     break
                 decisions[id(s)] = f"rejected after refit: {verdict}"
             for s in passing:
@@ -583,11 +587,11 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     label=_label(s.candidate)))
             if accepted is None:
                 break
-            s, solution, r_new, J_new, trial_free, bic, after = accepted
+            s, solution, r_new, trial_free, bic, after = accepted
             steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
                                screening.cv_before, after, bic))
             x, r, free = solution.x, r_new, trial_free
-            jacobian.append(J_new)
+            jacobian.append(big.jacobian(solution.x))
             remaining = [c for c in remaining if c is not s.candidate]
             if not remaining:
                 break
