@@ -280,10 +280,20 @@ class Problem:
         return np.array(dataset.joints.T, dtype=float), extras, payload_com
 
     def _mapped(self, which: int, rows: int) -> ca.Function:
+        """The row function ``which`` mapped over ``rows`` rows. Below ``COMPILE_ROWS`` it
+        evaluates every residual, on two threads; from there on the compiled batches do
+        that and this map serves a few calls (the initial placement), in series: a
+        threaded map holds work memory that grows with the rows (tens of MB at 10,000),
+        for the same numbers."""
         key = (which, rows)
         if key not in self._maps:
             function = self._row[which]
-            self._maps[key] = function.map(rows, "thread", 2) if rows > 1 else function
+            if rows <= 1:
+                self._maps[key] = function
+            elif rows >= COMPILE_ROWS:
+                self._maps[key] = function.map(rows, "serial")
+            else:
+                self._maps[key] = function.map(rows, "thread", 2)
         return self._maps[key]
 
     def points_numeric(self, model: MeasurementModel, x: np.ndarray):
