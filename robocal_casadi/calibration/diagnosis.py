@@ -591,6 +591,9 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
             steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
                                screening.cv_before, after, bic))
             x, r, free = solution.x, r_new, trial_free
+            # This round's columns (its screening, every candidate's) go before the next
+            # round's Jacobian is formed.
+            del screening, screens, passing, refit, accepted
             jacobian.append(big.jacobian(solution.x))
             remaining = [c for c in remaining if c is not s.candidate]
             if not remaining:
