@@ -331,6 +331,7 @@ class _Screening:
                        key=problem.unknowns.index)
         self.effect_index = {n: problem.unknowns.index(n) for n in names}
         E = J[:, [self.effect_index[n] for n in names]] if names else np.zeros((self.n, 0))
+        del J  # its columns are copied: freed here unless the caller holds it
         self.raw_norm = dict(zip(names, np.linalg.norm(E, axis=0)))
         E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
         E /= E_norms  # a copy of J's columns: scaled in place
