@@ -311,11 +311,14 @@ def _pivoted(columns: np.ndarray, threshold: float) -> tuple[list[int], list[flo
 class _Screening:
     """Everything one round needs from one residual and Jacobian."""
 
-    def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray, free: np.ndarray,
-                 candidates: Sequence[_Candidate], schemes: Sequence[FoldScheme],
-                 n_errors: int, free_columns: bool = False):
-        """``free_columns``: ``J`` holds the ``free`` columns only (no ``candidates``);
-        it is then scaled in place."""
+    def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray | list[np.ndarray],
+                 free: np.ndarray, candidates: Sequence[_Candidate],
+                 schemes: Sequence[FoldScheme], n_errors: int, free_columns: bool = False):
+        """``J``: the Jacobian, or a list holding it (taken out, so that it is freed once
+        its columns are copied). ``free_columns``: ``J`` holds the ``free`` columns only
+        (no ``candidates``); it is then scaled in place."""
+        if isinstance(J, list):
+            J = J.pop()
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
@@ -517,9 +520,9 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     for rounds in range(1, max_rounds + 1):
         with stage(f"diagnosis round {rounds} ({len(steps)} effect(s) added)"):
             with stage(f"screening {len(remaining)} candidates"):
-                # The screening copies the columns it needs: J is not held meanwhile.
-                screening = _Screening(big, r, jacobian.pop(), free, remaining, schemes,
-                                       n_errors)
+                # The screening takes J out of the list and copies the columns it
+                # needs: J is then freed (an argument would stay alive during the call).
+                screening = _Screening(big, r, jacobian, free, remaining, schemes, n_errors)
                 screens = []
                 for k, candidate in enumerate(remaining):
                     note(f"{k + 1}/{len(remaining)} {_label(candidate)}")

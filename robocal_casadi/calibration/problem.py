@@ -76,6 +76,7 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
 
 
 COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
+JACOBIAN_BLOCK = 4096  # rows of a separable model's Jacobian evaluated at once
 
 
 def _runs(source: np.ndarray, target: np.ndarray
@@ -398,18 +399,33 @@ class Problem:
 
     def _separable_jacobian(self, model: MeasurementModel, functions: SeparableResidual,
                             x: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residual and Jacobian ``columns`` of a separable model, row by row."""
-        r, J_rows = functions.jacobian(*self._separable_arguments(model, x))
-        J_rows = J_rows.reshape(len(r), r.size // len(r), -1)  # rows x entries x columns
+        """Residual and Jacobian ``columns`` of a separable model, row by row.
+
+        Evaluated in blocks of ``JACOBIAN_BLOCK`` rows, each copied into place: the
+        function's own output (every unknown it sees, in its layout) never exists for all
+        rows at once. Rows are independent, so the numbers are those of one call."""
+        arguments = self._separable_arguments(model, x)
+        varying = functions.jacobian.per_row
+        rows = model.dataset.rows
         position = np.full(len(self.unknowns), -1)
         position[columns] = np.arange(len(columns))
         source = np.flatnonzero(position[functions.columns] >= 0)
-        target = position[functions.columns[source]]
-        J = np.zeros((len(r), J_rows.shape[1], len(columns)))
-        # Copied run by run of consecutive columns: no full-size temporary.
-        for (a, b), (c, d) in _runs(source, target):
-            J[:, :, c:d] = J_rows[:, :, a:b]
-        return r.ravel(), J.reshape(r.size, len(columns))
+        runs = _runs(source, position[functions.columns[source]])
+        r_parts, J = [], None
+        for start in range(0, max(rows, 1), JACOBIAN_BLOCK):
+            block = [a[start:start + JACOBIAN_BLOCK] if v else a
+                     for a, v in zip(arguments, varying)]
+            r, J_rows = functions.jacobian(*block)
+            J_rows = J_rows.reshape(r.shape[0], r.shape[1], len(functions.columns))
+            if J is None:
+                J = np.zeros((rows, J_rows.shape[1], len(columns)))
+            # Copied run by run of consecutive columns: no full-size temporary.
+            for (a, b), (c, d) in runs:
+                J[start:start + len(r), :, c:d] = J_rows[:, :, a:b]
+            r_parts.append(r.ravel())
+        r_all = np.concatenate(r_parts)
+        assert J is not None
+        return r_all, J.reshape(r_all.size, len(columns))
 
     def _model_values(self, compiled: CompiledModel, x: np.ndarray) -> np.ndarray:
         """Residual of one model at ``x``."""
