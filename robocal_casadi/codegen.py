@@ -387,8 +387,10 @@ class BatchFunction:
             if not full:
                 for o, s_ in zip(outputs, scratch_out):
                     o[start:stop] = s_[: stop - start]
-        # The buffer keeps raw pointers: hold what they point to until the next call.
-        self._alive = (arrays, outputs, scratch_in, scratch_out)
+        # The buffer keeps raw pointers: hold the inputs and scratch they point to until
+        # the next call. The outputs are the caller's (every call points the buffer at new
+        # ones before evaluating), so a large result is freed as soon as it is dropped.
+        self._alive = (arrays, scratch_in, scratch_out)
         # Each row's block is stored column-major: swap to rows x columns.
         shaped = []
         for o, (_, columns) in zip(outputs, self.out_shapes):

@@ -24,6 +24,8 @@ from .parameters import ParameterRegistry
 from .robot import Robot
 from .transforms import pose_from_xyz_rpy, rot_x, rot_y, rot_z, translation
 
+SERIAL_ROWS = 1000  # from this many rows on, a mapped function runs in series
+
 
 def dh_transform(convention: str, revolute: bool, reading, theta, d, a, alpha, beta):
     """One link transform ``T(i-1,i)`` (docs/conventions.md#standard-dh,
@@ -224,10 +226,17 @@ class Kinematics:
     # ------------------------------------------------------------------ numeric helpers
 
     def mapped(self, function: ca.Function, count: int) -> ca.Function:
-        """``function.map(count)``, built once per (function, count) and cached."""
+        """``function.map(count)``, built once per (function, count) and cached: on two
+        threads below ``SERIAL_ROWS``, in series from there on (a threaded map holds work
+        memory that grows with ``count``; the numbers are the same)."""
         key = (function.name(), count)
         if key not in self._maps:
-            self._maps[key] = function.map(count, "thread", 2) if count > 1 else function
+            if count <= 1:
+                self._maps[key] = function
+            elif count >= SERIAL_ROWS:
+                self._maps[key] = function.map(count, "serial")
+            else:
+                self._maps[key] = function.map(count, "thread", 2)
         return self._maps[key]
 
     def _parameters(self, p) -> np.ndarray:

@@ -205,3 +205,23 @@ def test_condition_number_selection_drops_what_hurts(tmp_path):
     result = calibrate([spoiled], diagnose=False, select_growth=0.0)
     assert sum(len(v) for v in result.selection.values()) == len(dropped)
     assert result.to_json()["selection"]["dropped"]
+
+
+@pytest.mark.parametrize("kind", ["tracker_points", "cross_bar"])
+def test_jacobian_columns_are_those_of_the_whole_jacobian(tmp_path, kind):
+    """Asking for some columns (any order, a mask, one) gives exactly those columns of
+    the whole Jacobian: they are copied from the same evaluation, never recomputed."""
+    from robocal_casadi.calibration import Problem, models_for
+
+    sim = simulate(industrial_6r(), kind, out_dir=tmp_path / kind, rows=30, noise=NOISE,
+                   seed=2, progress=False)
+    problem = Problem(industrial_6r(), models_for([sim.load()]))
+    x = problem.initial() + 1e-4 * np.random.default_rng(0).normal(size=len(problem.unknowns))
+    J = problem.jacobian(x)
+    n = len(problem.unknowns)
+    picks = [np.arange(n)[::-1], np.array([3]), np.r_[0:5, n - 4:n, 7],
+             np.flatnonzero(problem.mask("placement"))]
+    for columns in picks:
+        assert np.array_equal(problem.jacobian(x, columns), J[:, columns])
+    mask = problem.mask("robot", "placement")
+    assert np.array_equal(problem.jacobian(x, mask), J[:, mask])

@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.calibration.outliers import MAX_SHARE, _hat_factor, kept_datasets, readings
+from robocal_casadi.calibration.outliers import (
+    MAX_SHARE,
+    _hat_factor,
+    _statistics,
+    kept_datasets,
+    readings,
+)
 from robocal_casadi.cli import main
 from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.examples import industrial_6r
@@ -169,6 +175,26 @@ def test_hat_factor_matches_the_pseudo_inverse():
     Jk = J[kept]
     expected = J @ np.linalg.pinv(Jk.T @ Jk, rcond=1e-12) @ J.T
     assert np.allclose(W @ W.T, expected, atol=1e-10 * np.abs(expected).max())
+
+
+def test_stacked_deletion_statistics_match_the_hat_matrix():
+    """Units judged as one stack: ``t = z^T V^-1 z``, ``V = I - H_e`` for a kept unit and
+    ``I + H_e`` for one set aside, ``H_e`` its block of ``J (J_k^T J_k)^+ J^T``."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(60, 6))
+    z = rng.normal(size=60)
+    units = np.arange(60).reshape(20, 3)
+    kept = np.ones(60, dtype=bool)
+    kept[units[[4, 11]].ravel()] = False
+    W = _hat_factor(J, kept)
+    t, ok = _statistics(z[units], W[units], kept[units].all(axis=1))
+    Jk = J[kept]
+    H = J @ np.linalg.pinv(Jk.T @ Jk, rcond=1e-12) @ J.T
+    for k, e in enumerate(units):
+        sign = -1.0 if kept[e].all() else 1.0
+        V = np.eye(3) + sign * H[np.ix_(e, e)]
+        assert ok[k]
+        assert t[k] == pytest.approx(z[e] @ np.linalg.solve(V, z[e]), rel=1e-9)
 
 
 def test_false_alarm_rate_on_pure_noise(tmp_path):

@@ -60,7 +60,7 @@ import functools
 import math
 import time
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -317,26 +317,34 @@ def _pivoted(columns: np.ndarray, threshold: float) -> tuple[list[int], list[flo
 class _Screening:
     """Everything one round needs from one residual and Jacobian."""
 
-    def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray, free: np.ndarray,
-                 candidates: Sequence[_Candidate], schemes: Sequence[FoldScheme],
-                 n_errors: int):
+    def __init__(self, problem: Problem, r: np.ndarray, J: np.ndarray | list[np.ndarray],
+                 free: np.ndarray, candidates: Sequence[_Candidate],
+                 schemes: Sequence[FoldScheme], n_errors: int, free_columns: bool = False):
+        """``J``: the Jacobian, or a list holding it (taken out, so that it is freed once
+        its columns are copied). ``free_columns``: ``J`` holds the ``free`` columns only
+        (no ``candidates``); it is then scaled in place."""
+        if isinstance(J, list):
+            J = J.pop()
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
         self.free_index = np.flatnonzero(free)
-        A = J[:, self.free_index]
+        A = J if free_columns else J[:, self.free_index]
         norms = np.linalg.norm(A, axis=0)
         norms[norms == 0] = 1.0
-        self.A = A / norms
+        A /= norms  # a copy of J's columns: scaled in place
+        self.A = A
         self.gram_A = self.A.T @ self.A
         self.candidates = list(candidates)
         names = sorted({n for c in candidates for n in c.names},
                        key=problem.unknowns.index)
         self.effect_index = {n: problem.unknowns.index(n) for n in names}
         E = J[:, [self.effect_index[n] for n in names]] if names else np.zeros((self.n, 0))
+        del J  # its columns are copied: freed here unless the caller holds it
         self.raw_norm = dict(zip(names, np.linalg.norm(E, axis=0)))
         E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
-        self.E = E / E_norms
+        E /= E_norms  # a copy of J's columns: scaled in place
+        self.E = E
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
         Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
@@ -513,6 +521,8 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
         n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in big.models)
         schemes = fold_schemes(big, folds, seed)
         r, J = _residual_and_jacobian(big, x)
+        jacobian = [J]
+        del J
     effect_of = {c: next(e for e in candidate_effects if set(c.names) <= set(e.parameter_names()))
                  for c in candidates}
     free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
@@ -521,11 +531,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     for rounds in range(1, max_rounds + 1):
         with stage(f"diagnosis round {rounds} ({len(steps)} effect(s) added)"):
             with stage(f"screening {len(remaining)} candidates"):
-                screening = _Screening(big, r, J, free, remaining, schemes, n_errors)
+                # The screening takes J out of the list and copies the columns it
+                # needs: J is then freed (an argument would stay alive during the call).
+                screening = _Screening(big, r, jacobian, free, remaining, schemes, n_errors)
                 screens = []
                 for k, candidate in enumerate(remaining):
                     note(f"{k + 1}/{len(remaining)} {_label(candidate)}")
-                    screens.append(screening.screen(candidate))
+                    screens.append(_unless_supported(screening.screen(candidate),
+                                                     bic_threshold))
             decisions: dict[int, str] = {}
             outcomes: dict[int, Decision] = {}  # the rest: Decision.NOT_PAYING
             for s in screens:
@@ -555,9 +568,11 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 trial_free = free | _mask_of(big, s.kept)
                 with stage(f"refit with {_label(s.candidate)}"):
                     solution = solve(big, x, trial_free, method=method, loss=loss)
-                    r_new, J_new = _residual_and_jacobian(big, solution.x)
-                    # The refit's own held-out numbers, on the same folds.
-                    refit = _Screening(big, r_new, J_new, trial_free, [], schemes, n_errors)
+                    # The refit's own held-out numbers, on the same folds (its free
+                    # columns only: the whole Jacobian is formed once a candidate is added).
+                    r_new = big.residual(solution.x)
+                    refit = _Screening(big, r_new, big.jacobian(solution.x, trial_free),
+                                       trial_free, [], schemes, n_errors, free_columns=True)
                 rss_new = float(r_new @ r_new)
                 bic = screening.bic_drop(rss_new, len(s.kept))
                 numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
@@ -573,7 +588,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                 if not verdict:
                     decisions[id(s)] = "added"
                     outcomes[id(s)] = Decision.ADDED
-                    accepted = (s, solution, r_new, J_new, trial_free, bic, refit.cv_before)
+                    accepted = (s, solution, r_new, trial_free, bic, refit.cv_before)
                     break
                 decisions[id(s)] = f"rejected after refit: {verdict}"
             for s in passing:
@@ -593,10 +608,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                     outcome=outcomes.get(id(s), Decision.NOT_PAYING)))
             if accepted is None:
                 break
-            s, solution, r_new, J_new, trial_free, bic, after = accepted
+            s, solution, r_new, trial_free, bic, after = accepted
             steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
                                screening.cv_before, after, bic))
-            x, r, J, free = solution.x, r_new, J_new, trial_free
+            x, r, free = solution.x, r_new, trial_free
+            # This round's columns (its screening, every candidate's) go before the next
+            # round's Jacobian is formed.
+            del screening, screens, passing, refit, accepted
+            jacobian.append(big.jacobian(solution.x))
             remaining = [c for c in remaining if c is not s.candidate]
             if not remaining:
                 break
@@ -632,6 +651,14 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     findings = _findings(final, solution, groups, evidence)
     return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
                      time.perf_counter() - start, effects)
+
+
+def _unless_supported(screen: _Screen, bic_threshold: float) -> _Screen:
+    """``screen`` without its projected columns unless its BIC drop passes the threshold:
+    only such candidates are ever compared with each other (``_Screening.overlap``)."""
+    if screen.P is None or screen.bic_drop > bic_threshold:
+        return screen
+    return replace(screen, P=None)
 
 
 def _no_longer_supported(numbers: dict, bic_threshold: float) -> str:

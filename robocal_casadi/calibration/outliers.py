@@ -38,6 +38,7 @@ would go, the data are bad rather than the robot: ``InputError``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -224,17 +225,38 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
     statistic = np.zeros(len(units))
     quantile = np.zeros(len(units))
     residual = np.zeros(len(units))
-    for k, unit in enumerate(units):
-        e = unit.entries
-        z = r[e] / sigma[e]
-        H = W[e] @ W[e].T
-        V = np.eye(len(e)) + (H if not kept[e].all() else -H)
-        quantile[k] = chi2.ppf(1.0 - FALSE_ALARM, len(e))
-        residual[k] = float(np.linalg.norm(r[e]))
-        if np.linalg.eigvalsh(V).min() < UNTESTABLE:
-            continue
-        statistic[k] = float(z @ np.linalg.solve(V, z))
+    sizes = np.array([len(unit.entries) for unit in units], dtype=int)
+    for size in np.unique(sizes):
+        members = np.flatnonzero(sizes == size)
+        E = np.stack([units[int(k)].entries for k in members])  # (units, entries)
+        t, ok = _statistics(r[E] / sigma[E], W[E], kept[E].all(axis=1))
+        statistic[members] = np.where(ok, t, 0.0)
+        quantile[members] = _quantile(int(size))
+        residual[members] = np.sqrt(_dots(r[E], r[E]))
     return statistic, quantile, residual, sigma
+
+
+def _statistics(z: np.ndarray, W: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``t = z^T V^-1 z`` for a stack of units of one size (``z`` (units, m) residual
+    entries over their noise, ``W`` (units, m, rank) their rows of the hat factor,
+    ``kept`` per unit), and whether ``V`` lets the unit be tested at all."""
+    H = W @ np.swapaxes(W, 1, 2)
+    V = np.eye(z.shape[1]) + np.where(kept[:, None, None], -H, H)
+    ok = np.linalg.eigvalsh(V).min(axis=1) >= UNTESTABLE
+    V[~ok] = np.eye(z.shape[1])  # untestable: not solved (its t stays 0)
+    y = np.linalg.solve(V, z[:, :, None])[:, :, 0]
+    return _dots(z, y), ok
+
+
+def _dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of two stacks of vectors, each as ``a[k] @ b[k]`` rounds."""
+    return np.matmul(a[:, None, :], b[:, :, None])[:, 0, 0]
+
+
+@functools.cache
+def _quantile(entries: int) -> float:
+    """The ``1 - FALSE_ALARM`` quantile of chi^2 with ``entries`` degrees of freedom."""
+    return float(chi2.ppf(1.0 - FALSE_ALARM, entries))
 
 
 def _hat_factor(J: np.ndarray, kept: np.ndarray) -> np.ndarray:
@@ -385,9 +407,10 @@ def kept_datasets(datasets: Sequence, rejected: Sequence[RejectedReading], role:
     out = []
     for dataset in datasets:
         keep = np.ones(readings(dataset), dtype=bool)
-        for entry in rejected:
-            if entry.role == role and entry.path == str(dataset.path):
-                lines = list(entry.lines)
-                keep &= ~np.isin([dataset.line(i) for i in range(len(keep))], lines)
+        mine = [entry for entry in rejected
+                if entry.role == role and entry.path == str(dataset.path)]
+        if mine:
+            table_lines = [dataset.line(i) for i in range(len(keep))]
+            keep &= ~np.isin(table_lines, [line for entry in mine for line in entry.lines])
         out.append(dataset if keep.all() else dataset_rows(dataset, keep))
     return out

@@ -82,6 +82,18 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
 
 
 COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
+JACOBIAN_BLOCK = 4096  # rows of a separable model's Jacobian evaluated at once
+
+
+def _runs(source: np.ndarray, target: np.ndarray
+          ) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+    """Pairs of half-open ranges ``((a, b), (c, d))`` covering ``source -> target``
+    (equal-length index arrays) where both step by one: ``out[c:d] = in[a:b]``."""
+    breaks = np.flatnonzero((np.diff(source) != 1) | (np.diff(target) != 1)) + 1
+    starts = np.r_[0, breaks].astype(int) if len(source) else np.zeros(0, int)
+    stops = np.r_[breaks, len(source)].astype(int) if len(source) else np.zeros(0, int)
+    return [((int(source[i]), int(source[j - 1]) + 1), (int(target[i]), int(target[j - 1]) + 1))
+            for i, j in zip(starts, stops)]
 
 
 def _pattern(sparsity: ca.Sparsity) -> tuple[np.ndarray, np.ndarray]:
@@ -328,10 +340,20 @@ class Problem:
         return np.array(dataset.joints.T, dtype=float), extras, payload_com
 
     def _mapped(self, which: int, rows: int) -> ca.Function:
+        """The row function ``which`` mapped over ``rows`` rows. Below ``COMPILE_ROWS`` it
+        evaluates every residual, on two threads; from there on the compiled batches do
+        that and this map serves a few calls (the initial placement), in series: a
+        threaded map holds work memory that grows with the rows (tens of MB at 10,000),
+        for the same numbers."""
         key = (which, rows)
         if key not in self._maps:
             function = self._row[which]
-            self._maps[key] = function.map(rows, "thread", 2) if rows > 1 else function
+            if rows <= 1:
+                self._maps[key] = function
+            elif rows >= COMPILE_ROWS:
+                self._maps[key] = function.map(rows, "serial")
+            else:
+                self._maps[key] = function.map(rows, "thread", 2)
         return self._maps[key]
 
     def points_numeric(self, model: MeasurementModel, x: np.ndarray):
@@ -449,15 +471,33 @@ class Problem:
 
     def _separable_jacobian(self, model: MeasurementModel, functions: SeparableResidual,
                             x: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residual and Jacobian ``columns`` of a separable model, row by row."""
-        r, J_rows = functions.jacobian(*self._separable_arguments(model, x))
-        J_rows = J_rows.reshape(r.size, -1)
+        """Residual and Jacobian ``columns`` of a separable model, row by row.
+
+        Evaluated in blocks of ``JACOBIAN_BLOCK`` rows, each copied into place: the
+        function's own output (every unknown it sees, in its layout) never exists for all
+        rows at once. Rows are independent, so the numbers are those of one call."""
+        arguments = self._separable_arguments(model, x)
+        varying = functions.jacobian.per_row
+        rows = model.dataset.rows
         position = np.full(len(self.unknowns), -1)
         position[columns] = np.arange(len(columns))
-        keep = position[functions.columns] >= 0
-        J = np.zeros((r.size, len(columns)))
-        J[:, position[functions.columns[keep]]] = J_rows[:, keep]
-        return r.ravel(), J
+        source = np.flatnonzero(position[functions.columns] >= 0)
+        runs = _runs(source, position[functions.columns[source]])
+        r_parts, J = [], None
+        for start in range(0, max(rows, 1), JACOBIAN_BLOCK):
+            block = [a[start:start + JACOBIAN_BLOCK] if v else a
+                     for a, v in zip(arguments, varying)]
+            r, J_rows = functions.jacobian(*block)
+            J_rows = J_rows.reshape(r.shape[0], r.shape[1], len(functions.columns))
+            if J is None:
+                J = np.zeros((rows, J_rows.shape[1], len(columns)))
+            # Copied run by run of consecutive columns: no full-size temporary.
+            for (a, b), (c, d) in runs:
+                J[start:start + len(r), :, c:d] = J_rows[:, :, a:b]
+            r_parts.append(r.ravel())
+        r_all = np.concatenate(r_parts)
+        assert J is not None
+        return r_all, J.reshape(r_all.size, len(columns))
 
     def _model_values(self, compiled: CompiledModel, x: np.ndarray) -> np.ndarray:
         """Residual of one model at ``x``."""
@@ -558,8 +598,8 @@ class Problem:
         if columns is not None and np.asarray(columns).dtype == bool:
             columns = np.flatnonzero(columns)
         x = np.asarray(x, float)
-        return np.vstack([self._model_jacobian(compiled, x, columns)[1]
-                          for compiled in self._compiled])
+        parts = [self._model_jacobian(compiled, x, columns)[1] for compiled in self._compiled]
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def row_sensitivities(self, x: np.ndarray, parameters: Sequence[int] | np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -203,6 +203,17 @@ def _chi2_quantile(k: int, tail: float) -> float:
     return k * (1.0 - h + z * math.sqrt(h)) ** 3
 
 
+def _orthonormal(X: np.ndarray) -> np.ndarray | None:
+    """Orthonormal basis of what the model cannot already do (singular values of the
+    unit-scaled, projected columns ``X`` above 1e-3), from the small Gram matrix; None
+    when ``X`` is zero."""
+    if not np.any(X):
+        return None
+    eigenvalues, vectors = np.linalg.eigh(X.T @ X)
+    big = eigenvalues > 1e-6
+    return X @ (vectors[:, big] / np.sqrt(eigenvalues[big]))
+
+
 def _units_subset(problem, n: int, seed: int) -> np.ndarray:
     """Residual entries to test: all, or whole units drawn at random up to MAX_ENTRIES."""
     if n <= MAX_ENTRIES:
@@ -265,26 +276,18 @@ def find(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0) -> Unexplai
         rows_of_columns -= (rows_of_columns @ U) @ U.T
         return rows_of_columns.reshape(len(names), K, n).transpose(2, 0, 1)
 
-    tests, bases = [], {}
+    tests = []
     for variable in variables:
         X_all = projected_columns(variable)
         for channel in range(len(names)):
-            X = X_all[:, channel, :]
-            if not np.any(X):
-                continue
-            # Orthonormal basis of what the model cannot already do (singular values of
-            # the unit-scaled, projected columns above 1e-3), from the small Gram matrix.
-            eigenvalues, vectors = np.linalg.eigh(X.T @ X)
-            big = eigenvalues > 1e-6
-            Q = X @ (vectors[:, big] / np.sqrt(eigenvalues[big]))
-            if not Q.shape[1] or Q.shape[1] >= n - U.shape[1] - 1:
+            Q = _orthonormal(X_all[:, channel, :])
+            if Q is None or not Q.shape[1] or Q.shape[1] >= n - U.shape[1] - 1:
                 continue
             drop = float(np.sum((Q.T @ r_perp) ** 2))
             rss1 = max(rss0 - drop, 1e-300)
             statistic = n * math.log(rss0 / rss1)
             tests.append(StructureTest(variable.name, names[channel], Q.shape[1], statistic,
                                        0.0, drop / rss0))
-            bases[(variable.name, names[channel])] = Q
     if not tests:
         return None
     tail = ALPHA / len(tests)
@@ -300,7 +303,15 @@ def find(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0) -> Unexplai
             chosen.append(test)
         if len(chosen) == COMBINED:
             break
-    X = np.column_stack([bases[(t.variable, t.parameter)] for t in chosen])
+    # The chosen bases are formed again (the same numbers) rather than every test's
+    # basis held meanwhile: hundreds of them at thousands of rows each.
+    by_name = {variable.name: variable for variable in variables}
+    chosen_bases = []
+    for t in chosen:
+        Q = _orthonormal(projected_columns(by_name[t.variable])[:, names.index(t.parameter), :])
+        assert Q is not None  # it was tested
+        chosen_bases.append(Q)
+    X = np.column_stack(chosen_bases)
     schemes = [s for s in fold_schemes(problem, 5, seed) if not s.extrapolating]
     if not schemes:
         return None
