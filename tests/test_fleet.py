@@ -296,3 +296,25 @@ def test_concurrent_processes_compile_one_library_once(tmp_path):
     events = log.read_text().split()
     assert events.count("start") == 1 and events.count("end") == 1  # compiled once only
     assert len(list((tmp_path / "cache").glob("*.so"))) == 1
+
+
+def test_local_workers_are_restarted_between_batches(tmp_path):
+    """With a restart every two robots on one worker, four robots run in two worker
+    processes, two robots each; every robot still gets its outcome (here the failure
+    of its missing dataset, which ends a task at once)."""
+    from robocal_casadi.fleet import Settings
+    from robocal_casadi.fleet.engine import run_tasks
+    from robocal_casadi.fleet.spec import Fleet, FleetRobot
+
+    robots = tuple(FleetRobot(name=f"m{k}", datasets=(tmp_path / f"m{k}.yaml",))
+                   for k in range(4))
+    outcomes = list(run_tasks(Fleet(path=tmp_path / "fleet.yaml", robots=robots),
+                              tmp_path / "out", Settings(report=False), workers=1,
+                              restart_every=2))
+    assert sorted(o.name for o in outcomes) == ["m0", "m1", "m2", "m3"]
+    assert all(o.status == "failed" and f"{o.name}.yaml" in (o.error or "") for o in outcomes)
+    by_worker: dict[str, list[str]] = {}
+    for outcome in outcomes:
+        by_worker.setdefault(outcome.worker, []).append(outcome.name)
+    assert sorted(sorted(names) for names in by_worker.values()) == [["m0", "m1"],
+                                                                     ["m2", "m3"]]

@@ -25,6 +25,10 @@ from ..output import note_interrupt
 from .robot_task import RobotOutcome, Settings, calibrate_robot
 from .spec import Fleet
 
+# A worker process of the local cluster is replaced after this many robots: each robot
+# leaves a few MiB behind in a long-lived worker (measured by benchmarks/fleet_memory.py),
+# so without a restart a worker's memory grows with the size of the fleet.
+RESTART_EVERY = 25
 CONNECT_TIMEOUT = 5.0  # [s] to reach an existing scheduler (a live one answers in ms)
 PROTOCOLS = ("tcp", "tls", "ucx", "ws", "wss")  # Dask's address schemes
 _ADDRESS = re.compile(r"(?:(?P<scheme>[a-z]+)://)?(?P<host>\[[0-9a-fA-F:]+\]|[A-Za-z0-9._-]+)"
@@ -113,34 +117,51 @@ def _interrupt_deferred() -> Iterator[list[int]]:
 
 
 def run_tasks(fleet: Fleet, out: Path, settings: Settings, *, scheduler: str | None = None,
-              workers: int | None = None) -> Iterator[RobotOutcome]:
+              workers: int | None = None,
+              restart_every: int = RESTART_EVERY) -> Iterator[RobotOutcome]:
     """Calibrate every robot of ``fleet`` into ``out/<name>/`` on the cluster; yield each
     robot's outcome as it finishes (in no fixed order). A task lost with its worker is a
-    failed outcome of that robot."""
+    failed outcome of that robot.
+
+    On a local cluster the robots go in batches of ``restart_every`` per worker, and the
+    worker processes are restarted between batches (no task is running then), so a
+    worker's memory stays that of its first batch however many robots follow. An
+    existing cluster (``scheduler``) is not restarted: its workers are the operator's."""
     client, cluster = _client(scheduler, workers)
     try:
-        from dask.distributed import as_completed
-
         out = Path(os.path.abspath(out))
-        futures = {}
-        for robot in fleet.robots:
-            future = client.submit(calibrate_robot, robot, out, settings, pure=False,
-                                   key=f"robocal-fleet-{robot.name}-{os.getpid()}-{id(fleet)}")
-            futures[future] = robot
-        for future in as_completed(futures):
-            robot = futures[future]
-            try:
-                yield future.result()
-            except Exception as error:  # noqa: BLE001 - the worker died, not the robot's code
-                message = " ".join(str(error).split()) or type(error).__name__
-                yield RobotOutcome(name=robot.name, status="failed",
-                                   error=f"its worker was lost ({message})")
-            finally:
-                future.release()
+        robots = fleet.robots
+        size = len(robots) if cluster is None else \
+            max(restart_every, 1) * (workers or machine_cores())
+        for first in range(0, len(robots), size):
+            if first:
+                client.restart()
+            yield from _batch(client, robots[first:first + size], out, settings, id(fleet))
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _batch(client, robots, out: Path, settings: Settings, run: int) -> Iterator[RobotOutcome]:
+    """Submit ``robots``; yield each outcome as it finishes."""
+    from dask.distributed import as_completed
+
+    futures = {}
+    for robot in robots:
+        future = client.submit(calibrate_robot, robot, out, settings, pure=False,
+                               key=f"robocal-fleet-{robot.name}-{os.getpid()}-{run}")
+        futures[future] = robot
+    for future in as_completed(futures):
+        robot = futures[future]
+        try:
+            yield future.result()
+        except Exception as error:  # noqa: BLE001 - the worker died, not the robot's code
+            message = " ".join(str(error).split()) or type(error).__name__
+            yield RobotOutcome(name=robot.name, status="failed",
+                               error=f"its worker was lost ({message})")
+        finally:
+            future.release()
 
 
 def run_fleet(fleet: Fleet, out: Path, settings: Settings, *, scheduler: str | None = None,
