@@ -120,10 +120,15 @@ def test_region_folds_hold_out_contiguous_joint_ranges(tmp_path):
 
 def test_region_folds_also_hold_out_each_half_of_a_joint_range(tmp_path):
     robot = ROBOTS["industrial_6r"]()
-    data = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=80, noise=NOISE,
-                    seed=2, progress=False).load()
+    parameters = len(robot.parameters().names)
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "t", rows=2 * parameters + 2,
+                    noise=NOISE, seed=2, progress=False).load()
     problem = Problem(robot, models_for([data]))
     schemes = {s.name: s for s in fold_schemes(problem, 5, 0)}
+    # a half with fewer units than the robot has parameters is not held out (its fit is weak)
+    few = dataset_rows(data, np.arange(data.rows) < 2 * parameters - 2)
+    fewer = {s.name for s in fold_schemes(Problem(robot, models_for([few])), 5, 0)}
+    assert "q2 ranges" in fewer and not any(name.endswith("halves") for name in fewer)
     for j in range(1, robot.dof + 1):
         halves = schemes[f"q{j} halves"]
         assert halves.extrapolating and halves.count == 2

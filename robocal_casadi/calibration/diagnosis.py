@@ -382,16 +382,11 @@ class _Screening:
     def extrapolation(self, after: Sequence[float]) -> tuple[float, str, float]:
         """(total ratio, worst scheme, its ratio) of held-out SSE after/before over the
         extrapolating schemes; (nan, "", nan) when the data allow none."""
-        schemes = [(s, b, a) for s, b, a in zip(self.schemes, self.held_out_before, after)
-                   if s.extrapolating and np.isfinite(a) and b > 0]
-        if not schemes:
+        pairs = [(s.name, b, a) for s, b, a in zip(self.schemes, self.held_out_before, after)
+                 if s.extrapolating and np.isfinite(a) and b > 0]
+        if not pairs:
             return float("nan"), "", float("nan")
-        pairs = [(s.name, b, a) for s, b, a in schemes]
-        # Schemes with a tolerance of their own (a joint's halves, fitted on half the data)
-        # veto on their own terms; their large held-out errors would swamp the total.
-        summed = [(b, a) for s, b, a in schemes if s.tolerance is None] or \
-            [(b, a) for _, b, a in schemes]
-        total = sum(a for _, a in summed) / sum(b for b, _ in summed)
+        total = sum(a for _, _, a in pairs) / sum(b for _, b, _ in pairs)
         name, b, a = max(pairs, key=lambda p: p[2] / p[1] / (1.0 + self.tolerance(p[0])))
         return total, name, a / b
 

@@ -48,8 +48,6 @@ from .solver import Loss, Method, Solution, solve
 
 LENGTH_SCALES = (0.1, 0.2, 0.4)  # [1] of each variable's trained span
 SMOOTHING = (1e-3, 1e-2, 1e-1, 1.0, 10.0)  # [1] lambda, against the kernel's unit diagonal
-HALF_TOLERANCE = 1.0  # a map, far more flexible than a physical law, may at most double
-# a held-out half's squared error (a physical effect may grow it tenfold: folds.py)
 MAX_VARIABLES = 3  # joint readings the map may follow
 MAX_ROWS = 800  # rows a map is trained on (evenly spread over the data beyond)
 RANK_TOLERANCE = 1e-6  # of a row's largest sensitivity: below, a direction is not seen
@@ -94,11 +92,8 @@ class _Rows:
 
 
 def tolerance_of(scheme) -> float:
-    """How much a map may grow the held-out squared error of an extrapolating scheme: a
-    scheme's own tolerance, but at most ``HALF_TOLERANCE``."""
-    if scheme.tolerance is None:
-        return EXTRAPOLATION_TOLERANCE
-    return min(float(scheme.tolerance), HALF_TOLERANCE)
+    """How much a map may grow the held-out squared error of an extrapolating scheme."""
+    return EXTRAPOLATION_TOLERANCE if scheme.tolerance is None else float(scheme.tolerance)
 
 
 def joints_named(variables: Sequence[str], dof: int) -> tuple[int, ...]:
