@@ -318,3 +318,21 @@ def test_local_workers_are_restarted_between_batches(tmp_path):
         by_worker.setdefault(outcome.worker, []).append(outcome.name)
     assert sorted(sorted(names) for names in by_worker.values()) == [["m0", "m1"],
                                                                      ["m2", "m3"]]
+
+
+def test_summary_of_an_effect_without_a_standard_error(tmp_path):
+    """A learned map's gain has no standard error: the fleet's summary keeps it as null
+    instead of failing the robot (a simulated fleet robot whose calibration kept a map)."""
+    from dataclasses import replace
+
+    from robocal_casadi.fleet.robot_task import robot_summary
+    from robocal_casadi.results import EffectFinding
+
+    data = simulate(examples.industrial_6r(), "tracker_points", out_dir=tmp_path / "d", rows=30,
+                    noise=2e-5, seed=3, progress=False).load()
+    result = calibrate([data], diagnose=False)
+    learned = EffectFinding("residual_map", (2, 3), {"map_gain": 1.0}, "1", {},
+                            {"map_gain": None})
+    summary = robot_summary(replace(result, effects=(learned,)))
+    assert summary["effects"][0]["std"] == {"map_gain": None}
+    assert json.loads(json.dumps(summary))["effects"][0]["parameters"] == {"map_gain": 1.0}

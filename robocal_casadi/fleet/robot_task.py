@@ -191,7 +191,8 @@ def robot_summary(result) -> dict:
     effects = []
     compliance = {}
     for effect in result.effects:
-        std = {k: float(v) for k, v in (effect.std or {}).items()}
+        # a learned map's gain has no standard error (None)
+        std = {k: None if v is None else float(v) for k, v in (effect.std or {}).items()}
         effects.append({"name": effect.name, "joints": list(effect.joints), "unit": effect.unit,
                         "parameters": {k: float(v) for k, v in effect.parameters.items()},
                         "std": std})
