@@ -704,17 +704,25 @@ def _sphere_laser(content: dict, table: Table | None, common: dict) -> SphereLas
     return SphereLaser(**common, **fields)
 
 
-def _pendant_poses(table: Table, units: Units) -> np.ndarray:
-    xyz = _lengths(table, list("xyz"), units)
-    quaternions = np.column_stack([table.numbers(c) for c in ("qw", "qx", "qy", "qz")])
+def check_unit_quaternions(quaternions: np.ndarray, table: Table) -> np.ndarray:
+    """The norms of ``quaternions`` (N x 4: qw, qx, qy, qz, rows of ``table``); the first
+    row whose norm is not 1 within ``QUATERNION_TOLERANCE`` is refused (``InputError``
+    naming its line)."""
     big = np.abs(quaternions).max(axis=1, keepdims=True)
     norms = np.linalg.norm(quaternions / np.where(big > 0, big, 1.0), axis=1) * big[:, 0]
-    bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
+    bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))  # NaN is bad too
     if bad.size:
         row = int(bad[0])
         raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[row]:.9g}, not 1 within "
                          f"{QUATERNION_TOLERANCE:g}", file=table.path,
                          where=f"line {table.line(row)}")
+    return norms
+
+
+def _pendant_poses(table: Table, units: Units) -> np.ndarray:
+    xyz = _lengths(table, list("xyz"), units)
+    quaternions = np.column_stack([table.numbers(c) for c in ("qw", "qx", "qy", "qz")])
+    norms = check_unit_quaternions(quaternions, table)
     poses = np.tile(np.eye(4), (len(xyz), 1, 1))
     for i, q in enumerate(quaternions / norms[:, None]):
         poses[i, :3, :3] = matrix_from_quaternion(q)

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
+from ..datasets import check_unit_quaternions
 from ..errors import InputError
 from ..fields import MAX_LENGTH, check_magnitude
 from ..output import atomic_file
@@ -48,7 +49,6 @@ from .console import summarise
 CALIBRATED_ROBOT = "robot_calibrated.yaml"
 POSITION = ("x", "y", "z")
 QUATERNION = ("qw", "qx", "qy", "qz")
-QUATERNION_TOLERANCE = 1e-6
 SEED_PREFIX = "seed_"  # the given joints, written back beside the answer
 
 
@@ -174,15 +174,7 @@ def _targets(table, robot: Robot) -> tuple[tuple[str, ...], np.ndarray]:
                         shown=targets[index, col], unit=robot.units.length)
     targets[:, :3] *= L
     if has_orientation:
-        big = np.abs(targets[:, 3:]).max(axis=1)
-        big = np.where(big > 0, big, 1.0)
-        norms = np.linalg.norm(targets[:, 3:] / big[:, None], axis=1) * big  # no overflow
-        bad = np.flatnonzero(~(np.abs(norms - 1.0) <= QUATERNION_TOLERANCE))
-        if bad.size:
-            first = int(bad[0])
-            raise InputError(f"quaternion (qw, qx, qy, qz) has norm {norms[first]:.9g}, not 1 "
-                             f"within {QUATERNION_TOLERANCE:g}", file=table.path,
-                             where=f"line {table.line(first)}")
+        check_unit_quaternions(targets[:, 3:], table)
     return columns, targets
 
 
