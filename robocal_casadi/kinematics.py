@@ -103,6 +103,16 @@ def symbolic_frames(robot: Robot, registry: ParameterRegistry, q, p) -> list:
     return frames
 
 
+def mapped(function: ca.Function, count: int) -> ca.Function:
+    """``function`` evaluated over ``count`` columns at once: on two threads below
+    ``SERIAL_ROWS``, in series from there on (a threaded map holds work memory that grows
+    with ``count``; the numbers are the same); ``function`` itself for one column."""
+    if count <= 1:
+        return function
+    if count >= SERIAL_ROWS:
+        return function.map(count, "serial")
+    return function.map(count, "thread", 2)
+
 class Kinematics:
     """Cached CasADi kinematics of one robot structure.
 
@@ -231,12 +241,7 @@ class Kinematics:
         memory that grows with ``count``; the numbers are the same)."""
         key = (function.name(), count)
         if key not in self._maps:
-            if count <= 1:
-                self._maps[key] = function
-            elif count >= SERIAL_ROWS:
-                self._maps[key] = function.map(count, "serial")
-            else:
-                self._maps[key] = function.map(count, "thread", 2)
+            self._maps[key] = mapped(function, count)
         return self._maps[key]
 
     def _parameters(self, p) -> np.ndarray:

@@ -30,7 +30,7 @@ from ..codegen import BatchFunction
 from ..effects.base import Effect, RowContext
 from ..effects.motion import direction_values, is_derived_column
 from ..errors import InputError
-from ..kinematics import Kinematics
+from ..kinematics import Kinematics, mapped
 from ..measurement.base import STATION_PREFIX, MeasurementModel
 from ..parameters import ParameterRegistry
 from ..robot import Robot
@@ -347,13 +347,7 @@ class Problem:
         for the same numbers."""
         key = (which, rows)
         if key not in self._maps:
-            function = self._row[which]
-            if rows <= 1:
-                self._maps[key] = function
-            elif rows >= COMPILE_ROWS:
-                self._maps[key] = function.map(rows, "serial")
-            else:
-                self._maps[key] = function.map(rows, "thread", 2)
+            self._maps[key] = mapped(self._row[which], rows)
         return self._maps[key]
 
     def points_numeric(self, model: MeasurementModel, x: np.ndarray):
