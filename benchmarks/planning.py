@@ -46,8 +46,8 @@ from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.datasets import load_dataset  # noqa: E402
 from robocal_casadi.examples import industrial_6r, panda_7dof  # noqa: E402
+from robocal_casadi.instruments.tracker.model import rigid_registration  # noqa: E402
 from robocal_casadi.kinematics import Kinematics  # noqa: E402
-from robocal_casadi.measurement.tracker import rigid_registration  # noqa: E402
 from robocal_casadi.robot import save_robot  # noqa: E402
 from robocal_casadi.simulate import true_parameters  # noqa: E402
 from robocal_casadi.transforms import pose_from_xyz_rpy  # noqa: E402

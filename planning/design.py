@@ -20,7 +20,7 @@ import numpy as np
 
 from robocal_casadi.datasets import Dataset
 from robocal_casadi.errors import ArgumentError, InputError
-from robocal_casadi.measurement import model_class
+from robocal_casadi.instruments import instrument
 from robocal_casadi.progress import Progress
 
 from .accuracy import tool_error, tool_weights
@@ -151,7 +151,7 @@ def _median(values: np.ndarray) -> float:
 def pool_size_for(count: int, kind: str) -> int:
     """How many feasible candidates to draw for a plan of ``count`` (the measurement
     model's ``pool_size``)."""
-    least, per_count = model_class(kind).pool_size
+    least, per_count = instrument(kind).model.pool_size
     return max(least, per_count * count)
 
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from robocal_casadi.calibration import Problem, analyse_identifiability
 from robocal_casadi.datasets import Dataset
+from robocal_casadi.instruments import instrument, model_for
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.measurement import model_class, model_for
 
 from .candidates import Candidate
 
@@ -30,7 +30,7 @@ def planned_dataset(dataset: Dataset, candidates: Iterable[Candidate],
     points = tuple(p for c in candidates for p in c.points)
     distance = (np.concatenate([c.distance for c in candidates])
                 if all(c.distance is not None for c in candidates) else None)
-    return model_class(dataset.kind, file=dataset.path).planned_dataset(
+    return instrument(dataset.kind, file=dataset.path).model.planned_dataset(
         dataset, Q, kinematics, pose=poses, point=points, distance=distance)
 
 

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from robocal_casadi.instruments import MeasurementModel
 from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.measurement import MeasurementModel
 
 from .candidates import Candidate
 from .setup import PlanSetup

@@ -24,12 +24,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from robocal_casadi.datasets import ArtifactTouches, Dataset, SphereLaser, TrackerPoints
+from robocal_casadi.datasets import Dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.fields import number, vector
-from robocal_casadi.measurement import ArtifactModel, MeasurementModel, model_class
+from robocal_casadi.fields import number
+from robocal_casadi.instruments import MeasurementModel, instrument
 from robocal_casadi.robot import Robot
 from robocal_casadi.units import Units
 
@@ -78,112 +77,55 @@ class PlanSetup:
     @property
     def model(self) -> type[MeasurementModel]:
         """The measurement model class of the set-up's kind: what the planner asks."""
-        return model_class(self.kind, file=self.path)
+        return instrument(self.kind, file=self.path).model
 
     def __repr__(self) -> str:
         return f"PlanSetup({self.path.name!r}, kind={self.kind}, robot={self.robot.name!r})"
 
 
-def setup_from_dataset(dataset: Dataset) -> PlanSetup:
-    """Read the set-up (and the optional ``planning`` block) of a loaded dataset."""
-    path, units = dataset.path, dataset.units
-    options = dataset.raw.get("planning") or {}
-    if not isinstance(options, dict):
-        raise InputError("expected a mapping", file=path, where="planning")
-    unknown = set(options) - PLANNING_KEYS
-    if unknown:
-        raise InputError(f"unknown key(s) {sorted(unknown)}; allowed: {sorted(PLANNING_KEYS)}",
-                         file=path, where="planning")
-    L, A = units.length_scale, units.angle_scale
+class PlanningOptions:
+    """The dataset's optional ``planning`` block, read in SI (file units at the edge)."""
 
-    def option(key, default, scale):
-        if key not in options:
+    def __init__(self, dataset: Dataset):
+        self.path, self.units = dataset.path, dataset.units
+        options = dataset.raw.get("planning") or {}
+        if not isinstance(options, dict):
+            raise InputError("expected a mapping", file=self.path, where="planning")
+        unknown = set(options) - PLANNING_KEYS
+        if unknown:
+            raise InputError(f"unknown key(s) {sorted(unknown)}; allowed: "
+                             f"{sorted(PLANNING_KEYS)}", file=self.path, where="planning")
+        self.options = options
+
+    def option(self, key: str, default, scale: float):
+        """``planning.<key>`` times ``scale`` (to SI), or ``default`` when absent."""
+        if key not in self.options:
             return default
-        return number(options[key], file=path, where=f"planning.{key}") * scale
+        return number(self.options[key], file=self.path, where=f"planning.{key}") * scale
 
-    def positive(key, default, scale):
-        value = option(key, default, scale)
+    def positive(self, key: str, default, scale: float):
+        """``option``, refused unless positive."""
+        value = self.option(key, default, scale)
         if not value > 0:
-            raise InputError(f"expected a positive value, got {options[key]!r}", file=path,
-                             where=f"planning.{key}")
+            raise InputError(f"expected a positive value, got {self.options[key]!r}",
+                             file=self.path, where=f"planning.{key}")
         return value
 
-    common = dict(path=path, kind=dataset.kind, robot=dataset.robot, units=units,
-                  table_height=option("table_height", None, L), dataset=dataset,
-                  noise=positive("noise", 10e-6, L), laser_rate=positive("laser_rate", 50.0, 1.0),
-                  max_joint_speed=positive("max_joint_speed", np.radians(60.0), A),
-                  max_joint_acceleration=positive("max_joint_acceleration",
-                                                  np.radians(120.0), A))
-    if isinstance(dataset, TrackerPoints):
-        return PlanSetup(offset=np.asarray(dataset.target, float), instrument=dataset.instrument,
-                         visibility_cone=option("visibility_cone", np.radians(60.0), A), **common)
-    if isinstance(dataset, ArtifactTouches):
-        model = model_class(dataset.kind, file=path)
-        assert issubclass(model, ArtifactModel)  # every touch kind's model is an artifact's
-        bar = model.cross
-        touches = 1 if bar else int(option("touches_per_socket", 4, 1.0))
-        if touches < 1:
-            raise InputError("must be at least 1", file=path, where="planning.touches_per_socket")
-        return PlanSetup(offset=np.asarray(dataset.probe, float),
-                         layout=artifact_layout(dataset, bar),
-                         distances=dataset.distances, perpendicular=dataset.perpendicular,
-                         touches=touches, max_tilt=option("max_tilt", np.radians(45.0), A),
-                         size_key=model.size_key, **common)
-    assert isinstance(dataset, SphereLaser)
-    for value, key in ((dataset.centre_guess, "sphere.centre_guess"),
-                       (dataset.origin_guess, "laser.origin_guess"),
-                       (dataset.direction_guess, "laser.direction_guess")):
-        if value is None:
-            raise InputError("planning needs this guess; add it to the dataset file",
-                             file=path, where=key)
-    laser_range = (0.05, 0.30)
-    if "laser_range" in options:
-        lo, hi = vector(options["laser_range"], 2, file=path, where="planning.laser_range")
-        if not 0 <= lo < hi:
-            raise InputError(f"expected 0 <= min < max, got [{lo}, {hi}]", file=path,
-                             where="planning.laser_range")
-        laser_range = (lo * L, hi * L)
-    return PlanSetup(offset=np.asarray(dataset.origin_guess, float),
-                     axis=np.asarray(dataset.direction_guess, float),
-                     centre=np.asarray(dataset.centre_guess, float), radius=dataset.radius,
-                     laser_range=laser_range, sensor_only=dataset.flange_poses is not None,
-                     max_incidence=option("max_incidence", np.radians(45.0), A), **common)
 
-
-def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray]:
-    """Socket positions [m] in the artifact frame that satisfy its distances and
-    perpendicularities (the cross: A, C on x and B, D on y, centred)."""
-    if bar:
-        h = dataset.distances[0][2] / 2
-        return {"A": np.array([-h, 0, 0]), "C": np.array([h, 0, 0]),
-                "B": np.array([0, -h, 0]), "D": np.array([0, h, 0])}
-    names = sorted({s for d in dataset.distances for s in d[:2]}
-                   | {s for p in dataset.perpendicular for s in p})
-    if not names:
-        raise InputError("planning needs at least one known distance between sockets",
-                         file=dataset.path, where="artifact.distances")
-    index = {n: i for i, n in enumerate(names)}
-    scale = max(d[2] for d in dataset.distances) if dataset.distances else 0.1
-
-    def residual(flat):
-        X = flat.reshape(-1, 3)
-        out = [np.linalg.norm(X[index[a]] - X[index[b]]) - L for a, b, L in dataset.distances]
-        for a, c, b, d in dataset.perpendicular:
-            out.append(np.dot(X[index[c]] - X[index[a]], X[index[d]] - X[index[b]]) / scale)
-        out += list(X[:, 2] * 1e-3)  # prefer a flat artifact
-        return np.array(out)
-
-    rng = np.random.default_rng(0)
-    fits = []
-    for _ in range(5):
-        start = rng.normal(scale=scale, size=(len(names), 3))
-        start[:, 2] = 0.0
-        fits.append(least_squares(residual, start.ravel(), xtol=1e-15, ftol=1e-15, gtol=1e-15))
-    best = min(fits, key=lambda fit: fit.cost)
-    X = best.x.reshape(-1, 3)
-    constraint = residual(best.x)[: len(dataset.distances) + len(dataset.perpendicular)]
-    if np.max(np.abs(constraint)) > 1e-9 * max(scale, 1.0):
-        raise InputError("the known distances and perpendicularities contradict each other: no "
-                         "rigid artifact has them", file=dataset.path, where="artifact")
-    X -= X.mean(axis=0)
-    return {n: X[index[n]] for n in names}
+def setup_from_dataset(dataset: Dataset) -> PlanSetup:
+    """Read the set-up (and the optional ``planning`` block) of a loaded dataset: what
+    every kind shares here, the instrument's own fields from its ``plan_setup``."""
+    options = PlanningOptions(dataset)
+    L, A = dataset.units.length_scale, dataset.units.angle_scale
+    record = instrument(dataset.kind, file=dataset.path)
+    if record.plan_setup is None:
+        raise InputError(f"the planner has no set-up for {dataset.kind} data",
+                         file=dataset.path, where="kind")
+    return PlanSetup(
+        path=dataset.path, kind=dataset.kind, robot=dataset.robot, units=dataset.units,
+        table_height=options.option("table_height", None, L), dataset=dataset,
+        noise=options.positive("noise", 10e-6, L),
+        laser_rate=options.positive("laser_rate", 50.0, 1.0),
+        max_joint_speed=options.positive("max_joint_speed", np.radians(60.0), A),
+        max_joint_acceleration=options.positive("max_joint_acceleration", np.radians(120.0), A),
+        **record.plan_setup(dataset, options))

@@ -70,35 +70,25 @@ from typing import Any
 import numpy as np
 
 from .checks import choice, count, path_argument, positive
-from .datasets import KINDS, Dataset, load_dataset
+from .datasets import Dataset, load_dataset
 from .effects import EFFECTS, Effect, TrueWorld
 from .effects.motion import direction_column, is_direction_column, travel_column
 from .errors import ArgumentError, InputError
-from .ik import inverse_kinematics, random_joints
+from .instruments import instrument, kinds
+from .instruments.laser.simulator import ray_sphere_distance
+from .instruments.simulation import Generated, Setup
 from .kinematics import Kinematics
-from .measurement import MODELS
 from .output import atomic_directory, replace_refusal
 from .parameters import perturbed_stems
-from .progress import Progress
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import read_table, write_table
 from .transforms import (
-    invert,
-    matrix_from_quaternion,
-    pose_from_xyz_rpy,
-    quaternion_from_matrix,
-    rot_z,
     rpy_from_matrix,
 )
 from .units import Units
 
-TABLES = {kind: model.table for kind, model in MODELS.items()}
 READINGS = ("joints", "pendant")
-LIMIT_MARGIN = 0.03  # fraction of each joint range kept free at both ends for configurations
-DEFAULT_PROBE = (0.0, 0.0, 0.15)  # [m] flange frame
-DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]
-DEFAULT_LASER_ORIGIN = (0.06, -0.015, 0.14)  # [m]
-DEFAULT_LASER_DIRECTION = (0.0, 0.0, 1.0)
+
 
 
 # ----------------------------------------------------------------------------- the truth
@@ -450,9 +440,7 @@ MAX_ROWS = 1_000_000  # rows of a simulated table (a few hundred MB of CSV)
 def table_rows_of(kind: str, rows: int, sockets: int, touches: int) -> int:
     """Rows of the table ``simulate`` writes for ``rows`` units of ``kind`` (the
     measurement model's ``table_rows_per_unit``)."""
-    from .measurement import MODELS
-
-    return rows * MODELS[kind].table_rows_per_unit(sockets, touches)
+    return rows * instrument(kind).model.table_rows_per_unit(sockets, touches)
 
 
 def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows: int = 100,
@@ -500,13 +488,12 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
     temperature = _temperature_span(temperature, true_effects, reference_temperature)
-    setup = _Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
+    setup = Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
                    noise=float(noise), mounted_error=float(mounted_error), angle_std=angle_std,
                    payload=payload, temperature=temperature, readings=readings,
                    bar_length=bar_length, socket_distance=socket_distance, sockets=int(sockets),
                    touches=int(touches), sphere_radius=sphere_radius, progress=progress)
-    generated = {"configuration": _tracker, "sockets": _touches,
-                 "beam": _laser_scan}[MODELS[kind].reach](setup)
+    generated = _simulator(kind)(setup)
 
     truth = Truth(kind=kind, robot=true_robot, nominal=nominal, parameter_errors=errors,
                   mounted=generated.mounted, placement=generated.placement,
@@ -515,6 +502,14 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     _write_dataset(out_dir, generated, truth, units,
                    None if payload is None or payload_com is None else com, payload_com)
     return _simulated(out_dir, truth, generated)
+
+
+def _simulator(kind: str) -> Callable[[Setup], Generated]:
+    """The simulator of ``kind``'s instrument (refused when it has none)."""
+    simulator = instrument(kind).simulate
+    if simulator is None:
+        raise InputError(f"no simulator for {kind} data", where="kind")
+    return simulator
 
 
 def _temperature_span(temperature: tuple[float, float] | None, true_effects,
@@ -531,7 +526,7 @@ def _checked_sizes(kind: str, readings: str, rows: int, noise: float, sockets: i
                    touches: int) -> tuple[str, str, int, float, int, int]:
     """The arguments that size the dataset, checked; ``rows`` refused where the table
     would pass ``MAX_ROWS``."""
-    kind = choice(kind, KINDS, "kind")
+    kind = choice(kind, kinds(), "kind")
     readings = choice(readings, READINGS, "readings")
     rows = count(rows, "rows")
     noise = positive(noise, "noise", allow_zero=True)
@@ -556,7 +551,7 @@ def _error_stds(geometric_errors) -> tuple[float, float]:
 def _simulated(out_dir: Path, truth: Truth, generated) -> SimulatedDataset:
     """What ``simulate`` returns: the paths written and the truth behind them."""
     leading = generated.leading
-    table_name = TABLES[truth.kind]
+    table_name = instrument(truth.kind).model.table
     return SimulatedDataset(
         out_dir / "dataset.yaml", out_dir / "robot.yaml", out_dir / table_name,
         out_dir / "truth.yaml", truth, len(generated.Q_read), joints=generated.Q_read,
@@ -570,7 +565,7 @@ def _true_effects(effects: Mapping | None, nominal: Robot, kind: str):
     cannot show them."""
     true_effects = parse_effects(effects, nominal)
     for effect, _ in true_effects.entries:
-        if effect.tracker_only and MODELS[kind].reach != "configuration":
+        if effect.tracker_only and instrument(kind).model.reach != "configuration":
             raise InputError(f"{effect.name} is simulated only for data taken at any "
                              f"configuration (absolute points), not for {kind}",
                              where=f"effects.{effect.name}")
@@ -582,7 +577,7 @@ def _write_dataset(out_dir: Path, generated, truth: Truth, units: Units,
     """Write robot.yaml, dataset.yaml, the table and truth.yaml into ``out_dir`` at once;
     ``com`` [m] the payload's centre of mass when the dataset file states it."""
     nominal = truth.nominal
-    table_name = TABLES[truth.kind]
+    table_name = instrument(truth.kind).model.table
     with atomic_directory(out_dir, verb="simulate") as staging:
         save_robot(nominal, staging / "robot.yaml")
         dataset = dict(kind=truth.kind, robot="robot.yaml", units=units.as_dict(),
@@ -606,434 +601,6 @@ def _check_out_dir(out_dir: Path, force: bool) -> None:
             raise InputError(refusal, where="--out")
 
 
-@dataclass
-class _Setup:
-    kind: str
-    nominal: Robot
-    world: TrueRobot
-    rng: np.random.Generator
-    rows: int
-    noise: float
-    mounted_error: float
-    angle_std: float
-    payload: Any
-    temperature: tuple[float, float] | None
-    readings: str
-    bar_length: float
-    socket_distance: float
-    sockets: int
-    touches: int
-    sphere_radius: float
-    progress: bool
-
-    @property
-    def cross(self) -> bool:
-        """The artifact is the cross bar (its measurement model's ``cross``)."""
-        return bool(getattr(MODELS[self.kind], "cross", False))
-
-    def payload_value(self) -> float:
-        if self.payload is None:
-            return 0.0
-        if np.ndim(self.payload) == 0:
-            return float(self.payload)
-        low, high = self.payload
-        return float(self.rng.uniform(low, high))
-
-    def temperature_at(self, fraction: float) -> float | None:
-        """A slowly drifting temperature [C] at ``fraction`` of the run, with 0.05 C jitter."""
-        if self.temperature is None:
-            return None
-        start, end = self.temperature
-        return float(start + (end - start) * fraction + self.rng.normal(0.0, 0.05))
-
-    def mounted(self, nominal) -> np.ndarray:
-        return np.asarray(nominal, dtype=float) + self.rng.normal(0.0, self.mounted_error, 3)
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Joint limits shrunk by 1e-6 of the range: readings after effects stay inside."""
-        lower, upper = self.nominal.lower_limits, self.nominal.upper_limits
-        inset = np.where(np.isfinite(upper - lower), 1e-6 * (upper - lower), 0.0)
-        inset = inset + self.world.play()  # readings move by up to the play with the order
-        return lower + inset, upper - inset
-
-    def in_order(self, Q_read: list, Q_true: list, payloads: list) -> np.ndarray:
-        """The readings of the rows in written order: as found row by row, or, with an
-        effect of the order of motion (backlash), found again in that order from the true
-        joints (the direction of each row follows from its reading and the previous one)."""
-        if not self.world.effects.sequential:
-            return np.array(Q_read)
-        out = self.world.readings_in_order(np.array(Q_true), payloads)
-        outside = [i for i, q in enumerate(out) if not self.within_limits(q)]
-        if outside:
-            raise InputError(f"with backlash, row {outside[0] + 1}'s reading leaves the joint "
-                             "limits; use a smaller backlash", where="effects.backlash")
-        return out
-
-    def within_limits(self, q: np.ndarray) -> bool:
-        robot = self.nominal
-        return bool(np.all(q >= robot.lower_limits) and np.all(q <= robot.upper_limits))
-
-
-@dataclass
-class _Generated:
-    """What a kind produced: readings, extra columns, measured columns, truth parts."""
-
-    Q_read: np.ndarray
-    extras: dict[str, np.ndarray]
-    mounted: dict[str, np.ndarray]
-    placement: dict[str, Any]
-    fields: Callable[[Units], dict]  # dataset-file entries in the given units
-    measured: dict[str, np.ndarray] = field(default_factory=dict)  # column -> values [m] or text
-    leading: dict[str, Any] = field(default_factory=dict)  # columns before the joints
-    pendant: np.ndarray | None = None  # (N, 7) x, y, z [m], qw, qx, qy, qz
-
-    def dataset_fields(self, units: Units) -> dict:
-        """The dataset file's instrument entries in ``units``."""
-        return self.fields(units)
-
-    def table(self, robot: Robot, units: Units) -> tuple[list[str], list[list]]:
-        columns: list[str] = list(self.leading)
-        data: list[np.ndarray | list] = [self.leading[c] for c in self.leading]
-        if self.pendant is not None:
-            columns += ["x", "y", "z", "qw", "qx", "qy", "qz"]
-            data += [self.pendant[:, k] / units.length_scale for k in range(3)]
-            data += [self.pendant[:, k] for k in range(3, 7)]
-        else:
-            scales = np.array([units.angle_scale if j.revolute else units.length_scale
-                               for j in robot.joints])
-            columns += [f"q{i}" for i in range(1, robot.dof + 1)]
-            data += [self.Q_read[:, i] / scales[i] for i in range(robot.dof)]
-        for name, values in self.measured.items():
-            columns.append(name)
-            data.append(np.asarray(values) / units.length_scale)
-        for name, values in self.extras.items():
-            columns.append(name)
-            data.append(values)
-        rows = [[column[i] for column in data] for i in range(len(self.Q_read))]
-        return columns, rows
-
-
-def _in(units: Units, xyz) -> list[float]:
-    """A position [m] as a list in ``units``."""
-    return [float(v) / units.length_scale for v in xyz]
-
-
-def _extras(payloads: list[float], temperatures: list, setup: _Setup) -> dict[str, np.ndarray]:
-    extras = {}
-    if setup.temperature is not None:
-        extras["temperature"] = np.array(temperatures, dtype=float)
-    if setup.payload is not None:
-        extras["payload"] = np.array(payloads, dtype=float)
-    return extras
-
-
-# ----------------------------------------------------------------------------- tracker
-
-
-def _tracker(setup: _Setup) -> _Generated:
-    rng, world = setup.rng, setup.world
-    target = setup.mounted(DEFAULT_TARGET)
-    yaw = rng.uniform(-math.pi, math.pi)
-    direction = rng.uniform(-math.pi, math.pi)
-    T_world_instrument = pose_from_xyz_rpy(
-        [2.5 * math.cos(direction), 2.5 * math.sin(direction), rng.uniform(0.0, 0.5)],
-        [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), yaw])
-    Q_read = random_joints(setup.nominal, setup.rows, rng, margin=LIMIT_MARGIN)
-    payloads = [setup.payload_value() for _ in range(setup.rows)]
-    temperatures = [setup.temperature_at(i / max(setup.rows - 1, 1)) for i in range(setup.rows)]
-    Q_true = world.true_joints(Q_read, np.array(payloads))
-    poses = world.flange_poses(Q_true, None if setup.temperature is None else
-                               np.array(temperatures))
-    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(Q_true, payloads)
-    T_instrument_world = invert(T_world_instrument)
-    measured = p_world @ T_instrument_world[:3, :3].T + T_instrument_world[:3, 3]
-    measured = measured + rng.normal(0.0, setup.noise, measured.shape)
-    return _Generated(
-        Q_read=Q_read, extras=_extras(payloads, temperatures, setup),
-        mounted={"target": target}, placement={"T_world_instrument": T_world_instrument},
-        fields=lambda units: {"target": {"xyz": _in(units, DEFAULT_TARGET)},
-                              "instrument": {"xyz": _in(units, T_world_instrument[:3, 3])}},
-        measured={"x": measured[:, 0], "y": measured[:, 1], "z": measured[:, 2]})
-
-
-# ----------------------------------------------------------------------------- touches
-
-
-def _random_rotation(rng: np.random.Generator) -> np.ndarray:
-    """A uniformly random 3x3 rotation (from a random unit quaternion)."""
-    q = rng.normal(size=4)
-    return matrix_from_quaternion(q / np.linalg.norm(q))
-
-
-def _tilt(rng: np.random.Generator, max_angle: float) -> np.ndarray:
-    """A rotation by up to ``max_angle`` [rad] about a random axis (3x3)."""
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    angle = rng.uniform(0.0, max_angle)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
-
-
-def _socket_layout(setup: _Setup) -> tuple[list[str], np.ndarray, list, list]:
-    """Socket names, positions in the artifact frame [m], distances, perpendicularity."""
-    if setup.cross:
-        h = setup.bar_length / 2
-        local = np.array([[h, 0, 0], [0, h, 0], [-h, 0, 0], [0, -h, 0]])
-        return ["A", "B", "C", "D"], local, [], []
-    count = max(2, setup.sockets)
-    names = [f"hole_{k}" for k in range(count)]
-    local = np.array([[(k - (count - 1) / 2) * setup.socket_distance, 0.0, 0.0]
-                      for k in range(count)])
-    distances = [[names[i], names[j], float(np.linalg.norm(local[i] - local[j]))]
-                 for i in range(count) for j in range(i + 1, count)]
-    return names, local, distances, []
-
-
-def _touches(setup: _Setup) -> _Generated:
-    """The cross bar or an artifact: place it, seat the probe in each socket."""
-    probe = setup.mounted(DEFAULT_PROBE)
-    names, local, distances, _ = _socket_layout(setup)
-    per_socket = 1 if setup.cross else max(1, setup.touches)
-    ik = inverse_kinematics(setup.world.kinematics, "point")
-    bounds = setup.bounds()
-    poses, points, Q_read, Q_true, payloads, temperatures = [], [], [], [], [], []
-    sockets_truth: dict[int, dict[str, np.ndarray]] = {}
-    attempts = 0
-    with _progress(setup) as bar:
-        while len(sockets_truth) < setup.rows:
-            attempts += 1
-            if attempts > 20 * setup.rows + 20:
-                raise InputError(f"could place only {len(sockets_truth)} of {setup.rows} "
-                                 "artifacts within reach; use a smaller artifact or fewer "
-                                 "placements", where="rows")
-            index = len(sockets_truth)
-            temperature = setup.temperature_at(index / max(setup.rows - 1, 1))
-            positions, placed = _placement(setup, ik, bounds, probe, names, local,
-                                           per_socket, temperature)
-            if len(placed) != len(names) * per_socket:
-                continue  # out of reach: skip this placement
-            for name, q_read, payload, q_true in placed:
-                poses.append(index)
-                points.append(name)
-                Q_read.append(q_read)
-                Q_true.append(q_true)
-                payloads.append(payload)
-                temperatures.append(temperature)
-            sockets_truth[index] = dict(zip(names, positions))
-            bar.update(len(sockets_truth))
-    bar_length = float(setup.bar_length)
-    Q_read_array = setup.in_order(Q_read, Q_true, payloads)
-
-    def fields(units: Units) -> dict:
-        out: dict[str, Any] = {"probe": {"xyz": _in(units, DEFAULT_PROBE)}}
-        if setup.cross:
-            return {"bar": {"length": bar_length / units.length_scale}, **out}
-        out["artifact"] = {"distances": [[a, b, d / units.length_scale] for a, b, d in distances]}
-        return out
-
-    return _Generated(
-        Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
-        mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
-        leading={"pose": poses, "point": points})
-
-
-def _placement(setup: _Setup, ik, bounds: tuple[np.ndarray, np.ndarray], probe: np.ndarray,
-               names: list[str], local: np.ndarray, per_socket: int,
-               temperature: float | None) -> tuple[np.ndarray, list]:
-    """One random placement of the bar or artifact near a random configuration: the
-    sockets' true positions [m] (world frame) and the touches seated so far, each
-    ``(socket, joint readings, payload [kg], true joints)``; fewer than all when one is
-    out of reach or outside the joint limits."""
-    rng, world = setup.rng, setup.world
-    p_row = world.parameters(temperature)
-    q0 = random_joints(setup.nominal, 1, rng, margin=0.15)[0]
-    T0 = world.kinematics.flange_poses(q0, p_row)[0]
-    centre = T0[:3, :3] @ probe + T0[:3, 3]
-    if setup.cross:
-        R_artifact = _random_rotation(rng)
-    else:  # a plate on a table: level, turned about the vertical, slightly tilted
-        R_artifact = rot_z(rng.uniform(-math.pi, math.pi))[:3, :3] @ _tilt(rng, 0.1)
-    positions = centre + local @ R_artifact.T
-    placed: list = []
-    for name, position in zip(names, positions):
-        for touch in range(per_socket):
-            preferred = T0[:3, :3] if setup.cross or touch == 0 else (
-                _tilt(rng, 0.5) @ T0[:3, :3])
-            seat = position + rng.normal(0.0, setup.noise, 3)
-            payload = setup.payload_value()
-            result = ik.solve(seat, seed=q0, p=p_row, offset=probe, orientation=preferred,
-                              bounds=bounds, restarts=3, rng=rng,
-                              orientation_tolerance=1e-3)
-            if not result.success:
-                return positions, placed
-            q_read = world.readings(result.q, payload)
-            if not setup.within_limits(q_read):
-                return positions, placed
-            placed.append((name, q_read, payload, result.q))
-    return positions, placed
-
-
-def _progress(setup: _Setup):
-    """A progress bar over the rows to simulate, or a silent stand-in."""
-    return Progress(f"simulate {setup.kind}", total=setup.rows) if setup.progress else _Quiet()
-
-
-class _Quiet:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return None
-
-    def update(self, *args, **kwargs):
-        return None
-
-
-# ----------------------------------------------------------------------------- laser on a sphere
-
-
-def ray_sphere_distance(origin, direction, centre, radius: float) -> float:
-    """Distance [m] along the unit ``direction`` from ``origin`` to the first hit of the
-    sphere (``centre`` [m], ``radius`` [m]); NaN when the ray misses or starts inside."""
-    origin, direction, centre = (np.asarray(v, dtype=float) for v in (origin, direction, centre))
-    m = origin - centre
-    b = float(m @ direction)
-    c = float(m @ m) - radius * radius
-    discriminant = b * b - c
-    if c <= 0.0 or discriminant < 0.0:
-        return math.nan
-    t = -b - math.sqrt(discriminant)
-    return t if t > 0.0 else math.nan
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotation taking unit vector ``a`` onto unit vector ``b`` (3x3)."""
-    v = np.cross(a, b)
-    c = float(a @ b)
-    if np.linalg.norm(v) < 1e-12:
-        if c > 0:
-            return np.eye(3)
-        axis = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        axis /= np.linalg.norm(axis)
-        return 2.0 * np.outer(axis, axis) - np.eye(3)
-    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
-
-
-def _laser_scan(setup: _Setup) -> _Generated:
-    """A laser on the flange scanning a sphere placed where its beam points."""
-    rng, world, robot = setup.rng, setup.world, setup.nominal
-    radius = float(setup.sphere_radius)
-    origin = setup.mounted(DEFAULT_LASER_ORIGIN)
-    direction = np.asarray(DEFAULT_LASER_DIRECTION) @ _tilt(rng, 2 * setup.angle_std).T
-    direction = direction / np.linalg.norm(direction)
-    ik = inverse_kinematics(world.kinematics, "flange_pose")
-    bounds = setup.bounds()
-    standoff = (0.08, 0.2)  # [m] laser distances
-    q0, T0, beam0 = _comfortable_beam(setup, direction)
-    centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
-    Q_read: list[np.ndarray] = []
-    Q_true: list[np.ndarray] = []
-    payloads: list[float] = []
-    temperatures: list[float | None] = []
-    distances: list[float] = []
-    attempts = 0
-    with _progress(setup) as bar:
-        while len(Q_read) < setup.rows:
-            attempts += 1
-            if attempts > 20 * setup.rows + 20:
-                raise InputError(f"could reach only {len(Q_read)} of {setup.rows} laser poses",
-                                 where="rows")
-            temperature = setup.temperature_at(len(Q_read) / max(setup.rows - 1, 1))
-            p_row = world.parameters(temperature)
-            T = _aimed_pose(rng, T0, beam0, centre, radius, direction, origin, standoff)
-            if T is None:
-                continue
-            payload = setup.payload_value()
-            result = ik.solve(T, seed=q0, p=p_row, bounds=bounds, restarts=2, rng=rng)
-            if not result.success:
-                continue
-            q_read = world.readings(result.q, payload)
-            if not setup.within_limits(q_read):
-                continue
-            F = world.kinematics.flange_poses(result.q, p_row)[0]
-            distance = ray_sphere_distance(F[:3, :3] @ origin + F[:3, 3], F[:3, :3] @ direction,
-                                           centre, radius)
-            if not np.isfinite(distance):
-                continue
-            Q_read.append(q_read)
-            Q_true.append(result.q)
-            payloads.append(payload)
-            temperatures.append(temperature)
-            distances.append(distance + rng.normal(0.0, setup.noise))
-            bar.update(len(Q_read))
-    Q_read_array = setup.in_order(Q_read, Q_true, payloads)
-    pendant = _pendant_poses(robot, Q_read_array) if setup.readings == "pendant" else None
-    centre_guess = centre + rng.normal(0.0, 0.005, 3)
-    return _Generated(
-        Q_read=Q_read_array, extras=_extras(payloads, temperatures, setup),
-        mounted={"laser_origin": origin, "laser_direction": direction},
-        placement={"sphere_centre": centre},
-        fields=lambda units: {
-            "sphere": {"radius": radius / units.length_scale,
-                       "centre_guess": _in(units, centre_guess)},
-            "laser": {"origin_guess": _in(units, DEFAULT_LASER_ORIGIN),
-                      "direction_guess": [float(v) for v in DEFAULT_LASER_DIRECTION]}},
-        measured={"distance": np.array(distances)}, pendant=pendant)
-
-
-def _comfortable_beam(setup: _Setup, direction: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A random configuration whose beam points down at something on a table (the last
-    one drawn after 200 tries): its joints [rad or m], flange pose (4x4, world frame, at
-    the run's first temperature) and beam direction (unit, world frame)."""
-    world = setup.world
-    for _ in range(200):
-        q0 = random_joints(setup.nominal, 1, setup.rng, margin=0.2)[0]
-        T0 = world.kinematics.flange_poses(q0, world.parameters(setup.temperature_at(0.0)))[0]
-        beam0 = T0[:3, :3] @ direction
-        if beam0[2] < -0.3:  # pointing down at something on a table
-            break
-    return q0, T0, beam0
-
-
-def _aimed_pose(rng: np.random.Generator, T0: np.ndarray, beam0: np.ndarray,
-                centre: np.ndarray, radius: float, direction: np.ndarray, origin: np.ndarray,
-                standoff: tuple[float, float]) -> np.ndarray | None:
-    """A random flange pose (4x4, world frame) [m] whose beam, tilted from ``beam0`` by up
-    to about 30 degrees, hits the sphere from a distance within ``standoff`` [m]; None
-    when the drawn beam misses it."""
-    beam = _tilt(rng, 0.5) @ beam0  # tilted up to about 30 degrees
-    lateral = rng.normal(size=3)
-    lateral -= (lateral @ beam) * beam
-    lateral *= rng.uniform(0.0, 0.7 * radius) / np.linalg.norm(lateral)
-    aim = centre + lateral
-    hit_from = aim - 2 * radius * beam
-    to_surface = ray_sphere_distance(hit_from, beam, centre, radius)
-    if not np.isfinite(to_surface):
-        return None
-    hit = hit_from + to_surface * beam
-    laser_origin = hit - rng.uniform(*standoff) * beam
-    R = _rotation_between(T0[:3, :3] @ direction, beam) @ T0[:3, :3]
-    roll = rng.uniform(-0.5, 0.5)
-    R = _axis_rotation(beam, roll) @ R
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = laser_origin - R @ origin
-    return T
-
-
-def _pendant_poses(robot: Robot, Q_read: np.ndarray) -> np.ndarray:
-    """The controller's nominal flange poses at the readings: (N, 7) x, y, z [m] and the
-    quaternion qw, qx, qy, qz (world frame)."""
-    flanges = Kinematics(robot).flange_poses(Q_read)
-    return np.array([np.concatenate([F[:3, 3], quaternion_from_matrix(F[:3, :3])])
-                     for F in flanges])
-
-
-def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
 # ----------------------------------------------------------------------------- truth file
@@ -1061,6 +628,8 @@ def _truth_dict(truth: Truth, units: Units, payload_com) -> dict:
         elif key == "sockets":
             placement["sockets"] = {int(pose): {name: length3(xyz) for name, xyz in s.items()}
                                     for pose, s in item.items()}
+        else:  # a position [m] of another kind's instrument
+            placement[key] = length3(item)
     mounted = {key: (length3(v) if key != "laser_direction" else [float(x) for x in v])
                for key, v in truth.mounted.items()}
     content: dict[str, Any] = {
@@ -1100,7 +669,10 @@ def inject_gross_errors(simulated: SimulatedDataset, share: float,
     share = positive(share, "share")
     table = read_table(simulated.table_path)
     dataset = simulated.load()
-    units = dataset.units
+    corrupt = instrument(simulated.truth.kind).corrupt
+    if corrupt is None:
+        raise InputError(f"no gross errors are simulated for {simulated.truth.kind} data",
+                         where="kind")
     rng = np.random.default_rng(seed)
     count_ = max(1, int(round(share * len(table))))
     chosen = np.sort(rng.choice(len(table), size=count_, replace=False))
@@ -1108,23 +680,6 @@ def inject_gross_errors(simulated: SimulatedDataset, share: float,
     columns = list(table.columns)
     for row in chosen:
         length = rng.uniform(*size)
-        reach = MODELS[simulated.truth.kind].reach
-        if reach == "configuration":
-            step = rng.normal(size=3)
-            step *= length / np.linalg.norm(step)
-            for axis, value in zip("xyz", step):
-                k = columns.index(axis)
-                rows[row][k] = float(rows[row][k]) + value / units.length_scale
-        elif reach == "beam":
-            k = columns.index("distance")
-            rows[row][k] = float(rows[row][k]) + rng.choice([-1, 1]) * length / units.length_scale
-        else:
-            k = columns.index("q1")
-            joints = np.asarray(dataset.joints)
-            probe = np.asarray(getattr(dataset, "probe", np.zeros(3)))
-            point = Kinematics(dataset.robot).points(joints[row:row + 1], probe)
-            radius = max(float(np.hypot(point[0, 0], point[0, 1])), 0.1)
-            turn = rng.choice([-1, 1]) * length / radius
-            rows[row][k] = float(rows[row][k]) + turn / units.angle_scale
+        corrupt(rows, columns, int(row), length, rng, dataset)
     write_table(simulated.table_path, columns, rows)
     return tuple(int(table.line(int(r))) for r in chosen)

@@ -26,8 +26,8 @@ import pytest
 from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
 from robocal_casadi.effects import make_effect
 from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp, ur_type
-from robocal_casadi.measurement.base import MeasurementModel
-from robocal_casadi.measurement.tracker import TrackerModel
+from robocal_casadi.instruments.model import MeasurementModel
+from robocal_casadi.instruments.tracker.model import TrackerModel
 from robocal_casadi.robot import Frame
 from robocal_casadi.simulate import simulate
 from robocal_casadi.units import Units

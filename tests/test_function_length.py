@@ -30,13 +30,10 @@ NOT_DONE_YET = (  # a name ending in "/" stands for a whole folder
     "robocal_casadi/calibration/problem.py",
     "robocal_casadi/calibration/solver.py",
     "robocal_casadi/calibration/unexplained.py",
-    "robocal_casadi/datasets.py",
     "robocal_casadi/delivery/",
     "robocal_casadi/effect_model.py",
     "robocal_casadi/fleet/",
-    "robocal_casadi/measurement/",
     "robocal_casadi/results.py",
-    "planning/setup.py",
 )
 
 

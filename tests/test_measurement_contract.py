@@ -1,11 +1,11 @@
 """The contract every registered measurement model keeps, checked on simulated truth.
 
-Parametrised over ``robocal_casadi.measurement.MODELS``: a model added to the registry
-is checked here too (and fails until the truth file's values for its unknowns are read
-below). Each kind is simulated without noise; the residual evaluated by the engine at the
-true values written to ``truth.yaml`` must vanish, the engine's Jacobian must match
-central differences of its residual, and shapes and units must agree with what the
-model declares.
+Parametrised over the instrument registry (``robocal_casadi.instruments``): a model
+added to the registry is checked here too (and fails until the truth file's values for
+its unknowns are read below). Each kind is simulated without noise; the residual
+evaluated by the engine at the true values written to ``truth.yaml`` must vanish, the
+engine's Jacobian must match central differences of its residual, and shapes and units
+must agree with what the model declares.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import yaml
 
 from robocal_casadi.calibration import Problem
 from robocal_casadi.examples import industrial_6r
-from robocal_casadi.measurement import MODELS, MeasurementModel, model_for
+from robocal_casadi.instruments import INSTRUMENTS, MeasurementModel, model_for
 from robocal_casadi.simulate import simulate
 from robocal_casadi.transforms import invert, pose_from_xyz_rpy
 
@@ -69,12 +69,12 @@ TRUTH = {"tracker_points": _tracker_truth, "cross_bar": _touch_truth,
          "artifact_touches": _touch_truth, "sphere_laser": _laser_truth}
 
 
-@pytest.fixture(scope="module", params=sorted(MODELS))
+@pytest.fixture(scope="module", params=sorted(INSTRUMENTS))
 def case(request, tmp_path_factory):
     """(model, problem, true x) for a noise-free simulation of one registered kind."""
     kind = request.param
     assert kind in TRUTH, f"no truth reader for the registered kind {kind!r}"
-    rows = 16 if MODELS[kind].unit_name == "readings" else 3
+    rows = 16 if INSTRUMENTS[kind].model.unit_name == "readings" else 3
     sim = simulate(industrial_6r(), kind, out_dir=tmp_path_factory.mktemp(kind), rows=rows,
                    noise=0.0, geometric_errors=(5e-4, 1e-3), seed=3, progress=False,
                    sockets=SIZES["sockets"], touches=SIZES["touches"])
@@ -95,7 +95,7 @@ def case(request, tmp_path_factory):
 
 
 def test_every_registered_model_says_what_the_toolkit_asks():
-    for kind, model in MODELS.items():
+    for kind, model in ((k, r.model) for k, r in INSTRUMENTS.items()):
         assert issubclass(model, MeasurementModel) and model.kind == kind
         assert model.reach in ("configuration", "sockets", "beam")
         assert model.table.endswith(".csv") and model.error_title and model.unit_name
@@ -159,23 +159,44 @@ def test_units_residual_in_metres_per_metre_of_placement(case):
     assert np.all(model.errors(r) < 2e-6)
 
 
-def test_kind_strings_live_only_in_the_registry():
-    """Only the measurement package and the dataset reader spell a dataset kind; the
-    planner, simulator, report and commands ask the measurement model."""
-    spelled = re.compile("|".join(sorted(MODELS)))
-    allowed = {ROOT / "robocal_casadi" / "datasets.py"}
+def test_kind_strings_live_only_in_the_instrument_packages():
+    """Only the instrument packages spell a dataset kind (each its own, in its
+    ``Instrument`` record and docstrings); the reader, planner, simulator, report and
+    commands ask the registry."""
+    spelled = re.compile("|".join(sorted(INSTRUMENTS)))
+    home = ROOT / "robocal_casadi" / "instruments"
     found = []
     for folder in (ROOT / "robocal_casadi", ROOT / "planning"):
         for path in sorted(folder.rglob("*.py")):
-            if path in allowed or (ROOT / "robocal_casadi" / "measurement") in path.parents:
+            if home in path.parents:
                 continue
             for number, line in enumerate(path.read_text().splitlines(), start=1):
                 if spelled.search(line):
                     found.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
-    assert not found, "dataset kinds spelled outside the registry:\n" + "\n".join(found)
+    assert not found, "dataset kinds spelled outside the instrument packages:\n" + "\n".join(found)
 
 
-@pytest.mark.parametrize("kind", sorted(MODELS))
+def test_each_kind_is_spelled_only_in_its_own_package():
+    """Inside ``instruments/``, a kind's name appears only in its own package and in its
+    registry line (``instruments/__init__.py``); the registry and the shared modules name
+    none, so a kind's folder is its one home."""
+    home = ROOT / "robocal_casadi" / "instruments"
+    found = []
+    for path in sorted(home.rglob("*.py")):
+        if path == home / "__init__.py":
+            continue
+        owner = path.relative_to(home).parts[0] if path.parent != home else None
+        for kind, record in INSTRUMENTS.items():
+            package = record.model.__module__.split(".")[2]
+            if owner == package:
+                continue
+            for number, line in enumerate(path.read_text().splitlines(), start=1):
+                if kind in line:
+                    found.append(f"{path.relative_to(ROOT)}:{number}: {kind}")
+    assert not found, "kinds spelled outside their own package:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize("kind", sorted(INSTRUMENTS))
 def test_planner_rows_are_the_engine_jacobian_of_the_planned_data(kind, tmp_path):
     """The planner's Jacobian rows of a candidate are the engine's Jacobian of the
     dataset made of that candidate, at the nominal robot and instrument: the mounted

@@ -225,7 +225,7 @@ def test_tool_weights_measure_the_point_error_left_after_the_best_rigid_motion(f
     from planning.reach import Workspace
     from planning.rows import RowModel
     from planning.setup import setup_from_dataset
-    from robocal_casadi.measurement.tracker import rigid_registration
+    from robocal_casadi.instruments.tracker.model import rigid_registration
 
     setup = setup_from_dataset(load_dataset(files["bar_ur"], require_data=False))
     kin = Kinematics(setup.robot)

@@ -18,8 +18,8 @@ import yaml
 from robocal_casadi import examples
 from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.measurement import MODELS
-from robocal_casadi.measurement.sphere_laser import SphereLaserModel
+from robocal_casadi.instruments import INSTRUMENTS
+from robocal_casadi.instruments.laser.model import SphereLaserModel
 from robocal_casadi.robot import save_robot
 from robocal_casadi.sphere_fit import (
     Scan,
@@ -373,7 +373,7 @@ def test_pendant_dataset_fit_and_model(tmp_path, patent_scan):
     fit = fit_dataset(dataset)
     np.testing.assert_allclose(fit.origin, p0, atol=5 * fit.origin_std.max())
 
-    model = MODELS["sphere_laser"](dataset, "scan")
+    model = INSTRUMENTS["sphere_laser"].model(dataset, "scan")
     assert isinstance(model, SphereLaserModel) and not model.uses_robot
     assert model.mounted.names == ("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny",
                                    "laser_nz")

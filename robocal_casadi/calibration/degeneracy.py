@@ -15,28 +15,24 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..datasets import ArtifactTouches, TrackerPoints
 from ..errors import InputError
-
-
-def _same_rows(values: np.ndarray) -> bool:
-    """Every row of ``values`` (N x k) equal to the first, bit for bit."""
-    return len(values) > 1 and bool(np.all(values == values[0]))
+from ..instruments import instrument
+from ..instruments.dataset import same_rows
 
 
 def check_dataset(dataset) -> None:
     """Refuse ``dataset`` when its rows carry no usable information (``InputError``).
 
-    Recognised: every reading at the same joints; in a placement of an artifact or bar,
-    two related sockets touched only at one and the same joint reading (they coincide);
-    a tracker that measured the same point in every row while the joints moved.
+    Recognised here: every reading at the same joints; then the kind's own checks
+    (``Instrument.check``: e.g. two related sockets of an artifact touched at one and the
+    same joint reading, a tracker that measured the same point in every row).
     """
     joints = dataset.joints
     if joints is None or len(joints) == 0:
         return
     joints = np.asarray(joints, dtype=float)
     where = dataset.data_path if dataset.data_path is not None else dataset.path
-    if _same_rows(joints):
+    if same_rows(joints):
         units = dataset.units
         scales = [units.angle_scale if j.revolute else units.length_scale
                   for j in dataset.robot.joints]
@@ -45,32 +41,7 @@ def check_dataset(dataset) -> None:
                          f"[{shown}] ({units.angle}, {units.length}): the robot never moved, "
                          f"so the data say nothing about its geometry; move it between "
                          f"readings", file=where)
-    if isinstance(dataset, ArtifactTouches):
-        _check_sockets(dataset, joints, where)
-    measured = getattr(dataset, "measured", None)
-    if isinstance(dataset, TrackerPoints) and measured is not None and _same_rows(
-            np.asarray(measured, dtype=float)):
-        raise InputError(f"every one of the {len(measured)} measured points is the same "
-                         f"(x, y, z equal in all rows) while the joints move: the instrument "
-                         f"did not follow the target", file=where)
-
-
-def _check_sockets(dataset, joints: np.ndarray, where) -> None:
-    pose = np.asarray(dataset.pose)
-    point = np.asarray(dataset.point)
-    related = [(a, b) for a, b, _ in dataset.distances]
-    for entry in dataset.perpendicular:
-        related += [(entry[0], entry[1]), (entry[2], entry[3])]
-    for placement in np.unique(pose):
-        in_pose = pose == placement
-        for a, b in related:
-            rows = joints[in_pose & ((point == a) | (point == b))]
-            touched = set(point[in_pose])
-            if a in touched and b in touched and _same_rows(rows):
-                raise InputError(f"sockets {a} and {b} were touched at the same joints, so "
-                                 f"they coincide and their known relation cannot hold: "
-                                 f"touch each socket where it is", file=where,
-                                 where=f"pose {int(placement)}")
+    instrument(dataset.kind, file=dataset.path).check(dataset, joints, where)
 
 
 def check_finite(models: Sequence, residual: np.ndarray, jacobian: np.ndarray,

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..effects.base import Effect
-from ..measurement import model_for
+from ..instruments import model_for
 from .problem import Problem, StationFrames
 from .solver import Method, solve
 

@@ -31,7 +31,6 @@ from ..datasets import DatasetBase, dataset_rows
 from ..effects.base import Effect
 from ..errors import ArgumentError, InputError, SolverError
 from ..fields import cut
-from ..measurement import SphereLaserModel
 from ..progress import reports_stages, stage
 from ..results import (
     DOMINATED_SHARE,
@@ -928,7 +927,7 @@ def _spheres(problem: Problem, x: np.ndarray, std: np.ndarray | None, role: str)
     """Sphere centre [m] (base frame, with standard errors) and radius [m] per sphere dataset."""
     out = []
     for model in problem.models:
-        if not isinstance(model, SphereLaserModel):
+        if not model.sphere:
             continue
         index = problem.placement_indices(model)
         centre_std = None if std is None else [_finite(std[i]) for i in index]

@@ -30,8 +30,8 @@ from ..codegen import BatchFunction
 from ..effects.base import Effect, RowContext
 from ..effects.motion import direction_values, is_derived_column
 from ..errors import InputError
+from ..instruments.model import STATION_PREFIX, MeasurementModel
 from ..kinematics import Kinematics, mapped
-from ..measurement.base import STATION_PREFIX, MeasurementModel
 from ..parameters import ParameterRegistry
 from ..robot import Robot
 

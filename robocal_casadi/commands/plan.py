@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from ..measurement import model_class
+from ..instruments import instrument
 from ..table import Table, read_table
 from .arguments import add_allow_outside_data, output_file, seed
 from .console import summarise
@@ -60,7 +60,7 @@ PLAN_SOCKET_COLUMNS = ("socket_x", "socket_y", "socket_z")
 def holds_readings(table: Table, kind: str) -> bool:
     """True unless ``table`` is a plan not yet measured: for tracker and laser data every
     measured cell is empty; for touches the table still has the plan's socket columns."""
-    measured = model_class(kind).measured_columns
+    measured = instrument(kind).model.measured_columns
     if measured:
         present = [c for c in measured if table.has(c)]
         return not present or any(cell for c in present for cell in table.text(c))
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         if holds_readings(read_table(data), dataset.kind):
             raise InputError(f"{args.out} is the dataset's own data table and it holds "
                              "readings; write the plan to another file", where="--out")
-    if model_class(dataset.kind).reach == "beam":  # laser plans are scan trajectories
+    if instrument(dataset.kind).model.reach == "beam":  # laser plans are scan trajectories
         return _scan(dataset, args)
     if args.sensor_only:
         raise InputError(f"--sensor-only is for laser scans, not {dataset.kind} data",

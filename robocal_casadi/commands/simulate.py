@@ -37,7 +37,8 @@ from ..effects import EFFECTS
 from ..errors import InputError
 from ..examples import ROBOTS
 from ..fields import check_magnitude
-from ..measurement import MODELS, TrackerModel
+from ..instruments import kinds
+from ..instruments.tracker import TrackerModel
 from ..robot import Robot, load_robot
 from ..simulate import MAX_ROWS, READINGS, simulate, table_rows_of
 from ..units import Units, parse_units
@@ -48,7 +49,7 @@ from .console import summarise
 __doc__ = (__doc__ or "").format(effects="\n".join(f"  {cls.simulation_syntax()}"
                                          for cls in EFFECTS.values()),
                                  tracker=TrackerModel.kind)
-KIND_CHOICES = tuple(MODELS)
+KIND_CHOICES = kinds()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..measurement import MODELS as MEASUREMENT_MODELS
+from ..instruments import INSTRUMENTS
 from ..results import DatasetResiduals
 from ..robot import Robot
 from ..units import Units
@@ -22,9 +22,6 @@ from ..units import Units
 MODELS = ("nominal", "geometric", "final")
 MODEL_TITLES = {"nominal": "nominal robot", "geometric": "geometric calibration",
                 "final": "with effects"}
-
-ERROR_NOUN = {kind: model.error_title for kind, model in MEASUREMENT_MODELS.items()}
-
 
 def format_number(value: float | None, digits: int = 4) -> str:
     """``value`` with ``digits`` significant digits; '-' for None or NaN."""
@@ -98,7 +95,8 @@ def error_noun(residuals: tuple[DatasetResiduals, ...]) -> str:
     """What the errors measure, in words, for one kind of data; 'error' for a mix."""
     kinds = {r.kind for r in residuals}
     if len(kinds) == 1:
-        return ERROR_NOUN.get(kinds.pop(), "error")
+        kind = kinds.pop()
+        return INSTRUMENTS[kind].model.error_title if kind in INSTRUMENTS else "error"
     return "error"
 
 

@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from ..effects import is_learned
-from ..measurement import MODELS, SphereLaserModel
+from ..instruments import INSTRUMENTS
 from ..results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from ..units import Units
 from . import figures, kind_figures
@@ -620,7 +620,7 @@ def diagnosis_table(diagnosis: tuple[DiagnosisRecord, ...], units: Units, *,
 
 def sphere_section(result: CalibrationResult) -> Section | None:
     spheres = [r for r in result.residuals + result.validation_residuals
-               if MODELS.get(r.kind) is SphereLaserModel]
+               if r.kind in INSTRUMENTS and INSTRUMENTS[r.kind].model.sphere]
     if not spheres:
         return None
     units = display_units(result.units)

@@ -11,8 +11,8 @@ minimum is the calibration. Its unknowns besides the robot are of two sorts:
   the names carry the station (``station:<name>/...``), datasets of one station share
   them, and data of a station the calibration fitted keep its placement.
 
-Each model class is also the one home of what its instrument means to the rest of the
-toolkit (``MODELS`` in ``__init__`` maps a dataset kind to its class; nothing else
+Each model class also says what its instrument means to the rest of the toolkit (the
+kind's ``Instrument`` record in ``instruments.registry`` names its class; nothing else
 switches on the kind): the name of its data table, how the robot takes one reading
 (``reach``), what a planned or simulated unit is (``unit_name``), its plan-table
 columns, how a planned dataset is filled with nominal readings, the minimal coordinates
@@ -34,9 +34,9 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from ..datasets import dataset_rows
 from ..parameters import ParameterRegistry
 from ..results import ErrorTerm
+from .dataset import dataset_rows
 
 PointsFunction = Callable[[ca.MX], ca.MX]
 
@@ -79,6 +79,9 @@ class MeasurementModel(ABC):
     """True: the residual is exactly ``row_residual`` of every row, in row order, so the
     engine may evaluate it row by row in compiled code."""
     pool_size: ClassVar[tuple[int, int]] = (300, 10)
+    sphere: ClassVar[bool] = False
+    """True: the placement is a sphere's centre [m] (base frame) of radius
+    ``dataset.radius``; the report and ``result.json`` list the fitted spheres."""
     """Feasible candidates the planner draws for a plan of ``count``: ``max(a, b count)``."""
 
     def __init__(self, dataset, label: str):

@@ -29,12 +29,12 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from ..beam import beam_direction, tangent_basis
-from ..errors import InputError
-from ..parameters import ParameterRegistry
-from ..results import ErrorTerm
-from ..sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
-from .base import MeasurementModel, PointsFunction
+from ...beam import beam_direction, tangent_basis
+from ...errors import InputError
+from ...parameters import ParameterRegistry
+from ...results import ErrorTerm
+from ...sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
+from ..model import MeasurementModel, PointsFunction
 
 MOUNTED_NAMES = ("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny", "laser_nz")
 GAUGE_LENGTH = 1.0  # [m] weight of the |v| = 1 row
@@ -49,6 +49,7 @@ class SphereLaserModel(MeasurementModel):
     error_title = "distance from the sphere surface"
     reading_name = "laser reading"
     measured_columns = ("distance",)
+    sphere = True
     invisible_reason = "has no effect on the laser points' distances from the sphere centre"
     absorbed_reason = ("absorbed by the unknown sphere centre (distances from one point do not "
                        "change when the whole robot moves or turns about it)")

@@ -1,4 +1,4 @@
-"""Probe touches of sockets on a rigid artifact (``artifact_touches``, ``cross_bar``).
+"""Probe touches of sockets on a rigid artifact (``artifact_touches``).
 
 Unknowns: the probe-ball centre in the flange frame (mounted: ``probe_x, probe_y,
 probe_z`` [m]) and, per placement, the position of every socket touched more than once
@@ -12,8 +12,8 @@ Residuals [m], per placement:
 * each perpendicularity ``[A, C, B, D]``: ``(C - A) . (D - B) / L_AC`` with ``L_AC`` the
   known distance A-C when given, else ``sqrt(|AC| |BD|)``.
 
-``cross_bar`` is the artifact with one touch per socket, distances ``A-C`` and ``B-D`` and
-one perpendicularity: exactly the bar residuals ``|AC| - L``, ``|BD| - L``, ``AC.BD / L``.
+The cross bar is the artifact with one touch per socket,
+distances ``A-C`` and ``B-D`` and one perpendicularity.
 """
 
 from __future__ import annotations
@@ -23,10 +23,10 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from ..datasets import dataset_rows
-from ..parameters import ParameterRegistry
-from ..results import ErrorTerm
-from .base import MeasurementModel, PointsFunction
+from ...parameters import ParameterRegistry
+from ...results import ErrorTerm
+from ..dataset import dataset_rows
+from ..model import MeasurementModel, PointsFunction
 
 
 @dataclass(frozen=True)
@@ -55,11 +55,6 @@ class ArtifactModel(MeasurementModel):
     # placement the pool's bound on the tool error comes within about 6% of what 1,200
     # candidates allow (benchmarks/design_bound.py)
     pool_size = (240, 16)
-    cross = False
-    """True: four sockets A, C and B, D at the ends of two equal perpendicular arms, each
-    touched once per placement in one orientation."""
-    size_key = "artifact.distances"
-    """The dataset file's key that sets the artifact's size."""
     invisible_reason = "it moves no touched point relative to the others"
     absorbed_reason = ("absorbed by the unknown socket positions (touch data carry no "
                        "absolute position)")
@@ -293,17 +288,3 @@ class ArtifactModel(MeasurementModel):
                       for entry in self._perpendiculars(pose)]
         return tuple(terms)
 
-
-class CrossBarModel(ArtifactModel):
-    """The cross-shaped bar: an artifact whose four sockets are touched once per pose."""
-
-    kind = "cross_bar"
-    error_title = "bar error"
-
-    @classmethod
-    def table_rows_per_unit(cls, sockets: int, touches: int) -> int:
-        return 4  # the four arm ends, touched once per placement
-    cross = True
-    size_key = "bar.length"
-    invisible_reason = ("bar data carry no absolute position: a rigid motion of all touched "
-                        "points changes no bar length and no angle")

@@ -19,10 +19,10 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from ..parameters import ParameterRegistry
-from ..results import ErrorTerm
-from ..transforms import pose_from_xyz_rpy
-from .base import MeasurementModel, PointsFunction
+from ...parameters import ParameterRegistry
+from ...results import ErrorTerm
+from ...transforms import pose_from_xyz_rpy
+from ..model import MeasurementModel, PointsFunction
 
 
 def rigid_registration(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,82 @@
+"""The one registry of dataset kinds: an ``Instrument`` record per kind.
+
+A kind is everything the toolkit knows about one instrument: the keys of its dataset
+file and the reader that turns them into a frozen dataset record, its measurement model,
+how the simulator produces its readings and corrupts one, the planner's set-up fields
+and the checks that refuse degenerate data. Each lives in the kind's own package
+(``instruments/<kind>/``), which builds its record; ``register`` adds it here. Callers
+ask ``instrument(kind)`` and never spell a kind.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..errors import InputError
+from ..fields import cut
+
+if TYPE_CHECKING:
+    from .dataset import DatasetBase
+    from .model import MeasurementModel
+
+
+def _no_check(dataset: Any, joints: Any, where: Path) -> None:
+    return None
+
+
+@dataclass(frozen=True)
+class Instrument:
+    """One dataset kind and the pieces of its package.
+
+    ``kind`` the ``kind:`` key of its dataset files; ``model`` its measurement model
+    class; ``blocks`` the instrument keys of its dataset file, each with the keys allowed
+    inside; ``read(content, table, common)`` the dataset record from the checked YAML
+    mapping, the table (None when not read) and the fields every kind shares;
+    ``simulate(setup)`` the readings of a simulated run (``instruments.simulation``);
+    ``corrupt(rows, columns, row, length, rng, dataset)`` moves one row of a simulated
+    table by ``length`` [m] (a gross error); ``plan_setup(dataset, options)`` the
+    planner's set-up fields (``planning.setup``); ``check(dataset, joints, where)``
+    refuses data that cannot calibrate (``calibration.degeneracy``).
+    """
+
+    kind: str
+    model: type[MeasurementModel]
+    blocks: Mapping[str, tuple[str, ...]]
+    read: Callable[[dict, Any, dict], DatasetBase]
+    simulate: Callable[[Any], Any] | None = None
+    corrupt: Callable[..., None] | None = None
+    plan_setup: Callable[[Any, Any], dict] | None = None
+    check: Callable[[Any, Any, Path], None] = field(default=_no_check)
+
+    def __repr__(self) -> str:
+        return f"Instrument({self.kind!r}, model={self.model.__name__})"
+
+
+INSTRUMENTS: dict[str, Instrument] = {}
+
+
+def register(record: Instrument) -> Instrument:
+    """Add ``record`` to the registry (a kind already registered is refused)."""
+    if record.kind in INSTRUMENTS:
+        raise ValueError(f"kind {record.kind!r} is registered already")
+    if record.model.kind != record.kind:
+        raise ValueError(f"{record.model.__name__} models kind {record.model.kind!r}, "
+                         f"not {record.kind!r}")
+    INSTRUMENTS[record.kind] = record
+    return record
+
+
+def kinds() -> tuple[str, ...]:
+    """The registered kinds, in the order registered."""
+    return tuple(INSTRUMENTS)
+
+
+def instrument(kind: Any, *, file: str | Path | None = None) -> Instrument:
+    """The record of ``kind``; an unknown kind is an ``InputError`` naming ``file``."""
+    if not isinstance(kind, str) or kind not in INSTRUMENTS:
+        raise InputError(f"unknown kind {cut(kind)}; expected one of {list(INSTRUMENTS)}",
+                         file=file, where="kind")
+    return INSTRUMENTS[kind]

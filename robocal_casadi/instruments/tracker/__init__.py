@@ -1,0 +1,14 @@
+"""A laser tracker measuring a reflector on the flange: absolute positions (``tracker_points``)."""
+
+from __future__ import annotations
+
+from ..registry import Instrument
+from . import planning, reader, simulator
+from .model import TrackerModel, rigid_registration
+
+INSTRUMENT = Instrument(
+    kind=TrackerModel.kind, model=TrackerModel, blocks=reader.BLOCKS, read=reader.read,
+    check=reader.check, simulate=simulator.simulate, corrupt=simulator.corrupt,
+    plan_setup=planning.setup_fields)
+
+__all__ = ["INSTRUMENT", "TrackerModel", "rigid_registration"]

@@ -1,0 +1,51 @@
+"""Simulated tracker readings: random configurations, the true target seen from a
+tracker standing about 2.5 m away (``simulate.simulate``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...ik import random_joints
+from ...transforms import invert, pose_from_xyz_rpy
+from ..simulation import LIMIT_MARGIN, Generated, Setup, in_units, run_extras
+
+DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]
+
+
+def simulate(setup: Setup) -> Generated:
+    rng, world = setup.rng, setup.world
+    target = setup.mounted(DEFAULT_TARGET)
+    yaw = rng.uniform(-math.pi, math.pi)
+    direction = rng.uniform(-math.pi, math.pi)
+    T_world_instrument = pose_from_xyz_rpy(
+        [2.5 * math.cos(direction), 2.5 * math.sin(direction), rng.uniform(0.0, 0.5)],
+        [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), yaw])
+    Q_read = random_joints(setup.nominal, setup.rows, rng, margin=LIMIT_MARGIN)
+    payloads = [setup.payload_value() for _ in range(setup.rows)]
+    temperatures = [setup.temperature_at(i / max(setup.rows - 1, 1)) for i in range(setup.rows)]
+    Q_true = world.true_joints(Q_read, np.array(payloads))
+    poses = world.flange_poses(Q_true, None if setup.temperature is None else
+                               np.array(temperatures))
+    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(Q_true, payloads)
+    T_instrument_world = invert(T_world_instrument)
+    measured = p_world @ T_instrument_world[:3, :3].T + T_instrument_world[:3, 3]
+    measured = measured + rng.normal(0.0, setup.noise, measured.shape)
+    return Generated(
+        Q_read=Q_read, extras=run_extras(payloads, temperatures, setup),
+        mounted={"target": target}, placement={"T_world_instrument": T_world_instrument},
+        fields=lambda units: {"target": {"xyz": in_units(units, DEFAULT_TARGET)},
+                              "instrument": {"xyz": in_units(units, T_world_instrument[:3, 3])}},
+        measured={"x": measured[:, 0], "y": measured[:, 1], "z": measured[:, 2]})
+
+
+def corrupt(rows: list[list], columns: list[str], row: int, length: float,
+            rng: np.random.Generator, dataset) -> None:
+    """Move the measured point of ``row`` by ``length`` [m] in a random direction."""
+    units = dataset.units
+    step = rng.normal(size=3)
+    step *= length / np.linalg.norm(step)
+    for axis, value in zip("xyz", step):
+        k = columns.index(axis)
+        rows[row][k] = float(rows[row][k]) + value / units.length_scale

@@ -1,0 +1,113 @@
+"""Adding a kind touches its own module and one registry line.
+
+``string_gauge_instrument`` is a kind the package does not know: a draw-wire gauge from a
+fixed anchor to the flange, written in one module that registers itself. Once imported,
+the toolkit reads, simulates and calibrates its data with nothing changed anywhere else;
+the checks here compare what it estimates with the simulated truth.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_casadi.calibration import calibrate
+from robocal_casadi.datasets import dataset_rows, load_dataset
+from robocal_casadi.errors import InputError
+from robocal_casadi.examples import industrial_6r
+from robocal_casadi.instruments import INSTRUMENTS, Instrument, instrument, kinds, register
+from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+MODULE = "string_gauge_instrument"
+
+
+@pytest.fixture(scope="module")
+def gauge():
+    """The test kind's module, registered for this module's tests and removed after (the
+    other tests see only the built-in kinds)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    try:
+        module = importlib.import_module(MODULE)
+        yield module
+    finally:
+        sys.path.remove(str(Path(__file__).parent))
+        INSTRUMENTS.pop("string_gauge", None)
+        sys.modules.pop(MODULE, None)
+
+
+def test_the_kind_is_registered_by_its_one_line(gauge):
+    assert instrument(gauge.KIND) is gauge.INSTRUMENT
+    assert kinds()[-1] == gauge.KIND
+    source = Path(gauge.__file__).read_text()
+    assert source.count("register(") == 1  # the one registry line
+
+
+def test_nothing_outside_the_kinds_module_names_it(gauge):
+    for folder in (ROOT / "robocal_casadi", ROOT / "planning"):
+        for path in folder.rglob("*.py"):
+            assert gauge.KIND not in path.read_text(), path
+
+
+def test_a_kind_is_registered_once(gauge):
+    with pytest.raises(ValueError, match="registered already"):
+        register(gauge.INSTRUMENT)
+
+
+def test_a_record_must_name_its_models_kind(gauge):
+    record = Instrument(kind="other_gauge", model=gauge.StringGaugeModel,
+                        blocks={}, read=gauge.read)
+    with pytest.raises(ValueError, match="models kind"):
+        register(record)
+    assert "other_gauge" not in INSTRUMENTS
+
+
+@pytest.fixture(scope="module")
+def simulated(gauge, tmp_path_factory):
+    return simulate(industrial_6r(), gauge.KIND, out_dir=tmp_path_factory.mktemp("gauge"),
+                    rows=60, noise=0.0, geometric_errors=(3e-4, 5e-4), seed=5, progress=False)
+
+
+def test_simulate_writes_and_read_loads_the_new_kind(gauge, simulated):
+    dataset = load_dataset(simulated.dataset_path)
+    assert isinstance(dataset, gauge.StringGauge) and dataset.kind == gauge.KIND
+    assert simulated.table_path.name == gauge.StringGaugeModel.table
+    truth = yaml.safe_load(simulated.truth_path.read_text())
+    scale = dataset.units.length_scale
+    true_hook = np.asarray(truth["mounted"]["hook"], float) * scale
+    true_anchor = np.asarray(truth["placement"]["anchor"], float) * scale
+    # the wire lengths, recomputed here from the true robot's flange poses
+    poses = Kinematics(simulated.truth.robot).flange_poses(dataset.joints)  # no effects
+    expected = np.linalg.norm(poses[:, :3, :3] @ true_hook + poses[:, :3, 3] - true_anchor,
+                              axis=1)
+    # the table holds the lengths in the file's unit with about 16 significant digits
+    np.testing.assert_allclose(dataset.length, expected, rtol=0, atol=1e-12)
+    half = dataset_rows(dataset, np.arange(dataset.rows) < 30)
+    np.testing.assert_array_equal(half.length, dataset.length[:30])
+
+
+def test_the_new_kind_calibrates_to_its_simulated_truth(gauge, simulated):
+    dataset = load_dataset(simulated.dataset_path)
+    result = calibrate([dataset], diagnose=False, loss="linear")
+    before = result.fit.rms_nominal
+    after = result.fit.rms_final
+    assert before > 1e-4  # the geometric errors lengthen the wire by a tenth of a mm or more
+    # noise-free readings: what is left is the solver's tolerance, far below the errors
+    assert after < 1e-3 * before
+
+
+def test_bad_keys_of_the_new_kind_are_refused(gauge, simulated, tmp_path):
+    content = yaml.safe_load(simulated.dataset_path.read_text())
+    content["hook"]["xzy"] = [0, 0, 0]
+    for name in ("robot.yaml", simulated.table_path.name):
+        (tmp_path / name).write_bytes((simulated.dataset_path.parent / name).read_bytes())
+    path = tmp_path / "dataset.yaml"
+    path.write_text(yaml.safe_dump(content))
+    with pytest.raises(InputError, match="xzy"):
+        load_dataset(path)
