@@ -44,9 +44,9 @@ def _tracker_truth(truth, model):
     T_world_instrument = pose_from_xyz_rpy(_length(truth, truth["placement"]["instrument"]["xyz"]),
                                            _angle(truth, truth["placement"]["instrument"]["rpy"]))
     T = invert(T_world_instrument)
-    model.R0 = T[:3, :3]  # the instrument frame's rotation, angles zero about it
+    model = model.with_reference(T[:3, :3])  # the instrument frame's rotation, angles zero
     return (_length(truth, truth["mounted"]["target"]),
-            np.concatenate([T[:3, 3], np.zeros(3)]))
+            np.concatenate([T[:3, 3], np.zeros(3)]), model)
 
 
 def _touch_truth(truth, model):
@@ -56,13 +56,13 @@ def _touch_truth(truth, model):
         pose, socket, axis = re.fullmatch(r".*/pose(\d+)/(.+)_([xyz])", name).groups()
         placement[model.placement.index(name)] = _length(
             truth, sockets[int(pose)][socket])["xyz".index(axis)]
-    return _length(truth, truth["mounted"]["probe"]), placement
+    return _length(truth, truth["mounted"]["probe"]), placement, model
 
 
 def _laser_truth(truth, model):
     mounted = np.concatenate([_length(truth, truth["mounted"]["laser_origin"]),
                               truth["mounted"]["laser_direction"]])
-    return mounted, _length(truth, truth["placement"]["sphere_centre"])
+    return mounted, _length(truth, truth["placement"]["sphere_centre"]), model
 
 
 TRUTH = {"tracker_points": _tracker_truth, "cross_bar": _touch_truth,
@@ -79,16 +79,16 @@ def case(request, tmp_path_factory):
                    noise=0.0, geometric_errors=(5e-4, 1e-3), seed=3, progress=False,
                    sockets=SIZES["sockets"], touches=SIZES["touches"])
     dataset = sim.load()
-    model = model_for(dataset, "d")
-    problem = Problem(dataset.robot, [model])
     truth = yaml.safe_load(sim.truth_path.read_text())
+    mounted, placement, model = TRUTH[kind](truth, model_for(dataset, "d"))
+    problem = Problem(dataset.robot, [model])
+    assert problem.models == (model,)  # a model with its reference keeps it
     x = problem.initial().copy()
     registry = dataset.robot.parameters()
     for name, value in truth["robot"].items():
         scale = {"length": _length(truth, 1.0), "angle": _angle(truth, 1.0)}.get(
             registry.quantity(name), 1.0)
         x[problem.unknowns.index(name)] = float(value) * float(scale)
-    mounted, placement = TRUTH[kind](truth, model)
     x[problem.mounted_indices(model)] = mounted
     x[problem.placement_indices(model)] = placement
     return model, problem, x
@@ -99,6 +99,22 @@ def test_every_registered_model_says_what_the_toolkit_asks():
         assert issubclass(model, MeasurementModel) and model.kind == kind
         assert model.reach in ("configuration", "sockets", "beam")
         assert model.table.endswith(".csv") and model.error_title and model.unit_name
+
+
+def test_models_are_immutable_and_problems_leave_them_alone(case):
+    """Setting up a problem places its own copies (the tracker's reference rotation)
+    and leaves the models it was given as they were; no model can be changed."""
+    model, problem, _ = case
+    with pytest.raises(AttributeError, match="immutable"):
+        model.label = "other"
+    fresh = model_for(model.dataset, "fresh")
+    before = {k: v for k, v in vars(fresh).items() if isinstance(v, np.ndarray)}
+    placed = Problem(model.dataset.robot, [fresh]).models[0]
+    for name, value in before.items():
+        np.testing.assert_array_equal(getattr(fresh, name), value)
+    if hasattr(fresh, "R0"):  # placed: the rotation of a registration, not the identity
+        assert np.array_equal(fresh.R0, np.eye(3)) and not np.allclose(placed.R0, np.eye(3))
+        assert placed is not fresh and placed.referenced and not fresh.referenced
 
 
 def test_residual_vanishes_at_the_simulated_truth(case):
@@ -222,9 +238,9 @@ def test_planner_rows_are_the_engine_jacobian_of_the_planned_data(kind, tmp_path
     block = np.vstack([b.X for b in RowModel(setup, kinematics).blocks(candidates)])
 
     model = model_for(planned_dataset(dataset, candidates, kinematics), "plan")
+    if hasattr(model, "with_reference"):
+        model = model.with_reference(np.eye(3))  # the planner's frame is the world frame
     problem = Problem(dataset.robot, [model])
-    if hasattr(model, "R0"):
-        model.R0 = np.eye(3)  # the planner's instrument frame is the world frame
     x = problem.initial().copy()
     x[problem.slices["robot"]] = kinematics.nominal
     x[problem.mounted_indices(model)] = model.nominal_mounted()

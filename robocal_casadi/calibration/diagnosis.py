@@ -232,19 +232,10 @@ def _candidates(problem: Problem, extras: dict) -> tuple[list[_Candidate], list[
 
 
 def sibling_problem(problem: Problem, effects: Sequence[Effect]) -> Problem:
-    """A problem over the same models with ``effects``, in the same placement frames.
-
-    Creating a problem re-initialises the placements, and a model may keep state from
-    that (the tracker's reference rotation); it is restored so that placement values
-    carry over by name unchanged.
-    """
-    states = [dict(vars(model)) for model in problem.models]
-    try:
-        sibling = Problem(problem.robot, problem.models, effects, kinematics=problem.kinematics)
-    finally:
-        for model, state in zip(problem.models, states):
-            vars(model).update(state)
-    return sibling
+    """A problem over the same models with ``effects``, in the same placement frames:
+    the models ``problem`` placed keep their references (the tracker's reference
+    rotation), so placement values carry over by name unchanged."""
+    return Problem(problem.robot, problem.models, effects, kinematics=problem.kinematics)
 
 
 def embed(source: Problem, x: np.ndarray, target: Problem) -> np.ndarray:

@@ -315,13 +315,13 @@ class Problem:
     def _data(self, model: MeasurementModel):
         """``(Q dof x N, extras columns x N, payload_com 3)`` of ``model``'s rows, built once
         per dataset (read-only: every residual and Jacobian evaluation reads them)."""
-        cached = self._data_cache.get(id(model))
+        cached = self._data_cache.get(id(model.dataset))
         if cached is not None and cached[0] is model.dataset:
             return cached[1]
         data = self._build_data(model)
         for array in data:
             array.flags.writeable = False
-        self._data_cache[id(model)] = (model.dataset, data)
+        self._data_cache[id(model.dataset)] = (model.dataset, data)
         return data
 
     def _build_data(self, model: MeasurementModel):
@@ -372,15 +372,17 @@ class Problem:
                 x[self.unknowns.index(name)] = value
         leaders = dict(self.frames.leaders)
         assigned = np.zeros(len(x), dtype=bool)
+        placed = []
         for model in self.models:
             mounted = x[self.mounted_indices(model)]
             # Pendant-pose data carry their own flange poses: no robot points to offer.
             points = self.points_numeric(model, x) if model.uses_robot else None
-            values = model.initial_placement(points, mounted)
+            model, values = model.placed(points, mounted)
             if model.station is not None:  # the station's first model sets its reference
                 leader = leaders.setdefault(model.station, model)
                 if leader is not model:
-                    model.follow(leader)
+                    model = model.follow(leader)
+            placed.append(model)
             for index, name, value in zip(self.placement_indices(model), model.placement.names,
                                           values):
                 if name in self.frames.values:
@@ -388,6 +390,7 @@ class Problem:
                 elif not assigned[index]:
                     x[index] = value
                 assigned[index] = True
+        self.models = tuple(placed)
         return x
 
     def initial(self) -> np.ndarray:

@@ -27,7 +27,8 @@ turns a numeric residual into the per-measurement error lengths the RMS values o
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+import copy
+from abc import ABCMeta, abstractmethod
 from collections.abc import Callable, Mapping
 from typing import ClassVar
 
@@ -48,8 +49,37 @@ def station_prefix(station: str) -> str:
     return f"{STATION_PREFIX}{station}"
 
 
-class MeasurementModel(ABC):
-    """Residuals of one dataset; see the module docstring for the unknowns."""
+class _Immutable(ABCMeta):
+    """Models are frozen once their class's ``__init__`` has run."""
+
+    def __call__(cls, *args, **kwargs):
+        model = super().__call__(*args, **kwargs)
+        object.__setattr__(model, "_frozen", True)
+        return model
+
+
+class MeasurementModel(metaclass=_Immutable):
+    """Residuals of one dataset; see the module docstring for the unknowns.
+
+    A model is immutable after construction: what changes as a problem is set up (the
+    tracker's reference rotation) comes back as a new model (``placed``, ``follow``).
+    """
+
+    def __setattr__(self, name: str, value) -> None:
+        if getattr(self, "_frozen", False):
+            raise AttributeError(f"{type(self).__name__} is immutable; {name!r} cannot be set "
+                                 f"after construction")
+        object.__setattr__(self, name, value)
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"{type(self).__name__} is immutable; {name!r} cannot be deleted")
+
+    def _replaced(self, **attributes) -> MeasurementModel:
+        """A copy of this model with ``attributes`` set (the copy is immutable too)."""
+        model = copy.copy(self)
+        for name, value in attributes.items():
+            object.__setattr__(model, name, value)
+        return model
 
     kind: ClassVar[str]
     table: ClassVar[str]
@@ -79,10 +109,10 @@ class MeasurementModel(ABC):
     """True: the residual is exactly ``row_residual`` of every row, in row order, so the
     engine may evaluate it row by row in compiled code."""
     pool_size: ClassVar[tuple[int, int]] = (300, 10)
+    """Feasible candidates the planner draws for a plan of ``count``: ``max(a, b count)``."""
     sphere: ClassVar[bool] = False
     """True: the placement is a sphere's centre [m] (base frame) of radius
     ``dataset.radius``; the report and ``result.json`` list the fitted spheres."""
-    """Feasible candidates the planner draws for a plan of ``count``: ``max(a, b count)``."""
 
     def __init__(self, dataset, label: str):
         self.dataset = dataset
@@ -95,11 +125,12 @@ class MeasurementModel(ABC):
         with the other datasets of that station), else the dataset's label."""
         return station_prefix(self.station) if self.station is not None else self.label
 
-    def follow(self, leader: MeasurementModel) -> None:
-        """Take the reference of the placement unknowns from ``leader``, a model of the
-        same station whose placement values this one shares (e.g. the tracker's
-        reference rotation). Models whose placement needs no reference do nothing."""
-        return None
+    def follow(self, leader: MeasurementModel) -> MeasurementModel:
+        """This model with the reference of the placement unknowns taken from ``leader``,
+        a model of the same station whose placement values this one shares (e.g. the
+        tracker's reference rotation). Models whose placement needs no reference are
+        returned as they are."""
+        return self
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}({self.label!r}, rows={self.dataset.rows}, "
@@ -128,6 +159,12 @@ class MeasurementModel(ABC):
         current robot (None for data that carry their own flange poses); ``mounted`` are
         the current mounted values.
         """
+
+    def placed(self, points: Callable[[np.ndarray], np.ndarray] | None,
+               mounted: np.ndarray) -> tuple[MeasurementModel, np.ndarray]:
+        """``(model, values)``: the model a problem solves with (its placement's reference
+        set, where it has one) and the starting ``initial_placement`` values."""
+        return self, self.initial_placement(points, mounted)
 
     @abstractmethod
     def residual(self, points: PointsFunction, mounted: ca.MX, placement: ca.MX) -> ca.MX:

@@ -25,6 +25,7 @@ constrained direction, and the Jacobian has full rank. ``errors`` leaves that ro
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -64,7 +65,6 @@ class SphereLaserModel(MeasurementModel):
             tuple(f"{self.placement_prefix}/sphere_{axis}" for axis in "xyz"), ("length",) * 3)
         self._scan = None if dataset.flange_poses is None else Scan.from_poses(
             dataset.flange_poses, dataset.distance, dataset.radius)
-        self._sensor: SensorFit | None = None
 
     def _pendant_scan(self) -> Scan:
         """The flange poses of sensor-only data (pendant readings); joint data have none."""
@@ -89,9 +89,11 @@ class SphereLaserModel(MeasurementModel):
     def sensor_fit(self) -> SensorFit:
         """Sensor-only calibration on the pendant poses, or on the nominal robot's flange
         poses for joint readings (``sphere_fit.fit_sensor``), computed once."""
-        if self._sensor is None:
-            self._sensor = fit_dataset(self.dataset)
         return self._sensor
+
+    @cached_property
+    def _sensor(self) -> SensorFit:
+        return fit_dataset(self.dataset)
 
     def initial_mounted(self) -> np.ndarray:
         """``[p0 [m], n]`` from the sensor-only fit (file guesses only seed that fit)."""

@@ -25,6 +25,13 @@ from ...transforms import pose_from_xyz_rpy
 from ..model import MeasurementModel, PointsFunction
 
 
+def _frozen_rotation(R: np.ndarray) -> np.ndarray:
+    """A read-only copy of the 3 x 3 rotation ``R``."""
+    out = np.array(R, dtype=float)
+    out.flags.writeable = False
+    return out
+
+
 def rigid_registration(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares ``R, t`` with ``target ~ R source + t`` (points as rows, Kabsch)."""
     source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
@@ -48,12 +55,21 @@ class TrackerModel(MeasurementModel):
     invisible_reason = "has no effect on the measured positions"
     absorbed_reason = "absorbed by the unknown instrument frame (tracker data fix no robot base)"
 
-    def __init__(self, dataset, label: str):
+    def __init__(self, dataset, label: str, reference: np.ndarray | None = None):
+        """``reference``: the rotation ``R0`` (3 x 3); None leaves it to ``placed`` (the
+        identity until then)."""
         super().__init__(dataset, label)
         names = tuple(f"{self.placement_prefix}/instrument_{k}"
                       for k in ("x", "y", "z", "rx", "ry", "rz"))
         self._placement = ParameterRegistry(names, ("length",) * 3 + ("angle",) * 3)
-        self.R0 = np.eye(3)
+        self.R0 = _frozen_rotation(np.eye(3) if reference is None else reference)
+        self.referenced = reference is not None
+
+    def with_reference(self, R0: np.ndarray) -> TrackerModel:
+        """This model with the reference rotation ``R0`` (3 x 3)."""
+        model = self._replaced(R0=_frozen_rotation(R0), referenced=True)
+        assert isinstance(model, TrackerModel)
+        return model
 
     @property
     def mounted(self) -> ParameterRegistry:
@@ -67,15 +83,24 @@ class TrackerModel(MeasurementModel):
         return np.asarray(self.dataset.target, dtype=float).copy()
 
     def initial_placement(self, points, mounted) -> np.ndarray:
+        return self.placed(points, mounted)[1]
+
+    def placed(self, points, mounted) -> tuple[TrackerModel, np.ndarray]:
+        """The translation of a rigid registration of the current robot's target positions
+        onto the measured ones, angles zero about its rotation; the model takes that
+        rotation as ``R0`` unless it has a reference already (a problem built again over
+        models another problem placed keeps their frames)."""
         world = points(np.asarray(mounted, float).reshape(3, 1)).T  # N x 3
         R, t = rigid_registration(world, self.dataset.measured)
-        self.R0 = R
-        return np.concatenate([t, np.zeros(3)])
+        model = self if self.referenced else self.with_reference(R)
+        return model, np.concatenate([t, np.zeros(3)])
 
-    def follow(self, leader: MeasurementModel) -> None:
-        """Share ``leader``'s reference rotation ``R0`` (same station, same placement)."""
+    def follow(self, leader: MeasurementModel) -> TrackerModel:
+        """This model with ``leader``'s reference rotation ``R0`` (same station, same
+        placement)."""
         if isinstance(leader, TrackerModel):
-            self.R0 = leader.R0.copy()
+            return self.with_reference(leader.R0)
+        return self
 
     def instrument_transform(self, placement: np.ndarray) -> np.ndarray:
         """``T_instrument_world`` (4x4) of a placement vector."""
