@@ -13,15 +13,15 @@ constraints keep each reading runnable:
   sight (``collision.Body.clearance_bound``), each joint within ``STEP`` [rad or m] of
   the chosen candidate (the model is trusted locally only);
 
-and, by how the measurement model says the robot takes a reading (``reach``):
+and, by the kind's ``Planner.refine`` (``robocal_casadi/instruments/<kind>/planning.py``),
+e.g.:
 
-* any configuration (tracker): the target faces the instrument (within the visibility
-  cone);
-* seated in sockets (bars and artifacts): the probe stays on its socket (the placement
-  is kept, the joints are re-solved), polished afterwards by inverse kinematics to
-  1e-9 m;
-* aiming a beam (laser on a sphere): the beam still hits the sphere within the incidence
-  limit and the sensor's range; the expected reading follows the pose.
+* a tracker: the target faces the instrument (within the visibility cone);
+* bars and artifacts: the probe stays on its socket (the placement is kept, the joints
+  are re-solved), polished afterwards by inverse kinematics to 1e-9 m
+  (``Planner.feasible``);
+* a laser on a sphere: the beam still hits the sphere within the incidence limit and the
+  sensor's range; the expected reading follows the pose.
 
 The refined plan replaces the chosen one only when it is feasible and improves the
 user's index.
@@ -34,16 +34,18 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from robocal_casadi.errors import InputError
+from robocal_casadi.instruments import instrument
+from robocal_casadi.instruments.planning import MARGIN
+
 from .best_iterate import BestFeasible
-from .candidates import Candidate, visible
+from .candidates import Candidate
 from .indices import better, index_value, scaling
 from .information import Information
 from .reach import Workspace
 from .rows import RowModel
 
 STEP = 0.35  # [rad] largest change of a joint during refinement
-MARGIN = 1e-3  # [m] clearance kept above the worktable
-ANGLE_MARGIN = 1e-4  # [rad] kept inside the visibility cone and incidence limit
 FEASIBLE = 1e-7  # violation of a usable iterate [m or cosine]: far inside the margins
 
 
@@ -98,13 +100,7 @@ def _solve(setup, workspace, row_model, info, candidates, max_iterations, mode):
     for c, candidate in enumerate(candidates):
         Q = _joint_variables(program, workspace, candidate, c)
         _keep_clear(program, workspace, row_model.p, Q, len(candidate.joints), clearance)
-        reach = setup.model.reach
-        if reach == "configuration":
-            _keep_visible(program, setup, workspace, row_model, candidate, Q)
-        elif reach == "beam":
-            _keep_on_sphere(program, setup, workspace, row_model, candidate, Q)
-        else:
-            _keep_in_sockets(program, setup, workspace, row_model, candidate, Q)
+        _planner(setup).refine(program, setup, workspace, row_model, candidate, Q)
     objective = _objective(_information(program.blocks, info), info, mode)
     values = _run_ipopt(program, objective, max_iterations)
     out, start = [], 0
@@ -138,49 +134,6 @@ def _keep_clear(program: _Program, workspace, p, Q, readings: int, clearance) ->
                           np.full(dof, workspace.table_height + MARGIN), np.full(dof, np.inf))
         if clearance is not None:
             program.constrain(clearance(Q[:, k]), [MARGIN], [np.inf])
-
-
-def _keep_visible(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
-    """Any configuration (tracker): the target above the table, facing the instrument."""
-    kin, p = workspace.kinematics, row_model.p
-    q = Q[:, 0]
-    world = kin.point(q, p, setup.offset)
-    program.blocks.append(row_model.symbolic_block(candidate, Q))
-    program.constrain(world[2], [workspace.table_height + MARGIN], [np.inf])
-    if setup.instrument is not None:
-        T = kin.flange_pose(q, p)
-        towards = setup.instrument - world
-        program.constrain(ca.dot(T[:3, 2], towards) / ca.norm_2(towards),
-                          [np.cos(setup.visibility_cone - ANGLE_MARGIN)], [1.0])
-
-
-def _keep_on_sphere(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
-    """Aiming a beam (laser on a sphere): the beam hits the sphere within the incidence
-    limit and the sensor's range [m]; the expected reading follows the pose."""
-    T = workspace.kinematics.flange_pose(Q[:, 0], row_model.p)
-    o = T[:3, :3] @ setup.offset + T[:3, 3]
-    axis = setup.axis / np.linalg.norm(setup.axis)
-    d = T[:3, :3] @ axis
-    v = o - setup.centre
-    b = ca.dot(d, v)
-    disc = b**2 - (ca.dot(v, v) - setup.radius**2)
-    reading = -b - ca.sqrt(ca.fmax(disc, 1e-12))
-    hit_normal = (o + reading * d - setup.centre) / setup.radius
-    program.constraints += [disc, reading, -ca.dot(d, hit_normal), o[2]]
-    program.c_lower += [[1e-8], [setup.laser_range[0]],
-                        [np.cos(setup.max_incidence - ANGLE_MARGIN)],
-                        [workspace.table_height + MARGIN]]
-    program.c_upper += [[np.inf], [setup.laser_range[1]], [1.0], [np.inf]]
-    program.blocks.append(row_model.symbolic_block(candidate, Q, data=[reading]))
-
-
-def _keep_in_sockets(program: _Program, setup, workspace, row_model, candidate, Q) -> None:
-    """Seated in sockets (bars and artifacts): the probe stays on its socket."""
-    program.blocks.append(row_model.symbolic_block(candidate, Q))
-    for k, name in enumerate(candidate.points):
-        program.constrain(
-            workspace.kinematics.point(Q[:, k], row_model.p, setup.offset)
-            - candidate.sockets[name], np.zeros(3), np.zeros(3))
 
 
 def _information(blocks, info: Information):
@@ -257,36 +210,20 @@ def _rebuild(setup, workspace, candidates, Q_new):
 
 def _feasible(setup, workspace, candidate, Q):
     """``candidate`` at joints ``Q`` (polished) when it passes every check, else None."""
-    kin = workspace.kinematics
     Q = np.clip(Q, workspace.lower, workspace.upper)
-    reach = setup.model.reach
-    if reach == "sockets":
-        targets = np.array([candidate.sockets[n] for n in candidate.points])
-        solved = workspace.solve_points(targets, setup.offset, Q)
-        if not solved.ok.all():
-            return None
-        Q = solved.joints
-        points = targets
-    elif reach == "beam":
-        pose = kin.flange_poses(Q, workspace.p)[0]
-        o = pose[:3, :3] @ setup.offset + pose[:3, 3]
-        d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
-        v = o - setup.centre
-        b = d @ v
-        disc = b * b - (v @ v - setup.radius**2)
-        if disc <= 0:
-            return None
-        reading = -b - np.sqrt(disc)
-        lo, hi = setup.laser_range
-        normal = (o + reading * d - setup.centre) / setup.radius
-        if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
-            return None
-        candidate = Candidate(Q, distance=np.array([reading]))
-        points = o[None]
-    else:
-        points = kin.points(Q, setup.offset, workspace.p)
-        if not visible(setup, kin.flange_poses(Q, workspace.p)).all():
-            return None
+    checked = _planner(setup).feasible(setup, workspace, candidate, Q)
+    if checked is None:
+        return None
+    candidate, Q, points = checked
     if not (workspace.within_limits(Q).all() and workspace.clear_of_table(Q, points).all()):
         return None
     return Candidate(Q, candidate.points, candidate.sockets, candidate.distance)
+
+
+def _planner(setup):
+    """The planning pieces of ``setup``'s kind."""
+    planner = instrument(setup.kind, file=setup.path).planner
+    if planner is None:
+        raise InputError(f"the planner cannot refine {setup.kind} data", file=setup.path,
+                         where="kind")
+    return planner

@@ -114,11 +114,11 @@ class PlanningOptions:
 
 def setup_from_dataset(dataset: Dataset) -> PlanSetup:
     """Read the set-up (and the optional ``planning`` block) of a loaded dataset: what
-    every kind shares here, the instrument's own fields from its ``plan_setup``."""
+    every kind shares here, the instrument's own fields from its ``Planner.setup``."""
     options = PlanningOptions(dataset)
     L, A = dataset.units.length_scale, dataset.units.angle_scale
-    record = instrument(dataset.kind, file=dataset.path)
-    if record.plan_setup is None:
+    planner = instrument(dataset.kind, file=dataset.path).planner
+    if planner is None:
         raise InputError(f"the planner has no set-up for {dataset.kind} data",
                          file=dataset.path, where="kind")
     return PlanSetup(
@@ -128,4 +128,4 @@ def setup_from_dataset(dataset: Dataset) -> PlanSetup:
         laser_rate=options.positive("laser_rate", 50.0, 1.0),
         max_joint_speed=options.positive("max_joint_speed", np.radians(60.0), A),
         max_joint_acceleration=options.positive("max_joint_acceleration", np.radians(120.0), A),
-        **record.plan_setup(dataset, options))
+        **planner.setup(dataset, options))

@@ -28,6 +28,25 @@ def _no_check(dataset: Any, joints: Any, where: Path) -> None:
 
 
 @dataclass(frozen=True)
+class Planner:
+    """How the planner (``planning/``) works with a kind.
+
+    ``setup(dataset, options)`` the kind's fields of ``planning.setup.PlanSetup``
+    (``options`` reads the dataset's ``planning`` block); ``candidates(setup, workspace,
+    count, rng, progress)`` up to ``count`` feasible ``instruments.planning.Candidate``;
+    ``refine(program, setup, workspace, row_model, candidate, Q)`` adds a candidate's
+    Jacobian block and the constraints that keep it runnable to the refinement's
+    program; ``feasible(setup, workspace, candidate, Q)`` the candidate at refined joints
+    ``Q`` as ``(candidate, Q, measured points [m])``, or None when it fails a check.
+    """
+
+    setup: Callable[[Any, Any], dict]
+    candidates: Callable[..., list]
+    refine: Callable[..., None]
+    feasible: Callable[..., Any]
+
+
+@dataclass(frozen=True)
 class Instrument:
     """One dataset kind and the pieces of its package.
 
@@ -37,9 +56,10 @@ class Instrument:
     mapping, the table (None when not read) and the fields every kind shares;
     ``simulate(setup)`` the readings of a simulated run (``instruments.simulation``);
     ``corrupt(rows, columns, row, length, rng, dataset)`` moves one row of a simulated
-    table by ``length`` [m] (a gross error); ``plan_setup(dataset, options)`` the
-    planner's set-up fields (``planning.setup``); ``check(dataset, joints, where)``
-    refuses data that cannot calibrate (``calibration.degeneracy``).
+    table by ``length`` [m] (a gross error); ``planner`` what the planner asks
+    (``Planner``); ``check(dataset, joints, where)`` refuses data that cannot calibrate
+    (``calibration.degeneracy``). A kind without a simulator or planner is read and
+    calibrated; simulating or planning it is refused.
     """
 
     kind: str
@@ -48,7 +68,7 @@ class Instrument:
     read: Callable[[dict, Any, dict], DatasetBase]
     simulate: Callable[[Any], Any] | None = None
     corrupt: Callable[..., None] | None = None
-    plan_setup: Callable[[Any, Any], dict] | None = None
+    planner: Planner | None = None
     check: Callable[[Any, Any, Path], None] = field(default=_no_check)
 
     def __repr__(self) -> str:

@@ -1,5 +1,9 @@
-"""What the planner needs of an artifact set-up (``planning.setup``): the probe, the
-socket layout in the artifact's own frame, the touches per socket and the largest tilt."""
+"""How the planner works with an artifact (``planning/``): the set-up (the probe, the
+socket layout in the artifact's own frame, the touches per socket and the largest tilt),
+candidates (the artifact placed with a random position and yaw, tilt up to
+``max_tilt``, above the worktable, every socket touched by the probe in ``touches``
+configurations solved by inverse kinematics within the limits), and the probe kept on
+its socket while refining."""
 
 from __future__ import annotations
 
@@ -9,6 +13,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ...errors import InputError
+from ...transforms import rot_x, rot_z
+from ..planning import Candidate, reach_radius
 from .reader import ArtifactTouches
 
 
@@ -65,3 +71,94 @@ def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray
                          "rigid artifact has them", file=dataset.path, where="artifact")
     X -= X.mean(axis=0)
     return {n: X[index[n]] for n in names}
+
+
+def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
+    layout = setup.layout  # socket name -> position in the artifact frame [m]
+    names = sorted(layout)
+    span = max(np.linalg.norm(layout[a] - layout[b]) for a in names for b in names)
+    radius = reach_radius(setup)
+    if span >= 2 * radius:
+        raise InputError(
+            f"the artifact spans {span / setup.units.length_scale:g} {setup.units.length}, more "
+            f"than the robot's whole reach ({2 * radius / setup.units.length_scale:g} "
+            f"{setup.units.length} across); it cannot be placed within reach",
+            file=setup.path, where=setup.size_key)
+    centroid = np.mean([layout[n] for n in names], axis=0)
+    found: list[Candidate] = []
+    attempts = 0
+    batch = 48
+    while len(found) < count and attempts < 40 * max(count, 10):
+        attempts += batch
+        centres = workspace.kinematics.points(workspace.random_joints(rng, batch), setup.offset,
+                                              workspace.p)
+        placements = [_random_placement(setup, c, rng) for c in centres]
+        # sockets in the world for each placement, each touched `touches` times, 2 seeds each
+        world_points, owners = [], []
+        for k, T in enumerate(placements):
+            for name in names:
+                world = T[:3, :3] @ (layout[name] - centroid) + T[:3, 3]
+                for _ in range(setup.touches * 2):
+                    world_points.append(world)
+                    owners.append((k, name))
+        targets = np.array(world_points)
+        solved = workspace.solve_points(targets, setup.offset,
+                                        workspace.random_joints(rng, len(targets)))
+        ok = solved.ok & workspace.clear_of_table(solved.joints, targets)
+        for k, T in enumerate(placements):
+            rows, points, sockets = [], [], {}
+            complete = True
+            for name in names:
+                sockets[name] = T[:3, :3] @ (layout[name] - centroid) + T[:3, 3]
+                good = [i for i, o in enumerate(owners) if o == (k, name) and ok[i]]
+                if len(good) < setup.touches:
+                    complete = False
+                    break
+                chosen = rng.choice(good, size=setup.touches, replace=False)
+                rows += [solved.joints[i] for i in chosen]
+                points += [name] * setup.touches
+            if complete and all(sockets[n][2] > workspace.table_height for n in names):
+                found.append(Candidate(np.array(rows), tuple(points), sockets))
+        if progress is not None:
+            progress.update(min(len(found), count), "feasible placements")
+    if len(found) < max(1, min(count, 4)):
+        raise InputError(
+            f"no placement of the artifact ({span / setup.units.length_scale:g} "
+            f"{setup.units.length} across) above the worktable (z > "
+            f"{workspace.table_height / setup.units.length_scale:g} {setup.units.length}) lets "
+            f"the probe reach every socket within the joint limits "
+            f"({len(found)} found in {attempts} tries)",
+            file=setup.path, where=setup.size_key)
+    return found[:count]
+
+
+def _random_placement(setup, position, rng) -> np.ndarray:
+    """An artifact pose centred on ``position`` [m] (a point the probe reaches), random
+    yaw and a tilt up to ``max_tilt``."""
+    yaw = rng.uniform(-np.pi, np.pi)
+    tilt_axis = rng.uniform(-np.pi, np.pi)
+    tilt = rng.uniform(0.0, setup.max_tilt)
+    R = (rot_z(tilt_axis) @ rot_x(tilt) @ rot_z(-tilt_axis) @ rot_z(yaw))[:3, :3]
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = position
+    return T
+
+
+def refine(program, setup, workspace, row_model, candidate, Q) -> None:
+    """Seated in sockets (bars and artifacts): the probe stays on its socket."""
+    program.blocks.append(row_model.symbolic_block(candidate, Q))
+    for k, name in enumerate(candidate.points):
+        program.constrain(
+            workspace.kinematics.point(Q[:, k], row_model.p, setup.offset)
+            - candidate.sockets[name], np.zeros(3), np.zeros(3))
+
+
+def feasible(setup, workspace, candidate: Candidate, Q: np.ndarray):
+    """``(candidate, Q, points)`` with the touches re-seated in their sockets by inverse
+    kinematics (``points`` the sockets [m]), or None when one cannot be."""
+    targets = np.array([candidate.sockets[n] for n in candidate.points])
+    solved = workspace.solve_points(targets, setup.offset, Q)
+    if not solved.ok.all():
+        return None
+    return candidate, solved.joints, targets

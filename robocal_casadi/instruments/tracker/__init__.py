@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from ..registry import Instrument
+from ..registry import Instrument, Planner
 from . import planning, reader, simulator
 from .model import TrackerModel, rigid_registration
 
 INSTRUMENT = Instrument(
     kind=TrackerModel.kind, model=TrackerModel, blocks=reader.BLOCKS, read=reader.read,
     check=reader.check, simulate=simulator.simulate, corrupt=simulator.corrupt,
-    plan_setup=planning.setup_fields)
+    planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
+                    planning.feasible))
 
 __all__ = ["INSTRUMENT", "TrackerModel", "rigid_registration"]
