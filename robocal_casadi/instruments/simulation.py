@@ -93,7 +93,6 @@ class Setup:
         return bool(np.all(q >= robot.lower_limits) and np.all(q <= robot.upper_limits))
 
 
-
 @dataclass
 class Generated:
     """What a kind produced: readings, extra columns, measured columns, truth parts."""
@@ -139,13 +138,14 @@ def in_units(units: Units, xyz) -> list[float]:
 
 
 def run_extras(payloads: list[float], temperatures: list, setup: Setup) -> dict[str, np.ndarray]:
+    """The extra columns of the run: ``temperature`` [C] and ``payload`` [kg] where the
+    set-up asks for them."""
     extras = {}
     if setup.temperature is not None:
         extras["temperature"] = np.array(temperatures, dtype=float)
     if setup.payload is not None:
         extras["payload"] = np.array(payloads, dtype=float)
     return extras
-
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -161,7 +161,6 @@ def tilt(rng: np.random.Generator, max_angle: float) -> np.ndarray:
     angle = rng.uniform(0.0, max_angle)
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
-
 
 
 def progress_of(setup: Setup):

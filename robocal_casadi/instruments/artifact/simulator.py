@@ -120,7 +120,6 @@ def _placement(setup: Setup, ik, bounds: tuple[np.ndarray, np.ndarray], probe: n
     return positions, placed
 
 
-
 def simulate(setup: Setup) -> Generated:
     """An artifact plate with ``setup.sockets`` sockets in a row, each touched
     ``setup.touches`` times per placement."""
