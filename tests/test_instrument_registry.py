@@ -111,3 +111,13 @@ def test_bad_keys_of_the_new_kind_are_refused(gauge, simulated, tmp_path):
     path.write_text(yaml.safe_dump(content))
     with pytest.raises(InputError, match="xzy"):
         load_dataset(path)
+
+
+def test_planning_a_kind_without_a_planner_is_refused(gauge, simulated):
+    """The gauge brings no planner: ``plan`` says so, naming the dataset file and key."""
+    from planning.setup import setup_from_dataset
+
+    dataset = load_dataset(simulated.dataset_path, require_data=False)
+    with pytest.raises(InputError, match="no set-up for string_gauge") as caught:
+        setup_from_dataset(dataset)
+    assert Path(caught.value.file).name == "dataset.yaml" and caught.value.where == "kind"
