@@ -83,9 +83,6 @@ from .output import atomic_directory, replace_refusal
 from .parameters import perturbed_stems
 from .robot import Robot, dump_yaml, load_robot, save_robot
 from .table import read_table, write_table
-from .transforms import (
-    rpy_from_matrix,
-)
 from .units import Units
 
 READINGS = ("joints", "pendant")
@@ -585,7 +582,8 @@ def _write_dataset(out_dir: Path, generated, truth: Truth, units: Units,
         (staging / "dataset.yaml").write_text(dump_yaml(dataset))
         columns, table = generated.table(nominal, units)
         write_table(staging / table_name, columns, table)
-        (staging / "truth.yaml").write_text(dump_yaml(_truth_dict(truth, units, payload_com)))
+        (staging / "truth.yaml").write_text(dump_yaml(_truth_dict(truth, units, payload_com,
+                                                                  generated)))
 
 
 def _check_out_dir(out_dir: Path, force: bool) -> None:
@@ -602,9 +600,10 @@ def _check_out_dir(out_dir: Path, force: bool) -> None:
 # ----------------------------------------------------------------------------- truth file
 
 
-def _truth_dict(truth: Truth, units: Units, payload_com) -> dict:
-    """``truth.yaml``: lengths and angles in ``units``; effects in SI (their own units)."""
-    L, A = units.length_scale, units.angle_scale
+def _truth_dict(truth: Truth, units: Units, payload_com, generated: Generated) -> dict:
+    """``truth.yaml``: lengths and angles in ``units`` (the instrument's entries as its
+    simulator writes them, ``Generated.truth_entries``); effects in SI (their own units)."""
+    L = units.length_scale
     registry = truth.robot.parameters()
     true_vector = registry.vector_of(truth.robot)
 
@@ -614,20 +613,7 @@ def _truth_dict(truth: Truth, units: Units, payload_com) -> dict:
     def length3(v) -> list[float]:
         return [float(x) / L for x in v]
 
-    placement: dict[str, Any] = {}
-    for key, item in truth.placement.items():
-        if key == "T_world_instrument":
-            placement["instrument"] = {"xyz": length3(item[:3, 3]),
-                                       "rpy": [float(a) / A for a in rpy_from_matrix(item[:3, :3])]}
-        elif key == "sphere_centre":
-            placement["sphere_centre"] = length3(item)
-        elif key == "sockets":
-            placement["sockets"] = {int(pose): {name: length3(xyz) for name, xyz in s.items()}
-                                    for pose, s in item.items()}
-        else:  # a position [m] of another kind's instrument
-            placement[key] = length3(item)
-    mounted = {key: (length3(v) if key != "laser_direction" else [float(x) for x in v])
-               for key, v in truth.mounted.items()}
+    mounted, placement = generated.truth_entries(units)
     content: dict[str, Any] = {
         "kind": truth.kind,
         "seed": truth.seed,

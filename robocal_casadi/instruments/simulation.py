@@ -105,6 +105,16 @@ class Generated:
     measured: dict[str, np.ndarray] = field(default_factory=dict)  # column -> values [m] or text
     leading: dict[str, Any] = field(default_factory=dict)  # columns before the joints
     pendant: np.ndarray | None = None  # (N, 7) x, y, z [m], qw, qx, qy, qz
+    # ``truth.yaml``'s mounted and placement entries in the given units; None: every
+    # entry of ``mounted`` and ``placement`` is a position [m]
+    written: Callable[[Units], tuple[dict, dict]] | None = None
+
+    def truth_entries(self, units: Units) -> tuple[dict, dict]:
+        """``(mounted, placement)`` of ``truth.yaml`` in ``units``."""
+        if self.written is not None:
+            return self.written(units)
+        return ({k: in_units(units, v) for k, v in self.mounted.items()},
+                {k: in_units(units, v) for k, v in self.placement.items()})
 
     def dataset_fields(self, units: Units) -> dict:
         """The dataset file's instrument entries in ``units``."""

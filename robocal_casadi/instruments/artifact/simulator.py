@@ -81,7 +81,10 @@ def touches(setup: Setup, cross: bool) -> Generated:
     return Generated(
         Q_read=Q_read_array, extras=run_extras(payloads, temperatures, setup),
         mounted={"probe": probe}, placement={"sockets": sockets_truth}, fields=fields,
-        leading={"pose": poses, "point": points})
+        leading={"pose": poses, "point": points},
+        written=lambda units: ({"probe": in_units(units, probe)}, {"sockets": {
+            int(pose): {name: in_units(units, xyz) for name, xyz in sockets.items()}
+            for pose, sockets in sockets_truth.items()}}))
 
 
 def _placement(setup: Setup, ik, bounds: tuple[np.ndarray, np.ndarray], probe: np.ndarray,

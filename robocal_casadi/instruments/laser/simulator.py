@@ -101,6 +101,9 @@ def simulate(setup: Setup) -> Generated:
         Q_read=Q_read_array, extras=run_extras(payloads, temperatures, setup),
         mounted={"laser_origin": origin, "laser_direction": direction},
         placement={"sphere_centre": centre},
+        written=lambda units: ({"laser_origin": in_units(units, origin),
+                                "laser_direction": [float(x) for x in direction]},
+                               {"sphere_centre": in_units(units, centre)}),
         fields=lambda units: {
             "sphere": {"radius": radius / units.length_scale,
                        "centre_guess": in_units(units, centre_guess)},

@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from ...ik import random_joints
-from ...transforms import invert, pose_from_xyz_rpy
+from ...transforms import invert, pose_from_xyz_rpy, rpy_from_matrix
+from ...units import Units
 from ..simulation import LIMIT_MARGIN, Generated, Setup, in_units, run_extras
 
 DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]
@@ -37,7 +38,18 @@ def simulate(setup: Setup) -> Generated:
         mounted={"target": target}, placement={"T_world_instrument": T_world_instrument},
         fields=lambda units: {"target": {"xyz": in_units(units, DEFAULT_TARGET)},
                               "instrument": {"xyz": in_units(units, T_world_instrument[:3, 3])}},
-        measured={"x": measured[:, 0], "y": measured[:, 1], "z": measured[:, 2]})
+        measured={"x": measured[:, 0], "y": measured[:, 1], "z": measured[:, 2]},
+        written=lambda units: _written(target, T_world_instrument, units))
+
+
+def _written(target: np.ndarray, T_world_instrument: np.ndarray, units: Units
+             ) -> tuple[dict, dict]:
+    """``truth.yaml``'s entries: the target [length] and the tracker's pose (position
+    [length], roll-pitch-yaw [angle]) in the world."""
+    rpy = rpy_from_matrix(T_world_instrument[:3, :3])
+    return ({"target": in_units(units, target)},
+            {"instrument": {"xyz": in_units(units, T_world_instrument[:3, 3]),
+                            "rpy": [float(a) / units.angle_scale for a in rpy]}})
 
 
 def corrupt(rows: list[list], columns: list[str], row: int, length: float,
