@@ -13,6 +13,7 @@ from ...ik import inverse_kinematics, random_joints
 from ...kinematics import Kinematics
 from ...robot import Robot
 from ...transforms import quaternion_from_matrix
+from ...units import Units
 from ..simulation import Generated, Setup, in_units, progress_of, run_extras, tilt
 
 DEFAULT_LASER_ORIGIN = (0.06, -0.015, 0.14)  # [m]
@@ -104,12 +105,17 @@ def simulate(setup: Setup) -> Generated:
         written=lambda units: ({"laser_origin": in_units(units, origin),
                                 "laser_direction": [float(x) for x in direction]},
                                {"sphere_centre": in_units(units, centre)}),
-        fields=lambda units: {
-            "sphere": {"radius": radius / units.length_scale,
+        fields=lambda units: _fields(radius, centre_guess, units),
+        measured={"distance": np.array(distances)}, pendant=pendant)
+
+
+def _fields(radius: float, centre_guess: np.ndarray, units: Units) -> dict:
+    """The dataset file's ``sphere`` (radius [length], a guess of its centre) and
+    ``laser`` (the default guesses) entries in ``units``."""
+    return {"sphere": {"radius": radius / units.length_scale,
                        "centre_guess": in_units(units, centre_guess)},
             "laser": {"origin_guess": in_units(units, DEFAULT_LASER_ORIGIN),
-                      "direction_guess": [float(v) for v in DEFAULT_LASER_DIRECTION]}},
-        measured={"distance": np.array(distances)}, pendant=pendant)
+                      "direction_guess": [float(v) for v in DEFAULT_LASER_DIRECTION]}}
 
 
 def _comfortable_beam(setup: Setup, direction: np.ndarray
