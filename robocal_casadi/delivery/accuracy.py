@@ -271,6 +271,7 @@ def _error_field(result, kinematics: Kinematics, names: Sequence[str],
     blocks = [np.zeros((len(PG), 0))]
     if fitted:
         covariance = np.asarray(result.covariance, dtype=float)[np.ix_(kept, kept)]
+        covariance = covariance + _represented(result, registry, names, PG, fitted, covariance)
         values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
         blocks.append(PG[:, fitted] @ (vectors * np.sqrt(np.clip(values, 0.0, None))))
     # Parameters held at nominal by an exact dependency moved nothing the fit could not
@@ -283,3 +284,33 @@ def _error_field(result, kinematics: Kinematics, names: Sequence[str],
         if tolerance is not None:
             blocks.append(tolerance * left[:, None])
     return np.hstack(blocks)
+
+
+def _represented(result, registry, names: Sequence[str], PG: np.ndarray, fitted: list[int],
+                 covariance: np.ndarray) -> np.ndarray:
+    """The error covariance [SI] the fitted parameters gain from the parameters they
+    represent: one held at nominal by an exact dependency (``beta5`` acting like
+    ``-theta5``) has its own error, which the fitted one takes up, so the combination it
+    estimates spreads by ``C' = C + A C_h A^T`` (``A`` the dependency over the work cell,
+    ``C_h`` the held tolerances squared), not by the fitted one's tolerance alone. The
+    estimate was weighed with the narrower prior ``P``; its error covariance under the
+    wider spread is ``K (H + P C' P) K = Sigma + K P A C_h A^T P K`` with ``K`` the
+    posterior covariance (``Sigma`` itself unless certified distances entered the fit,
+    where ``Sigma`` stands in for ``K``)."""
+    prior = result.prior
+    tolerance = {} if prior is None else dict(prior.tolerance)
+    fitted_names = [names[k] for k in fitted]
+    if not tolerance or not all(n in tolerance for n in fitted_names):
+        return np.zeros_like(covariance)
+    known = set(result.covariance_names) | set(result.identifiability.practical)
+    held = [(names.index(n), tolerance_of(n, registry.quantity(n), result.robot_nominal))
+            for n in registry.names if n not in known and n in names]
+    held = [(k, t) for k, t in held if t is not None and np.any(PG[:, k])]
+    if not held:
+        return np.zeros_like(covariance)
+    B = PG[:, fitted]
+    A = np.linalg.lstsq(B, PG[:, [k for k, _ in held]], rcond=1e-10)[0]  # fitted x held
+    spread = (A * np.array([t for _, t in held]) ** 2) @ A.T
+    P = np.diag([1.0 / tolerance[n] ** 2 for n in fitted_names])
+    gain = covariance @ P
+    return gain @ spread @ gain.T
