@@ -60,6 +60,7 @@ import numpy as np
 
 from ..calibration.prior import tolerance_of
 from ..kinematics import Kinematics
+from ..parameters import perturbed_stems
 from ..robot import Robot
 
 SAMPLES = 400
@@ -289,8 +290,8 @@ def _error_field(result, kinematics: Kinematics, names: Sequence[str],
 def _represented(result, registry, names: Sequence[str], PG: np.ndarray, fitted: list[int],
                  covariance: np.ndarray) -> np.ndarray:
     """The error covariance [SI] the fitted parameters gain from the parameters they
-    represent: one held at nominal by an exact dependency (``beta5`` acting like
-    ``-theta5``) has its own error, which the fitted one takes up, so the combination it
+    represent: one held at nominal by an exact dependency (``d3`` acting like ``d2`` on
+    parallel axes) has its own error, which the fitted one takes up, so the combination it
     estimates spreads by ``C' = C + A C_h A^T`` (``A`` the dependency over the work cell,
     ``C_h`` the held tolerances squared), not by the fitted one's tolerance alone. The
     estimate was weighed with the narrower prior ``P``; its error covariance under the
@@ -303,8 +304,14 @@ def _represented(result, registry, names: Sequence[str], PG: np.ndarray, fitted:
     if not tolerance or not all(n in tolerance for n in fitted_names):
         return np.zeros_like(covariance)
     known = set(result.covariance_names) | set(result.identifiability.practical)
-    held = [(names.index(n), tolerance_of(n, registry.quantity(n), result.robot_nominal))
-            for n in registry.names if n not in known and n in names]
+    robot = result.robot_nominal
+    # Only the joint parameters that stand for a physical error of their own (``beta``
+    # only where the file gives one); another name for a freedom the fitted parameters
+    # already describe (``beta5`` of non-parallel axes) adds no spread.
+    physical = {f"{stem}{i}" for i, joint in enumerate(robot.joints, start=1)
+                for stem in perturbed_stems(robot, joint)}
+    held = [(names.index(n), tolerance_of(n, registry.quantity(n), robot))
+            for n in registry.names if n not in known and n in names and n in physical]
     held = [(k, t) for k, t in held if t is not None and np.any(PG[:, k])]
     if not held:
         return np.zeros_like(covariance)
