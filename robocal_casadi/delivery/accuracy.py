@@ -21,7 +21,8 @@ The parameter error after calibration has covariance ``Sigma``:
 * for those it held at nominal because the data barely see them (the 1% rule), their
   tolerance squared (``calibration.prior``), counted only for the part of their effect
   that the fitted parameters cannot take up over the region; those held by an exact
-  dependency move nothing the fit could not take up.
+  dependency move nothing the fit could not take up, but their own errors widen the
+  spread of the fitted parameters that take them up (``_represented``).
 
 A rigid motion of the whole robot (its base placement) is what registering the robot to
 the cell fixes, and no calibration instrument but the cell's own registration sees it; so
