@@ -14,30 +14,39 @@ One more case is the point laser on the example 6R arm with four errors, 60 read
 Prints one JSON object: per case and seed the exit status, ``recommended``, the true error
 of the delivered and of the nominal robot, the predicted error and their ratio (a case whose
 data the calibration refuses has exit status 2 and the reason); and per kind how many seeds
-were refused, how many are never worse than nominal without exit 3 and how many
-predictions lie within a factor 1.5 of the truth.
+were refused, how many are never worse than nominal without exit 3, how many
+predictions lie within a factor 1.5 of the truth, how many truths lie in the predicted
+band of one robot's RMS (10% to 90%: eight in ten should), and the mean and spread of
+log(predicted / true) (a bias shows in the mean; with one dominant direction even a
+right prediction has a mean near +0.6, the spread of log |z|).
 
-    python benchmarks/delivered.py [--seeds 10] [--diagnose]
+    python benchmarks/delivered.py [--seeds 10] [--diagnose] [--kinds KIND ...] [--keep DIR]
+
+``--keep DIR`` keeps every case's data, outputs and a pickle of the result and the truth
+(``case.pkl``) in DIR, for studying the prediction without calibrating again.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from robocal_casadi import examples
-from robocal_casadi.calibration.job import JobOptions, run_job
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.delivery.accuracy import SAMPLES, SEED, region_of
-from robocal_casadi.errors import RobocalError
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import load_robot, save_robot
-from robocal_casadi.simulate import simulate, true_parameters
+# The checkout this script lives in, not an installed copy, is what it measures.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from robocal_casadi import examples  # noqa: E402
+from robocal_casadi.calibration.job import JobOptions, run_job  # noqa: E402
+from robocal_casadi.datasets import load_dataset  # noqa: E402
+from robocal_casadi.delivery.accuracy import SAMPLES, SEED, region_of  # noqa: E402
+from robocal_casadi.errors import RobocalError  # noqa: E402
+from robocal_casadi.kinematics import Kinematics  # noqa: E402
+from robocal_casadi.robot import load_robot, save_robot  # noqa: E402
+from robocal_casadi.simulate import simulate, true_parameters  # noqa: E402
 
 ERRORS = (1e-3, np.radians(0.5))  # [m], [rad]: the tolerances the prior assumes
 KINDS = {  # kind: (fit units, held-out units, noise [m])
@@ -82,7 +91,8 @@ def split(dataset: Path, table: Path, share: float) -> tuple[Path, Path]:
 
 
 def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, int],
-             noise: float, diagnose: bool, folder: Path, mounted_error: float | None) -> dict:
+             noise: float, diagnose: bool, folder: Path, mounted_error: float | None,
+             keep: bool = False) -> dict:
     if isinstance(errors, tuple):  # drawn once, so fit and held-out data share the truth
         _, errors = true_parameters(load_robot(robot_file), errors,
                                     np.random.default_rng(1000 + seed))
@@ -112,6 +122,10 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
     delivered_error = rigid_rms(Kinematics(delivered).points(Q, delivered_point), true_points)
     nominal_error = rigid_rms(Kinematics(result.robot_nominal).points(Q, nominal_point),
                               true_points)
+    if keep:
+        with open(folder / "case.pkl", "wb") as handle:
+            pickle.dump({"result": result, "truth": fit.truth, "fit": fit_path,
+                         "held": held_path}, handle)
     predicted = result.predicted_accuracy
     out = {"seed": seed, "exit_status": outcome.exit_status, "recommended": result.recommended,
            "delivered_model": result.delivered["model"],
@@ -120,6 +134,10 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
            "predicted_mm": None if predicted is None else 1e3 * predicted.rms}
     if predicted is not None:
         out["predicted_over_true"] = predicted.rms / delivered_error
+        band = getattr(predicted, "band", None)
+        if band is not None:
+            out["band_mm"] = [1e3 * band[0], 1e3 * band[1]]
+            out["true_in_band"] = bool(band[0] <= delivered_error <= band[1])
     return out
 
 
@@ -129,9 +147,16 @@ def summarise(rows: list[dict]) -> dict:
         r["true_error_delivered_mm"] <= r["true_error_nominal_mm"] or r["exit_status"] == 3))
     ratios = [r["predicted_over_true"] for r in rows if "predicted_over_true" in r]
     within = sum(1 for x in ratios if 1 / 1.5 <= x <= 1.5)
+    banded = [r["true_in_band"] for r in rows if "true_in_band" in r]
     return {"seeds": len(rows), "refused": refused, "never_worse_without_exit_3": honest,
             "predicted_within_1.5x": within, "predictions": len(ratios),
-            "median_predicted_over_true": float(np.median(ratios)) if ratios else None}
+            "median_predicted_over_true": float(np.median(ratios)) if ratios else None,
+            # mean and spread of log(predicted / true): a bias shows in the mean
+            "mean_log_predicted_over_true": float(np.mean(np.log(ratios))) if ratios else None,
+            "std_log_predicted_over_true": float(np.std(np.log(ratios))) if ratios else None,
+            "true_in_band": sum(banded), "bands": len(banded),
+            "mean_true_error_delivered_mm": float(np.mean(
+                [r["true_error_delivered_mm"] for r in rows if "refused" not in r] or [np.nan]))}
 
 
 def main() -> None:
@@ -139,9 +164,12 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--diagnose", action="store_true")
     parser.add_argument("--kinds", nargs="*", default=list(KINDS) + ["laser_readme"])
+    parser.add_argument("--keep", type=Path, default=None)
     args = parser.parse_args()
     report: dict = {"cases": {}, "summary": {}}
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = scratch if args.keep is None else str(args.keep)
+        Path(tmp).mkdir(parents=True, exist_ok=True)
         robot_file = Path(tmp) / "robot.yaml"
         save_robot(examples.ROBOTS["industrial_6r"](), robot_file)
         for kind in args.kinds:
@@ -150,11 +178,11 @@ def main() -> None:
                 folder = Path(tmp) / f"{kind}-{seed}"
                 if kind == "laser_readme":
                     row = one_case(robot_file, "sphere_laser", seed, README_ERRORS, (60, 60),
-                                   1e-5, args.diagnose, folder, None)
+                                   1e-5, args.diagnose, folder, None, args.keep is not None)
                 else:
                     units, held, noise = KINDS[kind]
                     row = one_case(robot_file, kind, seed, ERRORS, (units, held), noise,
-                                   args.diagnose, folder, MOUNTED_ERROR)
+                                   args.diagnose, folder, MOUNTED_ERROR, args.keep is not None)
                 rows.append(row)
                 print(f"{kind} seed {seed}: {row}", file=sys.stderr)
             report["cases"][kind] = rows

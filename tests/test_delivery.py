@@ -16,7 +16,7 @@ from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.job import JobOptions, calibrate_job
 from robocal_casadi.cli import main
 from robocal_casadi.datasets import load_dataset
-from robocal_casadi.delivery.accuracy import SAMPLES, SEED, predict, region_of
+from robocal_casadi.delivery.accuracy import BAND, MEASURED, SAMPLES, SEED, predict, region_of
 from robocal_casadi.kinematics import nominal_pose
 from robocal_casadi.robot import load_robot
 from robocal_casadi.simulate import simulate
@@ -179,3 +179,52 @@ def test_lumped_compliance_reads_back_at_another_geometry():
                                       + 1e-3 * rng.standard_normal(len(panda.parameters())))
         read = JointCompliance((6,), robot=moved).with_terms_named(names, moved)
         assert read.parameter_names() == names
+
+
+def test_band_of_one_robots_rms_matches_monte_carlo(tmp_path):
+    """The band holds one robot's RMS over the work cell for 80% of posterior draws: the
+    errors drawn from the posterior, the numpy reference kinematics moved, the best rigid
+    motion removed in closed form, at the prediction's own poses (the fit readings)."""
+    sim = simulate(UR10, "tracker_points", out_dir=tmp_path / "fit", rows=30, noise=2e-4,
+                   geometric_errors=ERRORS, seed=8, progress=False)
+    result = calibrate_job([load_dataset(sim.dataset_path)], (), JobOptions(diagnose=False))
+    robot = result.robot_calibrated
+    assert not robot.has_tool  # the tool pose is the flange pose: the reference below
+    names = ("target_x", "target_y", "target_z")
+    point = np.array([result.mounted_geometric[n] for n in names])
+    prediction = predict(result, robot, point, names, structured=0.0, region=region_of(result),
+                         region_kind=MEASURED)
+    unexplained = 0.0 if result.unexplained is None else result.unexplained.rms
+    Q = np.asarray(result.residuals[0].joints, dtype=float)
+    assert prediction.samples == len(Q)
+    registry = robot.parameters()
+    in_robot = [k for k, n in enumerate(result.covariance_names) if n in registry]
+    in_point = [k for k, n in enumerate(result.covariance_names) if n in names]
+    index = registry.indices([result.covariance_names[k] for k in in_robot])
+    point_index = [names.index(result.covariance_names[k]) for k in in_point]
+    base = robot.parameter_vector()
+
+    def located(geometry, offset):
+        poses = [nominal_pose(geometry, q) for q in Q]
+        return np.array([T[:3, :3] @ offset + T[:3, 3] for T in poses])
+
+    reference = located(robot, point)
+    draws = 400
+    rms = []
+    for delta in np.random.default_rng(12).multivariate_normal(
+            np.zeros(len(result.covariance_names)), result.covariance, draws):
+        moved, offset = base.copy(), point.copy()
+        moved[index] += delta[in_robot]
+        offset[point_index] += delta[in_point]
+        error = _kabsch_rms(located(robot.with_parameters(moved), offset), reference)
+        rms.append(np.sqrt(error**2 + unexplained**2))
+    rms = np.array(rms)
+    low, high = prediction.band
+    assert low < prediction.rms < high
+    # Each tail holds BAND[0] = 10% of the draws; a share of `draws` Bernoulli trials has
+    # standard deviation sqrt(p (1 - p) / draws): 3 of them.
+    for share, expected in ((np.mean(rms < low), BAND[0]), (np.mean(rms > high), 1 - BAND[1])):
+        assert share == pytest.approx(expected, abs=3 * np.sqrt(expected * (1 - expected) / draws))
+    # The expected mean square is the prediction's (relative spread of a mean of squares
+    # at most sqrt(2 / draws), 3 of them).
+    assert np.sqrt(np.mean(rms**2)) == pytest.approx(prediction.rms, rel=3 * np.sqrt(2 / draws))

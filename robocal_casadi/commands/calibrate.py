@@ -198,7 +198,9 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
             "delivered_model": (result.delivered or {}).get("model"),
             "predicted_accuracy": None if result.predicted_accuracy is None else {
                 "rms": result.predicted_accuracy.rms / s, "p95": result.predicted_accuracy.p95 / s,
-                "max": result.predicted_accuracy.max / s}}
+                "max": result.predicted_accuracy.max / s,
+                "rms_band": None if result.predicted_accuracy.band is None else [
+                    v / s for v in result.predicted_accuracy.band]}}
 
 
 def _rejected(result: CalibrationResult, outcome: Decision) -> list[str]:

@@ -21,7 +21,8 @@ The parameter error after calibration has covariance ``Sigma``:
 * for those it held at nominal because the data barely see them (the 1% rule), their
   tolerance squared (``calibration.prior``), counted only for the part of their effect
   that the fitted parameters cannot take up over the region; those held by an exact
-  dependency move nothing the fit could not take up.
+  dependency move nothing the fit could not take up, but their own errors widen the
+  spread of the fitted parameters that take them up (``_represented``).
 
 A rigid motion of the whole robot (its base placement) is what registering the robot to
 the cell fixes, and no calibration instrument but the cell's own registration sees it; so
@@ -34,6 +35,20 @@ with ``P`` the projection and ``s`` the part of the residual that is structured 
 than noise: what the diagnosis left unexplained, plus, when effects were identified but a
 controller runs geometry alone, the RMS distance between the delivered geometry and the
 model with effects at the fit readings. ``rms``, ``p95`` and ``max`` are over the poses.
+
+``rms`` is an expectation over calibrations like this one: the root of the mean, over
+robots, of the square of the RMS over the work cell. One robot's RMS is a random draw
+about it. Writing the parameter error as ``L z`` (``L L^T = Sigma``, ``z`` standard
+normal), the square of one robot's RMS over the ``N`` poses is
+
+    |P G L z|^2 / N + s^2 = sum_i lambda_i z_i^2 + s^2                         [m^2]
+
+with ``lambda_i`` the eigenvalues of ``(P G L)^T (P G L) / N``: a weighted sum of
+chi-square variables with one degree of freedom. When many directions share the
+uncertainty (a tracker) it stays close to ``rms``; when one direction carries most of it
+(the robot's scale seen only through a bar's length) it scatters like ``|z|``, and a
+robot may lie at a third or at twice ``rms``. ``band`` gives its ``BAND`` quantiles,
+from ``DRAWS`` draws of ``z`` with a fixed seed.
 """
 
 from __future__ import annotations
@@ -46,10 +61,13 @@ import numpy as np
 
 from ..calibration.prior import tolerance_of
 from ..kinematics import Kinematics
+from ..parameters import perturbed_stems
 from ..robot import Robot
 
 SAMPLES = 400
 SEED = 9283  # fixed: a prediction is repeatable
+BAND = (0.1, 0.9)  # quantiles of one robot's RMS over the work cell that ``band`` gives
+DRAWS = 20000  # draws of the parameter error behind ``band`` (quantile error ~0.5%)
 DATA_RANGES = "joint ranges of the fit data"
 DECLARED = "declared work cell"
 PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
@@ -60,7 +78,8 @@ MEASURED = "poses of the fit data"
 class PredictedAccuracy:
     """Predicted tool-position error over ``region`` [m]: ``rms``, ``p95``, ``max``;
     ``structured`` [m] the part from what the model does not describe (``s``);
-    ``region`` the joint ranges (per joint ``[low, high]``, rad or m)."""
+    ``region`` the joint ranges (per joint ``[low, high]``, rad or m); ``band`` [m] the
+    ``BAND`` quantiles of one robot's RMS over the region (module docstring)."""
 
     rms: float
     p95: float
@@ -70,10 +89,14 @@ class PredictedAccuracy:
     samples: int = SAMPLES
     errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
     region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
+    band: tuple[float, float] | None = None
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
         return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
                 "max": self.max / length_scale, "structured": self.structured / length_scale,
+                "rms_band": (None if self.band is None else
+                             [self.band[0] / length_scale, self.band[1] / length_scale]),
+                "rms_band_quantiles": list(BAND),
                 "unit": unit,
                 "region": {"kind": self.region_kind, "samples": self.samples,
                            "joints_rad_or_m": [list(r) for r in self.region]}}
@@ -87,9 +110,17 @@ class PredictedAccuracy:
                 MEASURED: "the poses the fit data were measured in"}.get(
             self.region_kind, "the joint ranges the data cover")
 
+    @property
+    def band_words(self) -> str:
+        """The band in words (its quantiles as a probability), for sentences."""
+        return f"{round(100 * (BAND[1] - BAND[0]))}% of robots calibrated like this"
+
     def sentence(self, length_scale: float, unit: str) -> str:
+        band = "" if self.band is None else (
+            f" ({self.band[0] / length_scale:.3g} to {self.band[1] / length_scale:.3g} for "
+            f"{self.band_words})")
         return (f"predicted tool-position error over {self.region_words}: RMS "
-                f"{self.rms / length_scale:.4g}, 95% {self.p95 / length_scale:.4g}, max "
+                f"{self.rms / length_scale:.4g}{band}, 95% {self.p95 / length_scale:.4g}, max "
                 f"{self.max / length_scale:.4g} {unit}")
 
     def __repr__(self) -> str:
@@ -154,13 +185,30 @@ def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
     G, positions = _point_jacobians(kinematics, Q, np.asarray(point, dtype=float))
     names = tuple(kinematics.registry.names) + tuple(point_names)
     PG = _without_rigid_motion(_rigid_basis(positions), G[:, :len(names)])
-    per_pose = _parameter_error(result, kinematics, names, PG)
+    E = _error_field(result, kinematics, names, PG)
+    per_pose = (E**2).sum(axis=1).reshape(len(Q), 3).sum(axis=1)
     unexplained = 0.0 if result.unexplained is None else float(result.unexplained.rms)
     s2 = unexplained**2 + structured**2
-    errors = np.sqrt(np.clip(per_pose, 0.0, None) + s2)
+    errors = np.sqrt(per_pose + s2)
     return PredictedAccuracy(float(np.sqrt(np.mean(errors**2))),
                              float(np.percentile(errors, 95)), float(errors.max()),
-                             float(np.sqrt(s2)), region, len(Q), errors, region_kind)
+                             float(np.sqrt(s2)), region, len(Q), errors, region_kind,
+                             rms_band(E, len(Q), s2))
+
+
+def rms_band(E: np.ndarray, count: int, s2: float,
+             quantiles: tuple[float, float] = BAND) -> tuple[float, float]:
+    """The ``quantiles`` [m] of one robot's RMS over ``count`` poses when its error field
+    (3 ``count`` entries [m]) is ``E z`` with ``z`` standard normal, plus ``s2`` [m^2]
+    everywhere (module docstring)."""
+    if not E.size:
+        return (float(np.sqrt(s2)), float(np.sqrt(s2)))
+    weights = np.linalg.svd(E, compute_uv=False) ** 2 / count  # lambda_i [m^2]
+    weights = weights[weights > weights[0] * 1e-12] if weights[0] > 0 else weights[:0]
+    z = np.random.default_rng(SEED).standard_normal((DRAWS, len(weights)))
+    rms = np.sqrt(z**2 @ weights + s2)
+    low, high = np.quantile(rms, quantiles)
+    return float(low), float(high)
 
 
 def _poses(result, region: tuple[tuple[float, float], ...], region_kind: str) -> np.ndarray:
@@ -213,21 +261,21 @@ def _without_rigid_motion(basis: np.ndarray, G: np.ndarray) -> np.ndarray:
     return G - basis @ (basis.T @ G)
 
 
-def _parameter_error(result, kinematics: Kinematics, names: Sequence[str],
-                     PG: np.ndarray) -> np.ndarray:
-    """Expected squared error [m^2] per pose from the parameters' errors (module
-    docstring); ``PG``'s columns (3N rows, the rigid motion removed) are ``names``."""
+def _error_field(result, kinematics: Kinematics, names: Sequence[str],
+                 PG: np.ndarray) -> np.ndarray:
+    """``E`` (3N x m) [m]: the error field at the poses (rigid motion removed) is ``E z``
+    with ``z`` standard normal (module docstring); ``PG``'s columns (3N rows) are
+    ``names``. Its squared row norms summed per pose are the expected squared errors."""
     registry = kinematics.registry
-    count = len(PG) // 3
     column = {name: k for k, name in enumerate(names)}
     kept = [k for k, n in enumerate(result.covariance_names) if n in column]
     fitted = [column[result.covariance_names[k]] for k in kept]
-    per_pose = np.zeros(count)
+    blocks = [np.zeros((len(PG), 0))]
     if fitted:
-        block = PG[:, fitted]
-        covariance = np.asarray(result.covariance)[np.ix_(kept, kept)]
-        per_pose += np.einsum("ij,jk,ik->i", block, covariance, block).reshape(
-            count, 3).sum(axis=1)
+        covariance = np.asarray(result.covariance, dtype=float)[np.ix_(kept, kept)]
+        covariance = covariance + _represented(result, registry, names, PG, fitted, covariance)
+        values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
+        blocks.append(PG[:, fitted] @ (vectors * np.sqrt(np.clip(values, 0.0, None))))
     # Parameters held at nominal by an exact dependency moved nothing the fit could not
     # take up; those held because the data barely see them keep their tolerance.
     held = [n for n in result.identifiability.practical if n in registry]
@@ -236,5 +284,41 @@ def _parameter_error(result, kinematics: Kinematics, names: Sequence[str],
         left = PG[:, column[name]] - basis @ (basis.T @ PG[:, column[name]])
         tolerance = tolerance_of(name, registry.quantity(name), result.robot_nominal)
         if tolerance is not None:
-            per_pose += tolerance**2 * (left.reshape(count, 3) ** 2).sum(axis=1)
-    return per_pose
+            blocks.append(tolerance * left[:, None])
+    return np.hstack(blocks)
+
+
+def _represented(result, registry, names: Sequence[str], PG: np.ndarray, fitted: list[int],
+                 covariance: np.ndarray) -> np.ndarray:
+    """The error covariance [SI] the fitted parameters gain from the parameters they
+    represent: one held at nominal by an exact dependency (``d3`` acting like ``d2`` on
+    parallel axes) has its own error, which the fitted one takes up, so the combination it
+    estimates spreads by ``C' = C + A C_h A^T`` (``A`` the dependency over the work cell,
+    ``C_h`` the held tolerances squared), not by the fitted one's tolerance alone. The
+    estimate was weighed with the narrower prior ``P``; its error covariance under the
+    wider spread is ``K (H + P C' P) K = Sigma + K P A C_h A^T P K`` with ``K`` the
+    posterior covariance (``Sigma`` itself unless certified distances entered the fit,
+    where ``Sigma`` stands in for ``K``)."""
+    prior = result.prior
+    tolerance = {} if prior is None else dict(prior.tolerance)
+    fitted_names = [names[k] for k in fitted]
+    if not tolerance or not all(n in tolerance for n in fitted_names):
+        return np.zeros_like(covariance)
+    known = set(result.covariance_names) | set(result.identifiability.practical)
+    robot = result.robot_nominal
+    # Only the joint parameters that stand for a physical error of their own (``beta``
+    # only where the file gives one); another name for a freedom the fitted parameters
+    # already describe (``beta5`` of non-parallel axes) adds no spread.
+    physical = {f"{stem}{i}" for i, joint in enumerate(robot.joints, start=1)
+                for stem in perturbed_stems(robot, joint)}
+    held = [(names.index(n), tolerance_of(n, registry.quantity(n), robot))
+            for n in registry.names if n not in known and n in names and n in physical]
+    held = [(k, t) for k, t in held if t is not None and np.any(PG[:, k])]
+    if not held:
+        return np.zeros_like(covariance)
+    B = PG[:, fitted]
+    A = np.linalg.lstsq(B, PG[:, [k for k, _ in held]], rcond=1e-10)[0]  # fitted x held
+    spread = (A * np.array([t for _, t in held]) ** 2) @ A.T
+    P = np.diag([1.0 / tolerance[n] ** 2 for n in fitted_names])
+    gain = covariance @ P
+    return gain @ spread @ gain.T

@@ -225,7 +225,9 @@ def robot_summary(result) -> dict:
             "delivered_model": (result.delivered or {}).get("model"),
             "predicted_accuracy": None if result.predicted_accuracy is None else {
                 "rms": result.predicted_accuracy.rms, "p95": result.predicted_accuracy.p95,
-                "max": result.predicted_accuracy.max},
+                "max": result.predicted_accuracy.max,
+                "rms_band": None if result.predicted_accuracy.band is None else list(
+                    result.predicted_accuracy.band)},
             "condition_number": float(result.condition_number)}
 
 

@@ -182,7 +182,7 @@ class FleetSummary:
         entry["delivered_model"] = summary.get("delivered_model")
         predicted = summary.get("predicted_accuracy")
         entry["predicted_accuracy"] = None if predicted is None else {
-            "unit": self.units.length, **{k: v / length for k, v in predicted.items()}}
+            "unit": self.units.length, **{k: _scaled(v, length) for k, v in predicted.items()}}
         entry["joint_offsets"] = {
             name: {"name": o["name"], "unit": self.unit(o["quantity"]),
                    "estimate": o["estimate"] / self.scale(o["quantity"]),
@@ -192,6 +192,15 @@ class FleetSummary:
         if self.previous is not None:
             entry["previous_found"] = outcome.name not in self.missing_previous
         return entry
+
+
+def _scaled(value, length: float):
+    """A length [m], or a list of them (a band), or None, in the fleet's length unit."""
+    if value is None:
+        return None
+    if isinstance(value, (list, tuple)):
+        return [v / length for v in value]
+    return value / length
 
 
 def _number(value: float) -> str:

@@ -16,6 +16,7 @@ from functools import partial
 
 import numpy as np
 
+from ..delivery.accuracy import BAND
 from ..effects import is_learned
 from ..instruments import INSTRUMENTS
 from ..results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
@@ -235,10 +236,16 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
         return None
     units = display_units(result.units)
     scale, unit = units.length_scale, units.length
-    rows = (("RMS", format_number(predicted.rms / scale)),
+    rows: tuple[tuple[str, str], ...] = (
+            ("RMS", format_number(predicted.rms / scale)),
             ("95th percentile", format_number(predicted.p95 / scale)),
             ("maximum", format_number(predicted.max / scale)),
             ("of which the model does not describe", format_number(predicted.structured / scale)))
+    if predicted.band is not None:  # where one robot's RMS lies (quantiles over robots)
+        low, high = (format_number(v / scale) for v in predicted.band)
+        rows = rows[:1] + ((f"RMS of one robot, {100 * BAND[0]:.0f}% of robots below", low),
+                           (f"RMS of one robot, {100 * BAND[1]:.0f}% of robots below",
+                            high)) + rows[1:]
     text = (f"The measured points say how well the model fits where the robot was measured. "
             f"Away from them, the error of robot_calibrated.yaml is predicted from the "
             f"uncertainty left in every parameter (the data and the tolerances together) and "
@@ -246,7 +253,10 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
             f"{predicted.region_words}, after the robot's placement in the cell (a rigid "
             f"motion of its base) is registered. Directions the data barely see keep the "
             f"uncertainty of their tolerances: where this figure is well above the held-out "
-            f"error, the data determine the robot only near the measured region.")
+            f"error, the data determine the robot only near the measured region. The RMS is "
+            f"an average over robots calibrated like this one; one robot's RMS scatters about "
+            f"it, within the stated range for {predicted.band_words}, widely when one "
+            f"direction the data see poorly carries most of the uncertainty.")
     blocks: list = [Paragraph(text), Table("predicted", f"Predicted tool-position error [{unit}]",
                                            ("statistic", "value"), rows,
                                            numeric=(False, True))]
