@@ -260,3 +260,30 @@ def test_report_lists_every_reading_set_aside(tmp_path):
     (plot,) = [b for b in section.blocks if isinstance(b, Plot)]
     figure = plot.draw()
     assert len(figure.axes) == 2
+
+
+def test_an_error_repeated_at_one_configuration_is_the_model_s_a_lone_one_is_not(tmp_path):
+    """Each pose measured four times (fresh noise): four alike 2 mm errors at one pose are
+    the model's (kept for the diagnosis), one 3 mm error among four visits is gross."""
+    from robocal_casadi.table import read_table, write_table
+
+    fit, _, _ = _pair(tmp_path, "tracker_points")
+    table = read_table(fit.table_path)
+    columns = list(table.columns)
+    xyz = [columns.index(axis) for axis in "xyz"]
+    scale = fit.load().units.length_scale
+    rng = np.random.default_rng(7)
+    rows = []
+    for row in table.rows:
+        for _ in range(4):
+            visit = [float(v) for v in row]
+            for k in xyz:
+                visit[k] += rng.normal(scale=NOISE) / scale
+            rows.append(visit)
+    for visit in range(4):  # pose 10: every visit off alike
+        rows[40 + visit][xyz[2]] += 0.002 / scale
+    rows[81][xyz[0]] += 0.003 / scale  # pose 20: one visit off
+    write_table(fit.table_path, columns, rows)
+    dataset = fit.load()
+    result = calibrate([dataset], diagnose=False)
+    assert _set_aside(result) == {dataset.line(81)}
