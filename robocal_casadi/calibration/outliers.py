@@ -424,6 +424,12 @@ def _position(problem: Problem, unit: Unit, x: np.ndarray) -> tuple[float, float
     return float(centre[0]), float(centre[1]), float(centre[2])
 
 
+def exceeds_share(problem: Problem, screening: Screening) -> bool:
+    """Whether more than ``MAX_SHARE`` of some dataset's readings would be set aside."""
+    return any(kept.size and (~kept).sum() > MAX_SHARE * kept.size
+               for kept in screening.kept_rows(problem))
+
+
 def check_share(problem: Problem, screening: Screening) -> None:
     """Refuse data of which more than ``MAX_SHARE`` would be set aside (``InputError``)."""
     for model, kept in zip(problem.models, screening.kept_rows(problem)):
