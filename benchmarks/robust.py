@@ -53,6 +53,15 @@ def held_out_rms(result) -> float:
     return (result.validation_all or result.validation).rms_final * MM
 
 
+def recommended_rms(result) -> float:
+    """Held-out RMS over every reading [mm] of the model the calibration recommends (the
+    geometric one when the held-out data show the model with effects worse)."""
+    validation = result.validation_all or result.validation
+    chosen = validation.rms_geometric if result.recommended == "geometric" else \
+        validation.rms_final
+    return chosen * MM
+
+
 def effects(result) -> list[str]:
     return [f"{e.name}{list(e.joints)}" for e in result.effects]
 
@@ -105,6 +114,8 @@ def compare(fit: list, validation: list, diagnose: bool) -> dict:
         result = calibrate(fit, validation, loss=loss, diagnose=diagnose)
         out[loss] = {"held_out_rms_kept": result.validation.rms_final * MM,
                      "held_out_rms_all": held_out_rms(result), "effects": effects(result),
+                     "recommended": result.recommended,
+                     "held_out_rms_recommended": recommended_rms(result),
                      "rejected": [e.to_json(result.units) for e in result.rejected],
                      "seconds": time.perf_counter() - start}
         out[loss]["rejected_count"] = len(result.rejected)
@@ -112,6 +123,8 @@ def compare(fit: list, validation: list, diagnose: bool) -> dict:
             entry.pop("position", None)
     out["ratio_all"] = out["robust"]["held_out_rms_all"] / out["linear"]["held_out_rms_all"]
     out["ratio_kept"] = out["robust"]["held_out_rms_kept"] / out["linear"]["held_out_rms_kept"]
+    out["ratio_recommended"] = (out["robust"]["held_out_rms_recommended"]
+                                / out["linear"]["held_out_rms_recommended"])
     return out
 
 

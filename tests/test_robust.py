@@ -260,3 +260,56 @@ def test_report_lists_every_reading_set_aside(tmp_path):
     (plot,) = [b for b in section.blocks if isinstance(b, Plot)]
     figure = plot.draw()
     assert len(figure.axes) == 2
+
+
+def test_an_error_repeated_at_one_configuration_is_the_model_s_a_lone_one_is_not(tmp_path):
+    """Each pose measured four times (fresh noise): four alike 2 mm errors at one pose are
+    the model's (kept for the diagnosis), one 3 mm error among four visits is gross."""
+    from robocal_casadi.table import read_table, write_table
+
+    fit, _, _ = _pair(tmp_path, "tracker_points")
+    table = read_table(fit.table_path)
+    columns = list(table.columns)
+    xyz = [columns.index(axis) for axis in "xyz"]
+    scale = fit.load().units.length_scale
+    rng = np.random.default_rng(7)
+    rows = []
+    for row in table.rows:
+        for _ in range(4):
+            visit = [float(v) for v in row]
+            for k in xyz:
+                visit[k] += rng.normal(scale=NOISE) / scale
+            rows.append(visit)
+    for visit in range(4):  # pose 10: every visit off alike
+        rows[40 + visit][xyz[2]] += 0.002 / scale
+    rows[81][xyz[0]] += 0.003 / scale  # pose 20: one visit off
+    write_table(fit.table_path, columns, rows)
+    dataset = fit.load()
+    result = calibrate([dataset], diagnose=False)
+    assert _set_aside(result) == {dataset.line(81)}
+
+
+def test_many_readings_off_the_geometric_model_are_judged_after_the_diagnosis(
+        tmp_path, monkeypatch):
+    """A compliance the geometric model lacks puts several clean readings past the
+    gross-error threshold: with the share allowed lowered below theirs, the calibration
+    without diagnosis refuses the data, the one with diagnosis names the compliance and
+    gives every reading back."""
+    import math
+
+    from robocal_casadi.calibration import outliers
+    from robocal_casadi.errors import InputError
+
+    simulated = simulate(industrial_6r(), "tracker_points", out_dir=tmp_path, rows=30,
+                         noise=1e-5, geometric_errors=(5e-4, math.radians(0.05)), seed=4,
+                         progress=False, effects={"joint_compliance": {2: 3e-6, 3: 3e-6}})
+    dataset = simulated.load()
+    first = calibrate([dataset], diagnose=False, loss="robust")
+    share = len(first.rejected) / 30
+    assert share > 0.1  # the premise: clean readings the geometric model misses
+    monkeypatch.setattr(outliers, "MAX_SHARE", share / 2)
+    with pytest.raises(InputError, match="the data are bad"):
+        calibrate([dataset], diagnose=False)
+    result = calibrate([dataset])
+    assert "joint_compliance" in [e.name for e in result.effects]
+    assert not result.rejected

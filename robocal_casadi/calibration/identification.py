@@ -313,9 +313,11 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
                            loss=fit_loss)
     rejected: tuple[RejectedReading, ...] = ()
     screened_from = nominal.datasets
+    deferred = False  # too many set aside before the diagnosis: judged after it instead
     if robust:
-        nominal, rejected = _screened(nominal, effects, method=method,
-                                      max_iterations=max_iterations)
+        nominal, rejected, deferred = _screened(nominal, effects, method=method,
+                                                max_iterations=max_iterations,
+                                                defer=diagnose)
     for attempt in range(2):
         problem = nominal.problem
         identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
@@ -326,7 +328,7 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
                           loss=fit_loss)
         # Effects found change what the residual holds: readings set aside before they
         # were known are judged again under the final model (once).
-        if not robust or not final.added or attempt:
+        if not robust or not (final.added or deferred) or attempt:
             break
         revised = _rescreened(screened_from, final, rejected, method=method,
                               max_iterations=max_iterations)
@@ -437,23 +439,31 @@ def _nominal_fit(robot: Robot, datasets: list[DatasetBase], effects: Sequence[Ef
 
 
 def _screened(nominal: NominalFit, effects: Sequence[Effect], *, method: Method,
-              max_iterations: int) -> tuple[NominalFit, tuple[RejectedReading, ...]]:
-    """The nominal fit again on the units ``outliers.screen`` keeps, and those it set aside.
+              max_iterations: int, defer: bool
+              ) -> tuple[NominalFit, tuple[RejectedReading, ...], bool]:
+    """The nominal fit again on the units ``outliers.screen`` keeps, those it set aside,
+    and whether the judgement was deferred.
 
     Screened with the unknowns the data determine at nominal, from a robust start; every
     later stage (identifiability, fits, diagnosis, noise level) sees the kept units only.
+    When more than ``outliers.MAX_SHARE`` of a dataset would go and ``defer`` (a diagnosis
+    follows), nothing is set aside yet: so many readings far off the geometric model say
+    as much about what the model lacks as about the data, and they are judged under the
+    model the diagnosis ends with (``_rescreened``), where too many still refuse the data.
     """
     problem = nominal.problem
     free = _free_mask(problem, nominal.identifiability)
     screening = outliers.screen(problem, nominal.solution.x, free, method=method,
                                 max_iterations=max_iterations)
     if not screening.rejected:
-        return nominal, ()
+        return nominal, (), False
+    if defer and outliers.exceeds_share(problem, screening):
+        return nominal, (), True
     outliers.check_share(problem, screening)
     rejected = outliers.rejected_readings(problem, screening)
     datasets = [dataset_rows(m.dataset, keep)
                 for m, keep in zip(problem.models, screening.kept_rows(problem))]
-    return _refitted(nominal, datasets, effects, method=method), rejected
+    return _refitted(nominal, datasets, effects, method=method), rejected, False
 
 
 def _refitted(nominal: NominalFit, datasets: Sequence[DatasetBase], effects: Sequence[Effect],

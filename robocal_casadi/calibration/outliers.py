@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import qr, solve_triangular
+from scipy.spatial import cKDTree
 from scipy.stats import chi2, norm
 
 from ..datasets import dataset_rows
@@ -60,6 +61,7 @@ SCALE_QUANTILE = 0.8  # the noise is read off this quantile of the absolute resi
 QUANTILE_SCALE = float(norm.ppf(0.5 + SCALE_QUANTILE / 2))  # ... which is this many sigma
 MIN_ENTRIES = 12  # fewer residual entries of one kind: its noise is pooled with the dataset's
 RANK_TOLERANCE = 1e-10  # relative size of a QR pivot below which a direction has no data
+NEIGHBOURS = 3  # readings nearest in joint space that show whether an error repeats
 UNTESTABLE = 1e-8  # V's smallest eigenvalue below this: the fit reproduces the unit whatever
 
 
@@ -181,8 +183,20 @@ def screen(problem: Problem, x: np.ndarray, free: np.ndarray, *, method: Method 
     if robust_start:
         x = solve(problem, x, free, method=method, loss="huber",
                   max_iterations=max_iterations).x
+    rounds = functools.partial(_rounds, problem, units, free=free, method=method,
+                               max_iterations=max_iterations)
+    rejected, x, weights, tested = rounds(x, rejected, repeats=False)
+    if rejected:  # then give back the errors that repeat where the configuration does
+        rejected, x, weights, tested = rounds(x, rejected, repeats=True)
+    statistic, quantile, residual, sigma = tested
+    return Screening(units, rejected, statistic, quantile, residual, weights, x, sigma)
+
+
+def _rounds(problem: Problem, units: Sequence[Unit], x: np.ndarray, rejected: tuple[int, ...],
+            *, free: np.ndarray, method: Method, max_iterations: int, repeats: bool):
+    """Test, set aside, refit, until the set aside no longer changes (step 4)."""
     weights = weights_of(problem, units, rejected)
-    tested = _test(problem, units, x, free, weights)
+    tested = _test(problem, units, x, free, weights, repeats)
     for _ in range(ROUNDS):
         found = tuple(int(k) for k in np.flatnonzero(tested[0] > tested[1]))
         if found == rejected:
@@ -190,9 +204,8 @@ def screen(problem: Problem, x: np.ndarray, free: np.ndarray, *, method: Method 
         rejected = found
         weights = weights_of(problem, units, rejected)
         x = refit(problem, x, free, weights, method=method, max_iterations=max_iterations)
-        tested = _test(problem, units, x, free, weights)
-    statistic, quantile, residual, sigma = tested
-    return Screening(units, rejected, statistic, quantile, residual, weights, x, sigma)
+        tested = _test(problem, units, x, free, weights, repeats)
+    return rejected, x, weights, tested
 
 
 def weights_of(problem: Problem, units: Sequence[Unit], rejected: Sequence[int]) -> np.ndarray:
@@ -213,8 +226,11 @@ def refit(problem: Problem, x: np.ndarray, free: np.ndarray, weights: np.ndarray
 
 
 def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarray,
-          weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per unit ``(t, chi^2 quantile, |r| [m])`` at ``x``, and the noise per entry [m]."""
+          weights: np.ndarray, repeats: bool = False
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per unit ``(t, chi^2 quantile, |r| [m])`` at ``x``, and the noise per entry [m];
+    with ``repeats``, ``t`` of a reading is at most that of its error less its
+    neighbours' (``_unrepeated``)."""
     r = problem.residual(x)
     J = problem.jacobian(x, free)
     kept = weights > 0
@@ -233,7 +249,43 @@ def _test(problem: Problem, units: Sequence[Unit], x: np.ndarray, free: np.ndarr
         statistic[members] = np.where(ok, t, 0.0)
         quantile[members] = _quantile(int(size))
         residual[members] = np.sqrt(_dots(r[E], r[E]))
+    if repeats:
+        statistic = np.minimum(statistic, _unrepeated(problem, units, r / sigma))
     return statistic, quantile, residual, sigma
+
+
+def _unrepeated(problem: Problem, units: Sequence[Unit], z: np.ndarray) -> np.ndarray:
+    """Per unit of one reading, ``t`` of its residual ``z`` (in noise units) less the mean
+    of those of the ``NEIGHBOURS`` readings nearest in joint space (same dataset, same
+    socket, same size; kept or set aside); ``inf`` where there are too few or the
+    dataset has no joint readings.
+
+    A gross error does not repeat: where the readings taken in nearly the same
+    configuration show the same error, the error is the model's, which the diagnosis
+    is there to find, not a bad reading. (A run of more than ``NEIGHBOURS`` alike errors
+    at neighbouring configurations is taken as the model's too.) The difference of one
+    unit-noise residual and the mean of ``NEIGHBOURS`` others has variance
+    ``1 + 1 / NEIGHBOURS``.
+    """
+    out = np.full(len(units), np.inf)
+    groups: dict[tuple, list[int]] = {}
+    for index, unit in enumerate(units):
+        joints = getattr(problem.models[unit.model].dataset, "joints", None)
+        if len(unit.rows) == 1 and unit.reading != "placement" and joints is not None:
+            groups.setdefault((unit.model, unit.near, len(unit.entries)), []).append(index)
+    for (model, _, _), members in groups.items():
+        if len(members) <= NEIGHBOURS:
+            continue
+        joints = np.asarray(problem.models[model].dataset.joints)
+        configurations = joints[[units[k].rows[0] for k in members]]
+        _, near = cKDTree(configurations).query(configurations, k=NEIGHBOURS + 1)
+        itself = near == np.arange(len(members))[:, None]
+        order = np.argsort(itself, axis=1, kind="stable")[:, :NEIGHBOURS]  # itself last
+        E = np.stack([units[k].entries for k in members])
+        local = z[E[np.take_along_axis(near, order, axis=1)]].mean(axis=1)
+        difference = z[E] - local
+        out[members] = _dots(difference, difference) / (1.0 + 1.0 / NEIGHBOURS)
+    return out
 
 
 def _statistics(z: np.ndarray, W: np.ndarray, kept: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -370,6 +422,12 @@ def _position(problem: Problem, unit: Unit, x: np.ndarray) -> tuple[float, float
         world = np.asarray(model.dataset.flange_poses)[rows, :3, 3].T
     centre = world.mean(axis=1)
     return float(centre[0]), float(centre[1]), float(centre[2])
+
+
+def exceeds_share(problem: Problem, screening: Screening) -> bool:
+    """Whether more than ``MAX_SHARE`` of some dataset's readings would be set aside."""
+    return any(kept.size and (~kept).sum() > MAX_SHARE * kept.size
+               for kept in screening.kept_rows(problem))
 
 
 def check_share(problem: Problem, screening: Screening) -> None:
