@@ -67,9 +67,20 @@ def fade_weight(X: np.ndarray, lower: np.ndarray, upper: np.ndarray,
 
 def gaussian(U: np.ndarray, centres: np.ndarray, length_scale: float) -> np.ndarray:
     """Kernel matrix (N x n) ``exp(-|u - c|^2 / (2 l^2))`` of scaled rows ``U`` (N x k)
-    against ``centres`` (n x k), ``l`` = ``length_scale`` [1]."""
-    squared = ((U[:, None, :] - centres[None]) ** 2).sum(axis=2)
-    return np.exp(-squared / (2.0 * length_scale ** 2))
+    against ``centres`` (n x k), ``l`` = ``length_scale`` [1].
+
+    Summed one variable at a time in place: no N x n x k temporary (at 12,000 rows
+    against 800 centres that alone was 230 MB), the same sums in the same order."""
+    U, centres = np.atleast_2d(U), np.atleast_2d(centres)
+    squared = np.zeros((U.shape[0], centres.shape[0]))
+    term = np.empty_like(squared)
+    for k in range(U.shape[1]):
+        np.subtract(U[:, k, None], centres[None, :, k], out=term)
+        np.square(term, out=term)
+        squared += term
+    np.negative(squared, out=squared)
+    np.divide(squared, 2.0 * length_scale ** 2, out=squared)
+    return np.exp(squared, out=squared)
 
 
 class ResidualMap(Effect):
