@@ -9,7 +9,9 @@ computed on the columns scaled to unit norm (``D = diag(|J_j|)``) so the system 
 scaled: ``(Js^T Js + mu I) D dx = -Js^T r``; Levenberg's ``J^T J + mu I`` (``D = I``) is the
 choice for unknowns of one unit. ``mu`` starts at ``Damping.initial``, grows by
 ``increase`` after a step that raises the cost and shrinks by ``decrease`` after one that
-does not; a step is sought until ``mu`` passes ``ceiling``.
+does not; a step is sought until ``mu`` passes ``ceiling``, or until a refused step is
+already below ``xtol`` with a predicted decrease within rounding of the cost (the
+minimum, to rounding: status 3).
 
 The state may live on a manifold: ``retract(x, dx)`` maps a step in the local
 coordinates the Jacobian is taken in to a new state (default ``x + dx``), and
@@ -224,10 +226,11 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
             if damping is None or cost_trial < state.cost or (
                     cost_trial == state.cost and not clipped):
                 break
-            # A refused step already below xtol: the state is where the steps end. (At the
-            # minimum only rounding is left to gain; more damping would shrink the step
+            # A refused step below xtol whose predicted gain is rounding: the state is
+            # where the steps end. (At the minimum more damping would only shrink the step
             # further, each trial evaluated in turn and refused.)
-            if _below_xtol(scaled_step, coordinates(state.x)[free] * scale, tolerances):
+            if _rounding_only(normal, scaled_step, state.cost) and _below_xtol(
+                    scaled_step, coordinates(state.x)[free] * scale, tolerances):
                 return _result(state, iteration, 3)
             mu = max(mu * damping.increase, damping.floor)
             if mu > damping.ceiling:
@@ -303,6 +306,15 @@ def _stop_after_step(scaled_step: np.ndarray, scaled_x: np.ndarray, cost: float,
     if _below_xtol(scaled_step, scaled_x, tolerances):
         return 3
     return None
+
+
+def _rounding_only(normal: tuple[np.ndarray, np.ndarray], scaled_step: np.ndarray,
+                   cost: float) -> bool:
+    """The linear model's decrease for ``scaled_step`` (``g.s - |Js s|^2 / 2`` from the
+    normal equations) is within rounding of ``cost``."""
+    A, g = normal
+    predicted = float(g @ scaled_step - 0.5 * scaled_step @ (A @ scaled_step))
+    return bool(predicted <= np.finfo(float).eps * cost)
 
 
 def _below_xtol(scaled_step: np.ndarray, scaled_x: np.ndarray, tolerances: Tolerances) -> bool:

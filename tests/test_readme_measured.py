@@ -16,15 +16,13 @@ SPEC = importlib.util.spec_from_file_location("readme_measured",
 assert SPEC is not None and SPEC.loader is not None
 measured = importlib.util.module_from_spec(SPEC)
 SPEC.loader.exec_module(measured)
+README_TEXT = (ROOT / "README.md").read_text()
 
 
 def test_the_readme_section_is_what_the_saved_json_renders():
     # A hand edit of the section, or a new JSON without rewriting the README, fails here:
     # run `python benchmarks/readme_measured.py`.
     assert measured.section(README_TEXT) == measured.rendered()
-
-
-README_TEXT = (ROOT / "README.md").read_text()
 
 
 @pytest.mark.parametrize("name", measured.ORDER)
