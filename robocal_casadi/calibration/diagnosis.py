@@ -337,8 +337,9 @@ class _Screening:
         # candidates') are views of it, each scaled in place.
         a = len(self.free_index)
         Z = np.empty((self.n, a + len(names) + 1))
-        Z[:, :a] = J if free_columns else J[:, self.free_index]
-        Z[:, a:-1] = J[:, [self.effect_index[n] for n in names]]
+        sources = np.arange(a) if free_columns else self.free_index
+        for k, column in enumerate([*sources, *(self.effect_index[n] for n in names)]):
+            Z[:, k] = J[:, column]  # column by column: no temporary of them all
         Z[:, -1] = r
         del J  # its columns are copied: freed here unless the caller holds it
         A = Z[:, :a]
