@@ -67,6 +67,7 @@ import numpy as np
 
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
+from ..memory import release_freed
 from ..progress import note, reports_stages, stage
 from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
@@ -325,6 +326,7 @@ class _Screening:
         (no ``candidates``); it is then scaled in place."""
         if isinstance(J, list):
             J = J.pop()
+        release_freed()  # what earlier steps freed, before the stacked columns are formed
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
