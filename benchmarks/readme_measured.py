@@ -220,10 +220,24 @@ def render_jobs(record: dict) -> str:
     rows = ["| job | CPU s | compiler CPU s | peak memory | target | profiled: calibrate / "
             "diagnosis / unexplained / report [s] |", "| --- | --- | --- | --- | --- | --- |"]
     rows += [_job_row(c) for c in cases]
-    parts = [lead, "\n".join(rows)]
+    parts = [lead, "\n".join(rows), _against_targets(cases)]
     if failed:
         parts.append(f"Failed in this run: {', '.join(failed)}.")
+    if "changes" in record:
+        parts.append(record["changes"])
     return "\n\n".join(parts) + _notes(record)
+
+
+def _against_targets(cases: list[dict]) -> str:
+    """Which jobs stayed within their targets in this run, and which did not."""
+    within, over = [], []
+    for case in cases:
+        memory = case.get("target_peak_mb")
+        ok = case["cpu_seconds"] <= case["target_cpu_seconds"] and (
+            not memory or case["peak_memory_mib"] * MIB / MB <= memory)
+        (within if ok else over).append(JOB_LABELS.get(case["case"], case["case"]))
+    return (f"Within target in this run: {'; '.join(within) or 'none'}. Over target: "
+            f"{'; '.join(over) or 'none'}.")
 
 
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
