@@ -223,9 +223,8 @@ def render_jobs(record: dict) -> str:
     parts = [lead, "\n".join(rows), _against_targets(cases)]
     if failed:
         parts.append(f"Failed in this run: {', '.join(failed)}.")
-    if "changes" in record:
-        parts.append(record["changes"])
-    return "\n\n".join(parts) + _notes(record)
+    changes = f"\n\n{record['changes']}" if "changes" in record else ""
+    return "\n\n".join(parts) + _notes(record) + changes
 
 
 def _against_targets(cases: list[dict]) -> str:
