@@ -7,7 +7,9 @@ arm, geometric errors, 0.01 mm noise), or on the shipped UR10 series A:
 * ``bar``: cross-bar, 30 placements;
 * ``artifact``: artifact touches (sockets), 60 placements;
 * ``tracker``: tracker points, 1,000 rows, with a payload and joint compliance;
-* ``series_a``: UR10 tracker series A (about 12,000 rows), with ``--series-a``.
+* ``series_a``: UR10 tracker series A (about 12,000 rows), with ``--series-a``;
+* ``demo``: ``robocal demo --no-screenshot`` (two calibrations with diagnosis and their
+  reports, on the shipped UR10 series D and Panda data), with ``--demo``.
 
 CPU seconds are ``time.process_time`` of the job (all threads of the process, not the
 simulation), so other work on the machine moves them less than wall time; the C
@@ -20,7 +22,8 @@ profiler itself adds to the total, so the CPU seconds come from a separate, unpr
 run). Run it with this copy of the package importable, e.g.
 ``PYTHONPATH=. python benchmarks/jobs.py``. Prints JSON.
 
-    python benchmarks/jobs.py [--cases bar,artifact,tracker] [--series-a] [--no-profile]
+    python benchmarks/jobs.py [--cases bar,artifact,tracker] [--series-a] [--demo]
+                              [--no-profile]
 """
 
 from __future__ import annotations
@@ -48,6 +51,10 @@ SERIES_A = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur
     "series_A.yaml"
 SHARED_SERIES_A = Path(__file__).resolve().parents[2] / "shared" / "data" / "ur10-ipa" / \
     "series_A.yaml"
+# What each case should stay within on a 2-core machine: CPU seconds, and peak memory
+# [MB, 10^6 bytes] where one is set.
+TARGETS = {"bar": (3.0, None), "artifact": (10.0, None), "tracker": (8.0, None),
+           "series_a": (30.0, 400.0), "demo": (20.0, None)}
 NOISE = 1e-5  # [m] per coordinate
 TOP = 25  # functions listed in the profile summary
 # Stages named in the summary by the function that runs them.
@@ -72,10 +79,20 @@ def _dataset(case: str, folder: Path) -> Path:
     return Path(sim.dataset_path)
 
 
-def _job(dataset: Path, out: Path) -> int:
+def _job(dataset: Path | None, out: Path) -> int:
     from robocal_casadi.cli import main
 
+    if dataset is None:  # the demo: its own data, two jobs under ``out``
+        return main(["demo", "--out", str(out), "--no-screenshot", "--force"])
     return main(["calibrate", str(dataset), "--out", str(out), "--force"])
+
+
+def _result(out: Path) -> dict:
+    """The job's result.json (the demo's first job's)."""
+    path = out / "result.json"
+    if not path.is_file():
+        path = next(iter(sorted(out.glob("*/result.json"))), path)
+    return json.loads(path.read_text()) if path.is_file() else {}
 
 
 def _summary(profile: cProfile.Profile) -> dict:
@@ -108,7 +125,7 @@ def one(case: str, profile: bool, keep: Path | None = None) -> dict:
     """Run ``case`` in this process and return its figures (``keep``: a folder to write
     the job's outputs into, ``<keep>/<case>``, instead of a temporary one)."""
     folder = Path(tempfile.mkdtemp(prefix=f"robocal-jobs-{case}-"))
-    dataset = _dataset(case, folder)
+    dataset = None if case == "demo" else _dataset(case, folder)
     out = keep / case if keep is not None else folder / "out"
     profiler = cProfile.Profile(time.process_time) if profile else None
     children = _children_cpu()
@@ -121,11 +138,12 @@ def one(case: str, profile: bool, keep: Path | None = None) -> dict:
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     children = _children_cpu() - children
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB -> MiB (Linux)
-    result = json.loads((out / "result.json").read_text()) if status == 0 else {}
-    figures = {"case": case, "dataset": dataset.name, "exit_status": status,
+    result = _result(out) if status == 0 else {}
+    figures = {"case": case, "dataset": dataset.name if dataset else "demo", "exit_status": status,
                "cpu_seconds": round(cpu, 2), "compiler_cpu_seconds": round(children, 2),
                "wall_seconds": round(wall, 2),
                "peak_memory_mib": round(peak, 1), "profiled": profile,
+               "target_cpu_seconds": TARGETS[case][0], "target_peak_mb": TARGETS[case][1],
                "fit_rms": result.get("fit"), "effects": [
                    f"{e['name']}{e['joints']}" for e in result.get("effects", [])]}
     if profiler is not None:
@@ -149,6 +167,7 @@ def main() -> None:
     parser.add_argument("--cases", default=",".join(CASES),
                         help="comma-separated cases (default: bar,artifact,tracker)")
     parser.add_argument("--series-a", action="store_true", help="also the UR10 series A")
+    parser.add_argument("--demo", action="store_true", help="also robocal demo")
     parser.add_argument("--no-profile", action="store_true",
                         help="CPU seconds and memory only, no profiled run")
     parser.add_argument("--keep", type=Path, metavar="DIR",
@@ -160,8 +179,9 @@ def main() -> None:
     if args.one:
         print(json.dumps(one(args.one, args.profile, args.keep)))
         return
-    cases = [c for c in args.cases.split(",") if c] + (["series_a"] if args.series_a else [])
-    unknown = sorted(set(cases) - set(CASES) - {"series_a"})
+    cases = [c for c in args.cases.split(",") if c] + (["series_a"] if args.series_a else []) \
+        + (["demo"] if args.demo else [])
+    unknown = sorted(set(cases) - set(CASES) - {"series_a", "demo"})
     if unknown:
         parser.error(f"unknown case(s) {', '.join(unknown)}; choose from {', '.join(CASES)}")
     out = []

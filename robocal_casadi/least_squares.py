@@ -9,7 +9,9 @@ computed on the columns scaled to unit norm (``D = diag(|J_j|)``) so the system 
 scaled: ``(Js^T Js + mu I) D dx = -Js^T r``; Levenberg's ``J^T J + mu I`` (``D = I``) is the
 choice for unknowns of one unit. ``mu`` starts at ``Damping.initial``, grows by
 ``increase`` after a step that raises the cost and shrinks by ``decrease`` after one that
-does not; a step is sought until ``mu`` passes ``ceiling``.
+does not; a step is sought until ``mu`` passes ``ceiling``, or until a refused step is
+already below ``xtol`` with a predicted decrease within rounding of the cost (the
+minimum, to rounding: status 3).
 
 The state may live on a manifold: ``retract(x, dx)`` maps a step in the local
 coordinates the Jacobian is taken in to a new state (default ``x + dx``), and
@@ -122,10 +124,22 @@ def damped_step(Js: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray:
     positive definite, an undamped one (``mu = 0``) is factored by Cholesky, and one that
     Cholesky refuses falls back to an SVD solve of the stacked problem.
     """
+    return _damped_solve(normal_equations(Js, r), Js, r, mu)
+
+
+def normal_equations(Js: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(Js^T Js, -Js^T r)``: what every damped step from one state shares, formed once
+    per state however many damping values are tried."""
+    return Js.T @ Js, -(Js.T @ r)
+
+
+def _damped_solve(normal: tuple[np.ndarray, np.ndarray], Js: np.ndarray, r: np.ndarray,
+                  mu: float) -> np.ndarray:
+    """``damped_step`` from the shared normal equations (``normal_equations(Js, r)``)."""
     n = Js.shape[1]
-    A = Js.T @ Js
+    A = normal[0].copy()
     A.flat[::n + 1] += mu
-    g = -(Js.T @ r)
+    g = normal[1]
     try:
         if mu > 0.0:
             return np.linalg.solve(A, g)
@@ -200,9 +214,11 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
         scale = column_scale(J[:, free]) if damping is None or damping.scaling == "marquardt" \
             else np.ones(int(free.sum()))
         Js = J[:, free] / scale
+        normal = normal_equations(Js, r)
         while True:
+            scaled_step = _damped_solve(normal, Js, r, mu)
             step = np.zeros(J.shape[1])
-            step[free] = damped_step(Js, r, mu) / scale
+            step[free] = scaled_step / scale
             x_trial, step, clipped = _moved(state.x, step, retract, bounds)
             r_trial, J_trial = evaluate(x_trial, False)
             cost_trial = _cost(r_trial, weights)
@@ -210,6 +226,12 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
             if damping is None or cost_trial < state.cost or (
                     cost_trial == state.cost and not clipped):
                 break
+            # A refused step below xtol whose predicted gain is rounding: the state is
+            # where the steps end. (At the minimum more damping would only shrink the step
+            # further, each trial evaluated in turn and refused.)
+            if _rounding_only(normal, scaled_step, state.cost) and _below_xtol(
+                    scaled_step, coordinates(state.x)[free] * scale, tolerances):
+                return _result(state, iteration, 3)
             mu = max(mu * damping.increase, damping.floor)
             if mu > damping.ceiling:
                 return _result(state, iteration, 5)
@@ -281,9 +303,23 @@ def _stop_after_step(scaled_step: np.ndarray, scaled_x: np.ndarray, cost: float,
                      decrease: float, tolerances: Tolerances) -> int | None:
     if abs(decrease) <= tolerances.ftol * cost:
         return 2
-    if np.linalg.norm(scaled_step) <= tolerances.xtol * (1.0 + np.linalg.norm(scaled_x)):
+    if _below_xtol(scaled_step, scaled_x, tolerances):
         return 3
     return None
+
+
+def _rounding_only(normal: tuple[np.ndarray, np.ndarray], scaled_step: np.ndarray,
+                   cost: float) -> bool:
+    """The linear model's decrease for ``scaled_step`` (``g.s - |Js s|^2 / 2`` from the
+    normal equations) is within rounding of ``cost``."""
+    A, g = normal
+    predicted = float(g @ scaled_step - 0.5 * scaled_step @ (A @ scaled_step))
+    return bool(predicted <= np.finfo(float).eps * cost)
+
+
+def _below_xtol(scaled_step: np.ndarray, scaled_x: np.ndarray, tolerances: Tolerances) -> bool:
+    """The scaled step at or below ``xtol`` of the scaled state."""
+    return bool(np.linalg.norm(scaled_step) <= tolerances.xtol * (1.0 + np.linalg.norm(scaled_x)))
 
 
 def _result(state: _State, iterations: int, status: int) -> LeastSquaresResult:

@@ -225,3 +225,17 @@ def test_the_job_delivers_the_map_and_reads_it_back(tmp_path):
     assert delivered == pytest.approx(result["validation"]["rms_final"], rel=1e-6)
     written = load_effects(out, ROBOTS["industrial_6r"]())
     assert any(isinstance(e, ResidualMap) for e in written.effects)
+
+
+def test_kernel_matrix_against_scipy_distances_across_row_blocks():
+    # More rows than one block of the in-place sum: every entry exp(-d^2 / (2 l^2)) with
+    # d the Euclidean distance scipy computes on its own.
+    from scipy.spatial.distance import cdist
+
+    from robocal_casadi.effects.residual_map import KERNEL_BLOCK, gaussian
+
+    rng = np.random.default_rng(4)
+    U = rng.uniform(-0.1, 1.1, (KERNEL_BLOCK + 37, 3))
+    centres = rng.uniform(0.0, 1.0, (50, 3))
+    expected = np.exp(-cdist(U, centres, "sqeuclidean") / (2.0 * 0.2**2))
+    np.testing.assert_allclose(gaussian(U, centres, 0.2), expected, rtol=1e-13, atol=0)

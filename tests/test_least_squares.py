@@ -119,3 +119,34 @@ def test_damped_step_is_the_regularised_least_squares_solution():
     step = damped_step(deficient, r, 0.0)
     best = deficient @ (np.linalg.pinv(deficient) @ -r) + r
     assert np.linalg.norm(deficient @ step + r) == pytest.approx(np.linalg.norm(best), rel=1e-9)
+
+
+def test_a_refused_step_below_xtol_ends_the_fit_without_more_damping():
+    # Started at the least-squares minimum of a linear problem, the only steps left are
+    # rounding: the first is refused or accepted, and no ladder of ever more damped
+    # trials follows (each trial is one residual evaluation).
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(200, 4))
+    b = A @ np.array([1.0, -2.0, 0.5, 3.0]) + rng.normal(0.0, 1e-3, 200)
+    x_min = np.linalg.lstsq(A, b, rcond=None)[0]
+    calls = []
+
+    def linear(x, _jacobian):
+        calls.append(1)
+        return A @ x - b, A
+
+    fit = levenberg_marquardt(linear, x_min.copy(), max_iterations=50,
+                              tolerances=Tolerances(xtol=1e-10))
+    assert fit.status == 3
+    assert len(calls) <= 3  # the start, one trial and at most one more
+    np.testing.assert_allclose(fit.x, x_min, rtol=1e-12, atol=1e-14)
+
+
+def test_a_fit_reaches_the_same_minimum_as_scipy_run_to_convergence():
+    # The exponential model from a poor start: our default xtol against scipy with every
+    # tolerance at 1e-15, to 1e-9 relative (far above rounding, far below the noise).
+    fit = levenberg_marquardt(evaluate, np.array([1.0, -0.5, 0.0]), max_iterations=200,
+                              tolerances=Tolerances(xtol=1e-10, ftol=1e-15))
+    ref = scipy_optimize.least_squares(lambda x: model(x) - DATA, [1.0, -0.5, 0.0],
+                                       jac=jacobian, ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    np.testing.assert_allclose(fit.x, ref.x, rtol=1e-9)

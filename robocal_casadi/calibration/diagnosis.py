@@ -67,6 +67,7 @@ import numpy as np
 
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
+from ..memory import release_freed
 from ..progress import note, reports_stages, stage
 from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
@@ -316,28 +317,36 @@ class _Screening:
         (no ``candidates``); it is then scaled in place."""
         if isinstance(J, list):
             J = J.pop()
+        release_freed()  # what earlier steps freed, before the stacked columns are formed
         self.problem, self.r, self.n_errors = problem, r, n_errors
         self.n = len(r)
         self.rss = float(r @ r)
         self.free_index = np.flatnonzero(free)
-        A = J if free_columns else J[:, self.free_index]
-        norms = np.linalg.norm(A, axis=0)
-        norms[norms == 0] = 1.0
-        A /= norms  # a copy of J's columns: scaled in place
-        self.A = A
-        self.gram_A = self.A.T @ self.A
         self.candidates = list(candidates)
         names = sorted({n for c in candidates for n in c.names},
                        key=problem.unknowns.index)
         self.effect_index = {n: problem.unknowns.index(n) for n in names}
-        E = J[:, [self.effect_index[n] for n in names]] if names else np.zeros((self.n, 0))
+        # Z = [A, E, r] is the one copy of J's columns: A (the free columns) and E (the
+        # candidates') are views of it, each scaled in place.
+        a = len(self.free_index)
+        Z = np.empty((self.n, a + len(names) + 1))
+        sources = np.arange(a) if free_columns else self.free_index
+        for k, column in enumerate([*sources, *(self.effect_index[n] for n in names)]):
+            Z[:, k] = J[:, column]  # column by column: no temporary of them all
+        Z[:, -1] = r
         del J  # its columns are copied: freed here unless the caller holds it
+        A = Z[:, :a]
+        norms = np.linalg.norm(A, axis=0)
+        norms[norms == 0] = 1.0
+        A /= norms
+        self.A = A
+        self.gram_A = self.A.T @ self.A
+        E = Z[:, a:-1]
         self.raw_norm = dict(zip(names, np.linalg.norm(E, axis=0)))
         E_norms = np.where(np.linalg.norm(E, axis=0) > 0, np.linalg.norm(E, axis=0), 1.0)
-        E /= E_norms  # a copy of J's columns: scaled in place
+        E /= E_norms
         self.E = E
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
-        Z = np.column_stack([self.A, self.E, r])
         total = Z.T @ Z
         self.schemes = list(schemes)
         self.base = list(range(len(self.free_index)))

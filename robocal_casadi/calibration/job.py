@@ -27,6 +27,7 @@ import numpy as np
 from ..delivery.accuracy import predict, work_cell
 from ..delivery.choice import Delivery, choose
 from ..effect_model import EFFECTS_FILE, load_effects, save_effects
+from ..memory import release_freed
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import ProfileCost, profile_parameters
@@ -243,6 +244,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
             from ..report import write_report
 
             with stage("report"):
+                release_freed()  # the calibration's freed memory, before the figures
                 write_report(result, staging / "report.html", pdf=report.pdf,
                              info=report.info, templates=report.templates)
         written = tuple(sorted(p.name for p in staging.iterdir()))

@@ -39,6 +39,7 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
 from ..effects.residual_map import FADE, GAIN, SHIFT, ResidualMap, fade_weight, gaussian
+from ..memory import release_freed
 from ..results import EffectFinding
 from ..units import Units
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
@@ -248,6 +249,7 @@ def learn(problem: Problem, x: np.ndarray, variables: Sequence[str]) -> LearnedM
     data = _rows(problem, x, joints)
     if data is None or not data.folds:
         return None
+    release_freed()  # what the calibration freed, before the folds' kernel matrices
     without, cv = _cross_validated(data)
     a, b = np.unravel_index(int(np.argmin(cv.sum(axis=0))), cv.shape[1:])
     sse = np.column_stack([without, cv[:, a, b]])

@@ -103,10 +103,18 @@ def _levenberg_marquardt(problem: LeastSquaresProblem, x: np.ndarray, free: np.n
                          loss: Loss, max_iterations: int, damping: bool, tolerance: float,
                          decrease: float = CONVERGED_DECREASE):
     """The shared kernel over ``x[free]``: damped (``lm``) or plain Gauss-Newton steps."""
+    last: list = [None, None]  # the state last evaluated and its residual
+
     def evaluate(z: np.ndarray, jacobian: bool):
         full = x.copy()
         full[free] = z
-        return problem.residual(full), problem.jacobian(full, free) if jacobian else None
+        # The kernel asks for the Jacobian of a state whose residual it already has.
+        if last[0] is not None and np.array_equal(last[0], z):
+            r = last[1]
+        else:
+            r = problem.residual(full)
+            last[:] = [np.array(z, copy=True), r]
+        return r, problem.jacobian(full, free) if jacobian else None
 
     fit = levenberg_marquardt(
         evaluate, x[free].copy(), max_iterations=max_iterations,
@@ -115,15 +123,17 @@ def _levenberg_marquardt(problem: LeastSquaresProblem, x: np.ndarray, free: np.n
         reweight=_huber_weights if loss == "huber" else None)
     x = x.copy()
     x[free] = fit.x
-    r, covariance = _finish(problem, x, free, loss)
+    r, covariance = _finish(problem, x, free, loss, fit.residual, fit.jacobian)
     return x, r, covariance, fit.cost, fit.iterations, fit.word
 
 
-def _finish(problem: LeastSquaresProblem, x: np.ndarray, free: np.ndarray, loss: Loss):
-    """Residual and covariance of the free unknowns at ``x``."""
-    r = problem.residual(x)
+def _finish(problem: LeastSquaresProblem, x: np.ndarray, free: np.ndarray, loss: Loss,
+            r: np.ndarray | None = None, J: np.ndarray | None = None):
+    """Residual and covariance of the free unknowns at ``x`` (``r`` and ``J``: the
+    residual and the free columns' Jacobian there, when the fit already has them)."""
+    r = problem.residual(x) if r is None else r
     w = np.sqrt(_huber_weights(r)) if loss == "huber" else np.ones_like(r)
-    J = problem.jacobian(x, free)
+    J = problem.jacobian(x, free) if J is None else J
     return r, _covariance(J * w[:, None], r * w)
 
 
