@@ -7,7 +7,7 @@ length unit, angles in its angle unit, residual RMS in its length unit).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -17,9 +17,6 @@ from .robot import Robot
 from .units import Units
 
 if TYPE_CHECKING:
-    from .calibration.problem import Problem
-    from .calibration.selection import Selection
-    from .calibration.solver import Solution
     from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
@@ -112,6 +109,14 @@ class Identifiability:
     # Held at nominal because the data barely see them (not an exact dependency): their
     # errors stay as large as their tolerances.
     practical: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        """The ``result.json`` block: what is identifiable, why the rest is not, the
+        combinations and the singular values."""
+        return {"identifiable": list(self.identifiable),
+                "not_identifiable": dict(self.unidentifiable),
+                "combinations": list(self.combinations),
+                "singular_values": [float(v) for v in self.singular_values]}
 
     def __repr__(self) -> str:
         return (f"Identifiability({len(self.identifiable)} of {len(self.candidates)} identifiable, "
@@ -376,87 +381,6 @@ class CalibrationResult:
     validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
     # over the readings kept)
 
-    @classmethod
-    def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
-                 final_problem: Problem, nominal: Solution, geometric: Solution,
-                 final: Solution, std: np.ndarray, identifiability: Identifiability,
-                 parameters: Sequence[ParameterEstimate],
-                 parameters_geometric: Sequence[ParameterEstimate],
-                 effects: Sequence[EffectFinding], diagnosis: Sequence[DiagnosisRecord],
-                 fit: RmsSummary,
-                 validation: RmsSummary | None, residuals: Sequence[DatasetResiduals],
-                 validation_residuals: Sequence[DatasetResiduals],
-                 spheres: Sequence[SphereEstimate], selection: Selection | None,
-                 unexplained: Any, recommended: str, recommendation: str,
-                 prior: PriorSummary | None, notes: Sequence[str], method: str,
-                 loss: str) -> CalibrationResult:
-        """The result of a calibration from its stages.
-
-        ``problem`` is the geometric identification problem (``nominal`` and ``geometric``
-        its solutions), ``final_problem`` the one with the effects diagnosis added
-        (``final`` its solution; the same problem when it added none); ``std`` [SI] the
-        standard error of every unknown of ``final_problem`` (NaN where not estimated).
-        The calibrated robot takes the ``recommended`` model's geometry.
-        """
-        names = final_problem.unknowns.names
-
-        def std_of(i: int) -> float | None:
-            return float(std[i]) if np.isfinite(std[i]) else None
-
-        mounted_slice = final_problem.slices["mounted"]
-        mounted = {names[i]: (float(final.x[i]), std_of(i))
-                   for i in range(mounted_slice.start, mounted_slice.stop)}
-        placement_slice = final_problem.slices["placement"]
-        placement = {names[i]: float(final.x[i])
-                     for i in range(placement_slice.start, placement_slice.stop)}
-        effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
-                                        for n in f.parameters}) for f in effects)
-        chosen = final.x if recommended == "final" else geometric.x
-        kept_slices = (problem.slices["robot"], problem.slices["mounted"])
-        robot_free = [i for i in np.flatnonzero(geometric.free)
-                      if any(part.start <= i < part.stop for part in kept_slices)]
-        position = {int(i): k for k, i in enumerate(np.flatnonzero(geometric.free))}
-        kept = [position[int(i)] for i in robot_free]
-        covariance = (np.asarray(geometric.covariance)[np.ix_(kept, kept)]
-                      if np.size(geometric.covariance) else np.zeros((0, 0)))
-        geometric_names = problem.unknowns.names
-        mounted_geometric = {geometric_names[i]: float(geometric.x[i])
-                             for i in range(problem.slices["mounted"].start,
-                                            problem.slices["mounted"].stop)}
-        return cls(
-            datasets=datasets,
-            robot_nominal=robot,
-            robot_calibrated=robot.with_parameters(chosen[problem.slices["robot"]]),
-            parameters=tuple(parameters),
-            identifiability=identifiability,
-            condition_number=identifiability.condition_number,
-            effects=effects,
-            fit=fit,
-            validation=validation,
-            residuals=tuple(residuals),
-            validation_residuals=tuple(validation_residuals),
-            mounted=mounted,
-            mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
-            placement=placement,
-            solver={"method": method, "loss": loss, "iterations": final.iterations,
-                    "status": final.status, "seconds": geometric.seconds + nominal.seconds,
-                    "residuals": problem.size, "free_unknowns": int(geometric.free.sum())},
-            effect_models=tuple(final_problem.effects),
-            effect_values=final.x[final_problem.slices["effects"]].copy(),
-            diagnosis=tuple(diagnosis),
-            selection={} if selection is None else dict(selection.dropped),
-            parameters_geometric=tuple(parameters_geometric),
-            unexplained=unexplained,
-            recommended=recommended,
-            recommendation=recommendation,
-            prior=prior,
-            spheres=tuple(spheres),
-            notes=tuple(notes),
-            mounted_geometric=mounted_geometric,
-            covariance_names=tuple(geometric_names[i] for i in robot_free),
-            covariance=covariance,
-        )
-
     @property
     def warning(self) -> str:
         """The first thing a person must read, or '' (held-out data reject the effects)."""
@@ -491,33 +415,16 @@ class CalibrationResult:
                     "datasets": _per_dataset(self.residuals, units)},
         }
         if self.validation is not None:
-            every = self.validation_all or self.validation
-            out["validation"] = {**self.validation.to_json(units),
-                                 "kept": self.validation.to_json(units),
-                                 "all": every.to_json(units),
-                                 "rejected": sum(e.role == "validation" for e in self.rejected),
-                                 "datasets": _per_dataset(self.validation_residuals, units)}
+            out["validation"] = self._validation_json(self.validation, units)
         out["rejected"] = [e.to_json(units) for e in self.rejected]
-        out["mounted"] = {}
-        for name, (value, std) in self.mounted.items():
-            quantity = self.mounted_quantities.get(name, "length")
-            scale = units.scale(quantity)
-            out["mounted"][name] = {"estimate": value / scale,
-                                    "std": None if std is None else std / scale,
-                                    "unit": units.unit_name(quantity),
-                                    **(self.prior.entry(name, units) if self.prior else {})}
+        out["mounted"] = self._mounted_json(units)
         if self.prior is not None:
             out["prior"] = self.prior.to_json(units)
         if self.spheres:
             out["spheres"] = [s.to_json(units) for s in self.spheres]
         if self.notes:
             out["notes"] = list(self.notes)
-        out["identifiability"] = {
-            "identifiable": list(self.identifiability.identifiable),
-            "not_identifiable": dict(self.identifiability.unidentifiable),
-            "combinations": list(self.identifiability.combinations),
-            "singular_values": [float(v) for v in self.identifiability.singular_values],
-        }
+        out["identifiability"] = self.identifiability.to_json()
         out["solver"] = {k: v for k, v in self.solver.items()
                          if isinstance(v, (int, float, str, bool))}
         out["recommended"] = self.recommended
@@ -529,16 +436,41 @@ class CalibrationResult:
         if self.profile is not None:
             out["profile"] = self.profile.to_json(units, self.fit, self.validation)
         if self.delivered is not None:
-            out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
-            # The instrument values that go with the delivered geometry, in the file's units.
-            out["delivered"]["robot_calibrated.yaml"]["mounted"] = {
-                name: value / units.scale(self.mounted_quantities.get(name, "length"))
-                for name, value in self.delivered.get("mounted", {}).items()}
+            out["delivered"] = self._delivered_json(units)
         if self.delivery is not None:
             out["recommendation"] = self.recommendation
         out["predicted_accuracy"] = (None if self.predicted_accuracy is None else
                                      self.predicted_accuracy.to_json(units.length_scale,
                                                                      units.length))
+        return out
+
+    def _validation_json(self, validation: RmsSummary, units: Units) -> dict:
+        """The held-out block: RMS over the readings kept (also as ``kept``) and over all
+        of them, the count set aside, and per dataset."""
+        every = self.validation_all or validation
+        return {**validation.to_json(units), "kept": validation.to_json(units),
+                "all": every.to_json(units),
+                "rejected": sum(e.role == "validation" for e in self.rejected),
+                "datasets": _per_dataset(self.validation_residuals, units)}
+
+    def _mounted_json(self, units: Units) -> dict:
+        """Each mounted instrument value with its standard error, in the file's units."""
+        out = {}
+        for name, (value, std) in self.mounted.items():
+            quantity = self.mounted_quantities.get(name, "length")
+            scale = units.scale(quantity)
+            out[name] = {"estimate": value / scale, "std": None if std is None else std / scale,
+                         "unit": units.unit_name(quantity),
+                         **(self.prior.entry(name, units) if self.prior else {})}
+        return out
+
+    def _delivered_json(self, units: Units) -> dict:
+        """``delivered`` in the file's units, with the instrument values that go with the
+        delivered geometry."""
+        out = delivered_json(self.delivered, units.length_scale, units.length)
+        out["robot_calibrated.yaml"]["mounted"] = {
+            name: value / units.scale(self.mounted_quantities.get(name, "length"))
+            for name, value in self.delivered.get("mounted", {}).items()}
         return out
 
     def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
