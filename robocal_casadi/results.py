@@ -292,6 +292,126 @@ class RejectedReading:
 
 
 @dataclass(frozen=True)
+class StructureTest:
+    """One variable against one geometric parameter: the numbers of its test
+    (``calibration.unexplained``)."""
+
+    variable: str
+    parameter: str
+    columns: int  # free columns after projection
+    statistic: float  # n log(RSS0 / RSS1)
+    threshold: float  # chi-square quantile it must exceed
+    rss_drop: float  # relative
+
+    @property
+    def significant(self) -> bool:
+        return self.statistic > self.threshold
+
+    def __repr__(self) -> str:
+        return (f"StructureTest({self.parameter} ~ {self.variable}: {self.statistic:.4g} "
+                f"vs {self.threshold:.4g}, rss -{100 * self.rss_drop:.3g}%)")
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """A structured residual the model does not explain (``calibration.unexplained``).
+
+    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS; at most the
+    fit RMS), ``share`` its fraction of the remaining mean square, ``variables`` the
+    variables it follows, strongest first, ``parameters`` the geometric parameter that
+    varies with each (the likeliest carrier, not a diagnosis), ``noise_floor`` [m] the
+    held-out RMS once the structure is fitted. ``curve`` holds per data row the strongest
+    variable's value (SI, or the column's own unit) and the RMS [m] of the row's residual
+    entries before
+    and after removing the structure, for a plot.
+    """
+
+    rms: float
+    share: float
+    variables: tuple[str, ...]
+    parameters: tuple[str, ...]
+    noise_floor: float
+    tests: tuple[StructureTest, ...] = field(repr=False, default=())
+    curve: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+
+    def to_json(self, length_scale: float, unit: str) -> dict[str, Any]:
+        """The result file's form: rms in the file's length unit."""
+        return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
+                "variables": list(self.variables)}
+
+    def sentence(self, length_scale: float, unit: str) -> str:
+        """One sentence for a person, in the file's length unit."""
+        pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
+        return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
+                f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
+                f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
+                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
+
+
+
+
+@dataclass(frozen=True)
+class CandidateFigures:
+    """One geometry-only model the delivery weighed (``delivery.choice``): its RMS [m]
+    on the fit data and on held-out data (None without any)."""
+
+    name: str
+    fit: float
+    held_out: float | None
+
+
+@dataclass(frozen=True)
+class Delivered:
+    """What each output file delivers, measured from the files as written
+    (``calibration.job.measured``).
+
+    ``model`` is the candidate ``robot_calibrated.yaml`` holds (``geometric``,
+    ``nominal``, ...), ``robot_file`` its RMS [m] by role (``fit``, ``validation``),
+    ``errors`` its per-measurement errors [m] by role, ``mounted`` the instrument values
+    [SI] that go with it; ``with_effects`` the RMS [m] by role of the model with
+    ``effects_calibrated.yaml`` (None when no effects are delivered); ``basis`` and
+    ``reason`` what the choice rested on and why; ``candidates`` every geometry-only
+    model it weighed.
+    """
+
+    model: str
+    robot_file: dict[str, float]
+    with_effects: dict[str, float] | None
+    mounted: dict[str, float]
+    errors: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    basis: str = ""
+    reason: str = ""
+    candidates: tuple[CandidateFigures, ...] = ()
+
+    def to_json(self, units: Units, quantities: dict[str, str]) -> dict:
+        """The ``result.json`` block in the robot file's units, with what each output
+        applies; ``quantities`` names the quantity of each mounted value (default length)."""
+        s, unit = units.length_scale, units.length
+
+        def scaled(block: dict[str, float]) -> dict:
+            return {role: value / s for role, value in block.items()} | {"unit": unit}
+
+        mounted = {name: value / units.scale(quantities.get(name, "length"))
+                   for name, value in self.mounted.items()}
+        out: dict[str, Any] = {"robot_calibrated.yaml": {
+            "applies": "the calibrated geometry only (robocal fk, robocal compensate, a "
+                       "controller's DH table)",
+            "model": self.model, **scaled(self.robot_file), "mounted": mounted}}
+        out["chosen_by"] = self.basis
+        out["reason"] = self.reason
+        if self.candidates:
+            out["candidates"] = {
+                c.name: {"fit": c.fit / s, "held_out": None if c.held_out is None else
+                         c.held_out / s, "unit": unit} for c in self.candidates}
+        if self.with_effects:
+            out["effects_calibrated.yaml"] = {
+                "applies": "the calibrated geometry with the identified effects (robocal fk "
+                           "and robocal compensate --with-effects)",
+                **scaled(self.with_effects)}
+        return out
+
+
+@dataclass(frozen=True)
 class ErrorTerm:
     """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
     components x, y, z), ``"surface"`` (signed distance from a surface), ``"distance"``
@@ -355,20 +475,20 @@ class CalibrationResult:
     mounted: dict[str, tuple[float, float | None]] = field(default_factory=dict)
     mounted_quantities: dict[str, str] = field(default_factory=dict)  # name -> length | none
     placement: dict[str, float] = field(default_factory=dict)
-    solver: dict[str, Any] = field(default_factory=dict)
+    solver: dict[str, str | int | float] = field(default_factory=dict)
     effect_models: tuple[Effect, ...] = ()  # the effects fitted, values in ``effect_values``
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[DiagnosisRecord, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
     parameters_geometric: tuple[ParameterEstimate, ...] = ()  # the geometric fit's estimates
-    unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
+    unexplained: Unexplained | None = None  # None: what remains is consistent with noise
     recommended: str = "final"  # "final" | "geometric": the model held-out data support
     recommendation: str = ""  # why, in words
     prior: PriorSummary | None = None
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
     profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
-    delivered: Any = None  # ``calibration.job.measured``: RMS [m] each output delivers
+    delivered: Delivered | None = None  # ``calibration.job.measured``: what each file delivers
     # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
     # its free robot and mounted parameters (``covariance_names``, in that order): what
     # the delivery and its predicted work-cell accuracy start from (``delivery``).
@@ -436,7 +556,7 @@ class CalibrationResult:
         if self.profile is not None:
             out["profile"] = self.profile.to_json(units, self.fit, self.validation)
         if self.delivered is not None:
-            out["delivered"] = self._delivered_json(units)
+            out["delivered"] = self.delivered.to_json(units, self.mounted_quantities)
         if self.delivery is not None:
             out["recommendation"] = self.recommendation
         out["predicted_accuracy"] = (None if self.predicted_accuracy is None else
@@ -464,14 +584,6 @@ class CalibrationResult:
                          **(self.prior.entry(name, units) if self.prior else {})}
         return out
 
-    def _delivered_json(self, units: Units) -> dict:
-        """``delivered`` in the file's units, with the instrument values that go with the
-        delivered geometry."""
-        out = delivered_json(self.delivered, units.length_scale, units.length)
-        out["robot_calibrated.yaml"]["mounted"] = {
-            name: value / units.scale(self.mounted_quantities.get(name, "length"))
-            for name, value in self.delivered.get("mounted", {}).items()}
-        return out
 
     def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
         entry = parameter.to_json(units)
@@ -500,32 +612,6 @@ class CalibrationResult:
         if self.unexplained is not None:
             lines.append("  unexplained: " + self.unexplained.sentence(s, u.length))
         return "\n".join(lines)
-
-
-def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
-    """``delivered`` in the robot file's length unit, with what each output applies."""
-    def scaled(block):
-        return {role: value / length_scale for role, value in block.items()} | {"unit": unit}
-
-    out = {"robot_calibrated.yaml": {"applies": "the calibrated geometry only (robocal fk, "
-                                                "robocal compensate, a controller's DH table)",
-                                     "model": delivered.get("model", "geometric"),
-                                     **scaled(delivered["robot_calibrated.yaml"])}}
-    if "basis" in delivered:
-        out["chosen_by"] = delivered["basis"]
-        out["reason"] = delivered.get("reason", "")
-    if delivered.get("candidates"):
-        out["candidates"] = {
-            name: {"fit": c["fit"] / length_scale,
-                   "held_out": None if c["held_out"] is None else c["held_out"] / length_scale,
-                   "unit": unit}
-            for name, c in delivered["candidates"].items()}
-    if delivered.get("with_effects"):
-        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified "
-                                                     "effects (robocal fk and robocal compensate "
-                                                     "--with-effects)",
-                                          **scaled(delivered["with_effects"])}
-    return out
 
 
 def mean_square_shares(nominal: float, geometric: float, final: float,

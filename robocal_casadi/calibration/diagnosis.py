@@ -56,10 +56,9 @@ docs/formats.md#result-file (for tracker data the 3-D point error), as ``Problem
 
 from __future__ import annotations
 
-import functools
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -88,16 +87,11 @@ MAX_ROUNDS = 8
 # ----------------------------------------------------------------------------- results
 
 
-@functools.cache
-def _field_names(cls: type) -> tuple[str, ...]:
-    """The field names of a dataclass, in order (looked up once: read on every access)."""
-    return tuple(f.name for f in fields(cls))
-
-
 @dataclass(frozen=True)
-class CandidateTest(Mapping):
-    """One candidate tested in one round, with its numbers (also readable as a mapping of
-    every field but ``outcome``, the ``Decision``; ``decision`` gives its reason in words).
+class CandidateTest:
+    """One candidate tested in one round, with its numbers: ``outcome`` is the
+    ``Decision``, ``decision`` its reason in words (``as_dict``: every field but
+    ``outcome`` by name).
 
     ``parameters`` counts the columns kept after the identifiability check, ``held`` names
     those the geometry absorbs; ``remaining_norm`` is the smallest relative norm among
@@ -126,22 +120,7 @@ class CandidateTest(Mapping):
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
-        return {key: getattr(self, key) for key in self._keys()}
-
-    def __getitem__(self, key: str):
-        if key not in self._keys():
-            raise KeyError(key)
-        return getattr(self, key)
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._keys())
-
-    def __len__(self) -> int:
-        return len(self._keys())
-
-    @classmethod
-    def _keys(cls) -> tuple[str, ...]:
-        return tuple(name for name in _field_names(cls) if name != "outcome")
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "outcome"}
 
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "

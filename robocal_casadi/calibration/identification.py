@@ -236,7 +236,7 @@ class DiagnosedFit:
     problem: Problem
     solution: Solution
     added: tuple[EffectFinding, ...]
-    tested: tuple = ()
+    tested: tuple[diagnosis.CandidateTest, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from ..profiles import ProfileCost, profile_parameters
 from ..progress import reports_stages, stage
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from ..results import CalibrationResult
+from ..results import CalibrationResult, CandidateFigures, Delivered
 from ..robot import load_robot, save_robot
 from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
@@ -163,12 +163,11 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None
-    delivered = {ROBOT_FILE: figures[ROBOT_FILE], "with_effects": with_effects,
-                 "model": delivery.delivered, "mounted": dict(mounted), "errors": errors,
-                 "basis": delivery.basis,
-                 "reason": delivery.reason,
-                 "candidates": {c.name: {"fit": c.fit_rms, "held_out": c.held_out_rms}
-                                for c in delivery.candidates}}
+    delivered = Delivered(model=delivery.delivered, robot_file=figures[ROBOT_FILE],
+                          with_effects=with_effects, mounted=dict(mounted), errors=errors,
+                          basis=delivery.basis, reason=delivery.reason,
+                          candidates=tuple(CandidateFigures(c.name, c.fit_rms, c.held_out_rms)
+                                           for c in delivery.candidates))
     return replace(result, delivered=delivered, predicted_accuracy=predicted)
 
 

@@ -29,19 +29,20 @@ reported.
 ``find`` returns None when nothing is significant, the cross-validation does not
 improve, or the structured part is below ``MIN_SHARE`` of the remaining mean square.
 Linearised at the final solution; residuals [m] are those of ``Problem.residual``,
-RMS values over the per-measurement errors as ``Problem.rms``.
+RMS values over the per-measurement errors as ``Problem.rms``. The records it returns
+(``Unexplained``, ``StructureTest``) are results, defined in ``results``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from statistics import NormalDist
-from typing import Any
 
 import numpy as np
 
 from ..effects.motion import directions_of_motion
+from ..results import StructureTest, Unexplained
 from .folds import FoldGrams, fold_schemes
 
 ALPHA = 1e-3  # family-wise false-alarm level over all tests
@@ -55,62 +56,6 @@ STEMS = ("theta", "d", "a", "alpha", "x", "y", "z", "roll", "pitch", "yaw")  # D
 PAIR_GAIN = 1.25  # a pair's statistic over the better of its two variables alone
 LISTED = 0.25  # variables listed down to this fraction of the strongest statistic
 CV_SLACK = 3.0  # held-out error of the model alone, over what a sound fold split gives
-
-
-@dataclass(frozen=True)
-class StructureTest:
-    """One variable against one geometric parameter: the numbers of its test."""
-
-    variable: str
-    parameter: str
-    columns: int  # free columns after projection
-    statistic: float  # n log(RSS0 / RSS1)
-    threshold: float  # chi-square quantile it must exceed
-    rss_drop: float  # relative
-
-    @property
-    def significant(self) -> bool:
-        return self.statistic > self.threshold
-
-    def __repr__(self) -> str:
-        return (f"StructureTest({self.parameter} ~ {self.variable}: {self.statistic:.4g} "
-                f"vs {self.threshold:.4g}, rss -{100 * self.rss_drop:.3g}%)")
-
-
-@dataclass(frozen=True)
-class Unexplained:
-    """A structured residual the model does not explain.
-
-    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS; at most the
-    fit RMS), ``share`` its fraction of the remaining mean square, ``variables`` the
-    variables it follows, strongest first, ``parameters`` the geometric parameter that
-    varies with each (the likeliest carrier, not a diagnosis), ``noise_floor`` [m] the
-    held-out RMS once the structure is fitted. ``curve`` holds per data row the strongest
-    variable's value (SI, or the column's own unit) and the RMS [m] of the row's residual
-    entries before
-    and after removing the structure, for a plot.
-    """
-
-    rms: float
-    share: float
-    variables: tuple[str, ...]
-    parameters: tuple[str, ...]
-    noise_floor: float
-    tests: tuple[StructureTest, ...] = field(repr=False, default=())
-    curve: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
-
-    def to_json(self, length_scale: float, unit: str) -> dict[str, Any]:
-        """The result file's form: rms in the file's length unit."""
-        return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
-                "variables": list(self.variables)}
-
-    def sentence(self, length_scale: float, unit: str) -> str:
-        """One sentence for a person, in the file's length unit."""
-        pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
-        return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
-                f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
-                f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
-                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
 
 
 # ----------------------------------------------------------------------------- variables
