@@ -12,17 +12,27 @@ this one job, so their results are the same, key by key:
    delivered file is computed by reading that file back and running the forward
    kinematics ``robocal fk`` runs; the predicted accuracy over the work cell; then
    ``result.json`` and the report; the folder moved into place as a whole.
+
+Each step runs the linear algebra library (OpenBLAS, MKL, ...) on one thread. A matrix
+product split over several threads adds its terms in another order, so the last digits
+of every estimate would depend on the machine's cores, and a fleet's worker processes
+(started with one thread each) would write other bytes than ``robocal calibrate`` for the
+same robot. On one thread every caller writes the same ``result.json``; the products of
+a calibration are too small for more threads to pay for starting them.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..delivery.accuracy import predict, work_cell
 from ..delivery.choice import Delivery, choose
@@ -39,6 +49,8 @@ from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
 from .outliers import kept_datasets
 
+P = ParamSpec("P")
+R = TypeVar("R")
 ROBOT_FILE = "robot_calibrated.yaml"
 REFUSED = 3  # exit status: the calibration is not better than doing nothing
 
@@ -94,6 +106,18 @@ class JobOutcome:
                 f"written={list(self.written)})")
 
 
+def on_one_blas_thread(function: Callable[P, R]) -> Callable[P, R]:
+    """``function`` run with the linear algebra library on one thread (the module
+    docstring says why); the caller's setting is restored after."""
+    @functools.wraps(function)
+    def run(*args: P.args, **kwargs: P.kwargs) -> R:
+        with threadpool_limits(limits=1, user_api="blas"):
+            return function(*args, **kwargs)
+
+    return run
+
+
+@on_one_blas_thread
 def calibrate_job(datasets: Sequence, validation: Sequence = (),
                   options: JobOptions = JobOptions()) -> CalibrationResult:
     """Steps 1 and 2: the calibration with its delivery chosen (nothing written)."""
@@ -134,6 +158,7 @@ def run_job(datasets: Sequence, validation: Sequence = (), options: JobOptions =
     return write(result, datasets, validation, Path(out), report, verb=verb)
 
 
+@on_one_blas_thread
 def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence = (),
              robot_file: Path | None = None, effects_folder: Path | None = None
              ) -> CalibrationResult:
@@ -223,6 +248,7 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     return float(np.sqrt(np.mean(np.sum((T[:, :3, 3] - T_target[:, :3, 3]) ** 2, axis=1))))
 
 
+@on_one_blas_thread
 def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, out: Path,
           report: ReportOptions = ReportOptions(), *, verb: str = "calibrate") -> JobOutcome:
     """Step 3: stage every file, measure the delivered ones as written, move into place
