@@ -411,6 +411,98 @@ class Delivered:
         return out
 
 
+# Where a predicted accuracy holds (``PredictedAccuracy.region_kind``), and its sample size.
+SAMPLES = 400
+DATA_RANGES = "joint ranges of the fit data"
+DECLARED = "declared work cell"
+PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
+MEASURED = "poses of the fit data"
+
+
+@dataclass(frozen=True)
+class PredictedAccuracy:
+    """Predicted tool-position error over ``region`` [m] (``delivery.accuracy``): ``rms``,
+    ``p95``, ``max``; ``structured`` [m] the part from what the model does not describe
+    (``s``); ``region`` the joint ranges (per joint ``[low, high]``, rad or m)."""
+
+    rms: float
+    p95: float
+    max: float
+    structured: float
+    region: tuple[tuple[float, float], ...]
+    samples: int = SAMPLES
+    errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
+    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
+
+    def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
+        return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
+                "max": self.max / length_scale, "structured": self.structured / length_scale,
+                "unit": unit,
+                "region": {"kind": self.region_kind, "samples": self.samples,
+                           "joints_rad_or_m": [list(r) for r in self.region]}}
+
+    @property
+    def region_words(self) -> str:
+        """Where the prediction holds, for sentences."""
+        return {DECLARED: "the declared work cell",
+                PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
+                                 "cover)",
+                MEASURED: "the poses the fit data were measured in"}.get(
+            self.region_kind, "the joint ranges the data cover")
+
+    def sentence(self, length_scale: float, unit: str) -> str:
+        return (f"predicted tool-position error over {self.region_words}: RMS "
+                f"{self.rms / length_scale:.4g}, 95% {self.p95 / length_scale:.4g}, max "
+                f"{self.max / length_scale:.4g} {unit}")
+
+    def __repr__(self) -> str:
+        return (f"PredictedAccuracy(rms={self.rms:.4g} m, p95={self.p95:.4g} m, "
+                f"max={self.max:.4g} m)")
+
+
+@dataclass(frozen=True)
+class ProfileCost:
+    """A calibration restricted to a controller ``profile``: the robot ``parameters`` it
+    leaves free, the ones the unrestricted calibration identified but the profile holds
+    (``held``), and the unrestricted calibration's RMS (``fit``, ``validation``; [m])
+    to compare with the restricted result's own."""
+
+    profile: str
+    parameters: tuple[str, ...]
+    held: tuple[str, ...]
+    fit: RmsSummary
+    validation: RmsSummary | None
+
+    def to_json(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> dict:
+        """The ``profile`` block of result.json: RMS with and without the restriction
+        (robot file length unit) for the geometric and the final model."""
+        s = units.length_scale
+
+        def compare(restricted: RmsSummary, free: RmsSummary) -> dict:
+            return {"unit": units.length,
+                    "rms_geometric": restricted.rms_geometric / s,
+                    "rms_geometric_unrestricted": free.rms_geometric / s,
+                    "rms_final": restricted.rms_final / s,
+                    "rms_final_unrestricted": free.rms_final / s}
+
+        out = {"name": self.profile, "parameters": list(self.parameters),
+               "held": list(self.held), "fit": compare(fit, self.fit)}
+        if validation is not None and self.validation is not None:
+            out["validation"] = compare(validation, self.validation)
+        return out
+
+    def sentence(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> str:
+        """One terminal line: what the profile costs."""
+        s, unit = units.length_scale, units.length
+        text = (f"profile {self.profile}: fit RMS {fit.rms_final / s:.4g} {unit} "
+                f"(unrestricted {self.fit.rms_final / s:.4g})")
+        if validation is not None and self.validation is not None:
+            text += (f", validation RMS {validation.rms_final / s:.4g} {unit} (unrestricted "
+                     f"{self.validation.rms_final / s:.4g})")
+        held = ", ".join(self.held[:8]) + (" ..." if len(self.held) > 8 else "")
+        return text + (f"; holds {held}" if self.held else "; holds nothing the data determine")
+
+
 @dataclass(frozen=True)
 class ErrorTerm:
     """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
@@ -487,7 +579,7 @@ class CalibrationResult:
     prior: PriorSummary | None = None
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
-    profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
+    profile: ProfileCost | None = None  # when restricted to a controller's parameter set
     delivered: Delivered | None = None  # ``calibration.job.measured``: what each file delivers
     # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
     # its free robot and mounted parameters (``covariance_names``, in that order): what
@@ -495,7 +587,7 @@ class CalibrationResult:
     mounted_geometric: dict[str, float] = field(default_factory=dict)
     covariance_names: tuple[str, ...] = ()
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
-    predicted_accuracy: Any = None  # ``delivery.accuracy.PredictedAccuracy``
+    predicted_accuracy: PredictedAccuracy | None = None  # over the work cell
     delivery: Any = None  # ``delivery.choice.Delivery``: what robot_calibrated.yaml holds
     rejected: tuple[RejectedReading, ...] = ()  # units of data set aside as gross errors
     validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
