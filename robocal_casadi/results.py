@@ -503,6 +503,64 @@ class ProfileCost:
         return text + (f"; holds {held}" if self.held else "; holds nothing the data determine")
 
 
+DOING_NOTHING = ("nominal", "instrument_only")  # recommendations that refuse a calibration
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One model a controller could run (``delivery.choice``): ``robot`` (geometry only)
+    with the ``mounted`` instrument values [SI] that belong to it; ``fit_rms`` and
+    ``held_out_rms`` [m] (None where not measured)."""
+
+    name: str
+    robot: Robot = field(repr=False)
+    mounted: dict[str, float] = field(repr=False)
+    fit_rms: float
+    held_out_rms: float | None = None
+
+    def __repr__(self) -> str:
+        held = "" if self.held_out_rms is None else f", held out {self.held_out_rms:.4g} m"
+        return f"Candidate({self.name!r}, fit {self.fit_rms:.4g} m{held})"
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What is delivered (``delivery.choice``): ``recommended`` (``final``, ``geometric``,
+    ``nominal`` or ``instrument_only``), ``delivered`` the candidate robot_calibrated.yaml holds,
+    the ``basis`` of the decision (``held-out data`` or ``cross-validation``), every
+    ``candidates`` scored, the held-out RMS [m] of the calibrated model the user would
+    otherwise take (``calibrated_rms``) and of doing nothing (``nothing_rms``), and the
+    ``reason`` in words."""
+
+    recommended: str
+    delivered: str
+    basis: str
+    candidates: tuple[Candidate, ...]
+    reason: str
+    calibrated_rms: float | None = None
+    nothing_rms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def refused(self) -> bool:
+        """The calibration is not better than doing nothing (exit status 3)."""
+        return self.recommended in DOING_NOTHING
+
+    def candidate(self, name: str) -> Candidate:
+        for candidate in self.candidates:
+            if candidate.name == name:
+                return candidate
+        raise KeyError(f"no candidate {name!r}; have {[c.name for c in self.candidates]}")
+
+    @property
+    def robot(self) -> Robot:
+        """The geometry ``robot_calibrated.yaml`` holds."""
+        return self.candidate(self.delivered).robot
+
+    def __repr__(self) -> str:
+        return (f"Delivery(recommended={self.recommended!r}, delivered={self.delivered!r}, "
+                f"basis={self.basis!r}, candidates={list(self.candidates)})")
+
+
 @dataclass(frozen=True)
 class ErrorTerm:
     """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
@@ -588,7 +646,7 @@ class CalibrationResult:
     covariance_names: tuple[str, ...] = ()
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     predicted_accuracy: PredictedAccuracy | None = None  # over the work cell
-    delivery: Any = None  # ``delivery.choice.Delivery``: what robot_calibrated.yaml holds
+    delivery: Delivery | None = None  # what robot_calibrated.yaml holds, and why
     rejected: tuple[RejectedReading, ...] = ()  # units of data set aside as gross errors
     validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
     # over the readings kept)

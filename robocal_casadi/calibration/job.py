@@ -35,8 +35,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..delivery.accuracy import predict, work_cell
-from ..delivery.choice import Delivery, choose
+from ..delivery.choice import choose
 from ..effect_model import EFFECTS_FILE, load_effects, save_effects
+from ..errors import ArgumentError
 from ..output import atomic_directory
 from ..output import json_safe as _clean
 from ..profiles import ProfileCost, profile_parameters
@@ -168,7 +169,10 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     the models in memory."""
     datasets, validation = _kept(result, datasets, validation)
     robot = load_robot(robot_file) if robot_file is not None else result.robot_calibrated
-    delivery: Delivery = result.delivery
+    delivery = result.delivery
+    if delivery is None:
+        raise ArgumentError("expected a result whose delivery is chosen (calibrate_job or "
+                            "deliver), got one without", argument="result")
     mounted = delivery.candidate(delivery.delivered).mounted
     figures: dict[str, dict[str, float]] = {ROBOT_FILE: {}}
     errors: dict[str, np.ndarray] = {}
