@@ -115,7 +115,7 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
     # The instrument's point on the flange: true, as delivered, and as the file declares.
     true_point = next(np.asarray(v, float) for k, v in fit.truth.mounted.items()
                       if k in ("probe", "target", "laser_origin"))
-    mounted = result.delivered["mounted"]
+    mounted = result.delivered.mounted
     delivered_point = np.array([mounted[n] for n in list(mounted)[:3]])
     nominal_point = np.array(list(result.delivery.candidate("nominal").mounted.values())[:3])
     true_points = Kinematics(truth).points(Q, true_point)
@@ -128,7 +128,7 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
                          "held": held_path}, handle)
     predicted = result.predicted_accuracy
     out = {"seed": seed, "exit_status": outcome.exit_status, "recommended": result.recommended,
-           "delivered_model": result.delivered["model"],
+           "delivered_model": result.delivered.model,
            "true_error_delivered_mm": 1e3 * delivered_error,
            "true_error_nominal_mm": 1e3 * nominal_error,
            "predicted_mm": None if predicted is None else 1e3 * predicted.rms}

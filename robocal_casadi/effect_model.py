@@ -28,6 +28,7 @@ from .effects.motion import is_derived_column, with_directions
 from .errors import InputError
 from .fields import load_yaml
 from .kinematics import Kinematics
+from .results import Delivered
 from .robot import Robot, dump_yaml
 
 EFFECTS_FILE = "effects_calibrated.yaml"
@@ -188,18 +189,18 @@ def _with_geometry(robot: Robot, geometry, path: Path) -> Robot:
     return robot.with_parameters(vector)
 
 
-def delivered_lines(delivered: dict, length_scale: float, unit: str) -> list[str]:
+def delivered_lines(delivered: Delivered, length_scale: float, unit: str) -> list[str]:
     """Terminal lines: the accuracy each output delivers."""
     def text(block):
         return ", ".join(f"{role} RMS {value / length_scale:.4g} {unit}"
                          for role, value in block.items())
 
-    model = str(delivered.get("model", "geometric")).replace("_", " ")
+    model = delivered.model.replace("_", " ")
     lines = [f"delivered: robot_calibrated.yaml ({model} model, geometry only): "
-             + text(delivered["robot_calibrated.yaml"])]
-    if delivered.get("with_effects"):
+             + text(delivered.robot_file)]
+    if delivered.with_effects:
         lines.append(f"delivered: with {EFFECTS_FILE} (fk/compensate --with-effects): "
-                     + text(delivered["with_effects"]))
+                     + text(delivered.with_effects))
     return lines
 
 

@@ -21,13 +21,10 @@ and stay free under every profile.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from .errors import InputError
 from .parameters import FRAME_PARAMETERS
-from .results import RmsSummary
+from .results import ProfileCost  # noqa: F401 (the record, re-exported)
 from .robot import Robot
-from .units import Units
 
 PROFILES = ("dh-only", "ur", "kuka")
 
@@ -54,44 +51,3 @@ def profile_parameters(profile: str, robot: Robot) -> tuple[str, ...]:
                  + frames)
 
 
-@dataclass(frozen=True)
-class ProfileCost:
-    """A calibration restricted to a controller ``profile``: the robot ``parameters`` it
-    leaves free, the ones the unrestricted calibration identified but the profile holds
-    (``held``), and the unrestricted calibration's RMS (``fit``, ``validation``; [m])
-    to compare with the restricted result's own."""
-
-    profile: str
-    parameters: tuple[str, ...]
-    held: tuple[str, ...]
-    fit: RmsSummary
-    validation: RmsSummary | None
-
-    def to_json(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> dict:
-        """The ``profile`` block of result.json: RMS with and without the restriction
-        (robot file length unit) for the geometric and the final model."""
-        s = units.length_scale
-
-        def compare(restricted: RmsSummary, free: RmsSummary) -> dict:
-            return {"unit": units.length,
-                    "rms_geometric": restricted.rms_geometric / s,
-                    "rms_geometric_unrestricted": free.rms_geometric / s,
-                    "rms_final": restricted.rms_final / s,
-                    "rms_final_unrestricted": free.rms_final / s}
-
-        out = {"name": self.profile, "parameters": list(self.parameters),
-               "held": list(self.held), "fit": compare(fit, self.fit)}
-        if validation is not None and self.validation is not None:
-            out["validation"] = compare(validation, self.validation)
-        return out
-
-    def sentence(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> str:
-        """One terminal line: what the profile costs."""
-        s, unit = units.length_scale, units.length
-        text = (f"profile {self.profile}: fit RMS {fit.rms_final / s:.4g} {unit} "
-                f"(unrestricted {self.fit.rms_final / s:.4g})")
-        if validation is not None and self.validation is not None:
-            text += (f", validation RMS {validation.rms_final / s:.4g} {unit} (unrestricted "
-                     f"{self.validation.rms_final / s:.4g})")
-        held = ", ".join(self.held[:8]) + (" ..." if len(self.held) > 8 else "")
-        return text + (f"; holds {held}" if self.held else "; holds nothing the data determine")

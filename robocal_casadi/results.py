@@ -7,7 +7,7 @@ length unit, angles in its angle unit, residual RMS in its length unit).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -17,9 +17,6 @@ from .robot import Robot
 from .units import Units
 
 if TYPE_CHECKING:
-    from .calibration.problem import Problem
-    from .calibration.selection import Selection
-    from .calibration.solver import Solution
     from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
@@ -112,6 +109,14 @@ class Identifiability:
     # Held at nominal because the data barely see them (not an exact dependency): their
     # errors stay as large as their tolerances.
     practical: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        """The ``result.json`` block: what is identifiable, why the rest is not, the
+        combinations and the singular values."""
+        return {"identifiable": list(self.identifiable),
+                "not_identifiable": dict(self.unidentifiable),
+                "combinations": list(self.combinations),
+                "singular_values": [float(v) for v in self.singular_values]}
 
     def __repr__(self) -> str:
         return (f"Identifiability({len(self.identifiable)} of {len(self.candidates)} identifiable, "
@@ -287,6 +292,290 @@ class RejectedReading:
 
 
 @dataclass(frozen=True)
+class StructureTest:
+    """One variable against one geometric parameter: the numbers of its test
+    (``calibration.unexplained``)."""
+
+    variable: str
+    parameter: str
+    columns: int  # free columns after projection
+    statistic: float  # n log(RSS0 / RSS1)
+    threshold: float  # chi-square quantile it must exceed
+    rss_drop: float  # relative
+
+    @property
+    def significant(self) -> bool:
+        return self.statistic > self.threshold
+
+    def __repr__(self) -> str:
+        return (f"StructureTest({self.parameter} ~ {self.variable}: {self.statistic:.4g} "
+                f"vs {self.threshold:.4g}, rss -{100 * self.rss_drop:.3g}%)")
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    """A structured residual the model does not explain (``calibration.unexplained``).
+
+    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS; at most the
+    fit RMS), ``share`` its fraction of the remaining mean square, ``variables`` the
+    variables it follows, strongest first, ``parameters`` the geometric parameter that
+    varies with each (the likeliest carrier, not a diagnosis), ``noise_floor`` [m] the
+    held-out RMS once the structure is fitted. ``curve`` holds per data row the strongest
+    variable's value (SI, or the column's own unit) and the RMS [m] of the row's residual
+    entries before
+    and after removing the structure, for a plot.
+    """
+
+    rms: float
+    share: float
+    variables: tuple[str, ...]
+    parameters: tuple[str, ...]
+    noise_floor: float
+    tests: tuple[StructureTest, ...] = field(repr=False, default=())
+    curve: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+
+    def to_json(self, length_scale: float, unit: str) -> dict[str, Any]:
+        """The result file's form: rms in the file's length unit."""
+        return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
+                "variables": list(self.variables)}
+
+    def sentence(self, length_scale: float, unit: str) -> str:
+        """One sentence for a person, in the file's length unit."""
+        pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
+        return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
+                f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
+                f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
+                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
+
+
+
+
+@dataclass(frozen=True)
+class CandidateFigures:
+    """One geometry-only model the delivery weighed (``delivery.choice``): its RMS [m]
+    on the fit data and on held-out data (None without any)."""
+
+    name: str
+    fit: float
+    held_out: float | None
+
+
+@dataclass(frozen=True)
+class Delivered:
+    """What each output file delivers, measured from the files as written
+    (``calibration.job.measured``).
+
+    ``model`` is the candidate ``robot_calibrated.yaml`` holds (``geometric``,
+    ``nominal``, ...), ``robot_file`` its RMS [m] by role (``fit``, ``validation``),
+    ``errors`` its per-measurement errors [m] by role, ``mounted`` the instrument values
+    [SI] that go with it; ``with_effects`` the RMS [m] by role of the model with
+    ``effects_calibrated.yaml`` (None when no effects are delivered); ``basis`` and
+    ``reason`` what the choice rested on and why; ``candidates`` every geometry-only
+    model it weighed.
+    """
+
+    model: str
+    robot_file: dict[str, float]
+    with_effects: dict[str, float] | None
+    mounted: dict[str, float]
+    errors: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    basis: str = ""
+    reason: str = ""
+    candidates: tuple[CandidateFigures, ...] = ()
+
+    def to_json(self, units: Units, quantities: dict[str, str]) -> dict:
+        """The ``result.json`` block in the robot file's units, with what each output
+        applies; ``quantities`` names the quantity of each mounted value (default length)."""
+        s, unit = units.length_scale, units.length
+
+        def scaled(block: dict[str, float]) -> dict:
+            return {role: value / s for role, value in block.items()} | {"unit": unit}
+
+        mounted = {name: value / units.scale(quantities.get(name, "length"))
+                   for name, value in self.mounted.items()}
+        out: dict[str, Any] = {"robot_calibrated.yaml": {
+            "applies": "the calibrated geometry only (robocal fk, robocal compensate, a "
+                       "controller's DH table)",
+            "model": self.model, **scaled(self.robot_file), "mounted": mounted}}
+        out["chosen_by"] = self.basis
+        out["reason"] = self.reason
+        if self.candidates:
+            out["candidates"] = {
+                c.name: {"fit": c.fit / s, "held_out": None if c.held_out is None else
+                         c.held_out / s, "unit": unit} for c in self.candidates}
+        if self.with_effects:
+            out["effects_calibrated.yaml"] = {
+                "applies": "the calibrated geometry with the identified effects (robocal fk "
+                           "and robocal compensate --with-effects)",
+                **scaled(self.with_effects)}
+        return out
+
+
+# Where a predicted accuracy holds (``PredictedAccuracy.region_kind``), and its sample size.
+SAMPLES = 400
+DATA_RANGES = "joint ranges of the fit data"
+DECLARED = "declared work cell"
+PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
+MEASURED = "poses of the fit data"
+BAND = (0.1, 0.9)  # quantiles of one robot's RMS over the work cell a prediction gives
+
+
+@dataclass(frozen=True)
+class PredictedAccuracy:
+    """Predicted tool-position error over ``region`` [m]: ``rms``, ``p95``, ``max``;
+    ``structured`` [m] the part from what the model does not describe (``s``);
+    ``region`` the joint ranges (per joint ``[low, high]``, rad or m); ``band`` [m] the
+    ``BAND`` quantiles of one robot's RMS over the region (module docstring)."""
+
+    rms: float
+    p95: float
+    max: float
+    structured: float
+    region: tuple[tuple[float, float], ...]
+    samples: int = SAMPLES
+    errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
+    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
+    band: tuple[float, float] | None = None
+
+    def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
+        return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
+                "max": self.max / length_scale, "structured": self.structured / length_scale,
+                "rms_band": (None if self.band is None else
+                             [self.band[0] / length_scale, self.band[1] / length_scale]),
+                "rms_band_quantiles": list(BAND),
+                "unit": unit,
+                "region": {"kind": self.region_kind, "samples": self.samples,
+                           "joints_rad_or_m": [list(r) for r in self.region]}}
+
+    @property
+    def region_words(self) -> str:
+        """Where the prediction holds, for sentences."""
+        return {DECLARED: "the declared work cell",
+                PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
+                                 "cover)",
+                MEASURED: "the poses the fit data were measured in"}.get(
+            self.region_kind, "the joint ranges the data cover")
+
+    @property
+    def band_words(self) -> str:
+        """The band in words (its quantiles as a probability), for sentences."""
+        return f"{round(100 * (BAND[1] - BAND[0]))}% of robots calibrated like this"
+
+    def sentence(self, length_scale: float, unit: str) -> str:
+        band = "" if self.band is None else (
+            f" ({self.band[0] / length_scale:.3g} to {self.band[1] / length_scale:.3g} for "
+            f"{self.band_words})")
+        return (f"predicted tool-position error over {self.region_words}: RMS "
+                f"{self.rms / length_scale:.4g}{band}, 95% {self.p95 / length_scale:.4g}, max "
+                f"{self.max / length_scale:.4g} {unit}")
+
+    def __repr__(self) -> str:
+        return (f"PredictedAccuracy(rms={self.rms:.4g} m, p95={self.p95:.4g} m, "
+                f"max={self.max:.4g} m)")
+
+
+@dataclass(frozen=True)
+class ProfileCost:
+    """A calibration restricted to a controller ``profile``: the robot ``parameters`` it
+    leaves free, the ones the unrestricted calibration identified but the profile holds
+    (``held``), and the unrestricted calibration's RMS (``fit``, ``validation``; [m])
+    to compare with the restricted result's own."""
+
+    profile: str
+    parameters: tuple[str, ...]
+    held: tuple[str, ...]
+    fit: RmsSummary
+    validation: RmsSummary | None
+
+    def to_json(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> dict:
+        """The ``profile`` block of result.json: RMS with and without the restriction
+        (robot file length unit) for the geometric and the final model."""
+        s = units.length_scale
+
+        def compare(restricted: RmsSummary, free: RmsSummary) -> dict:
+            return {"unit": units.length,
+                    "rms_geometric": restricted.rms_geometric / s,
+                    "rms_geometric_unrestricted": free.rms_geometric / s,
+                    "rms_final": restricted.rms_final / s,
+                    "rms_final_unrestricted": free.rms_final / s}
+
+        out = {"name": self.profile, "parameters": list(self.parameters),
+               "held": list(self.held), "fit": compare(fit, self.fit)}
+        if validation is not None and self.validation is not None:
+            out["validation"] = compare(validation, self.validation)
+        return out
+
+    def sentence(self, units: Units, fit: RmsSummary, validation: RmsSummary | None) -> str:
+        """One terminal line: what the profile costs."""
+        s, unit = units.length_scale, units.length
+        text = (f"profile {self.profile}: fit RMS {fit.rms_final / s:.4g} {unit} "
+                f"(unrestricted {self.fit.rms_final / s:.4g})")
+        if validation is not None and self.validation is not None:
+            text += (f", validation RMS {validation.rms_final / s:.4g} {unit} (unrestricted "
+                     f"{self.validation.rms_final / s:.4g})")
+        held = ", ".join(self.held[:8]) + (" ..." if len(self.held) > 8 else "")
+        return text + (f"; holds {held}" if self.held else "; holds nothing the data determine")
+
+
+DOING_NOTHING = ("nominal", "instrument_only")  # recommendations that refuse a calibration
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One model a controller could run (``delivery.choice``): ``robot`` (geometry only)
+    with the ``mounted`` instrument values [SI] that belong to it; ``fit_rms`` and
+    ``held_out_rms`` [m] (None where not measured)."""
+
+    name: str
+    robot: Robot = field(repr=False)
+    mounted: dict[str, float] = field(repr=False)
+    fit_rms: float
+    held_out_rms: float | None = None
+
+    def __repr__(self) -> str:
+        held = "" if self.held_out_rms is None else f", held out {self.held_out_rms:.4g} m"
+        return f"Candidate({self.name!r}, fit {self.fit_rms:.4g} m{held})"
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What is delivered (``delivery.choice``): ``recommended`` (``final``, ``geometric``,
+    ``nominal`` or ``instrument_only``), ``delivered`` the candidate robot_calibrated.yaml holds,
+    the ``basis`` of the decision (``held-out data`` or ``cross-validation``), every
+    ``candidates`` scored, the held-out RMS [m] of the calibrated model the user would
+    otherwise take (``calibrated_rms``) and of doing nothing (``nothing_rms``), and the
+    ``reason`` in words."""
+
+    recommended: str
+    delivered: str
+    basis: str
+    candidates: tuple[Candidate, ...]
+    reason: str
+    calibrated_rms: float | None = None
+    nothing_rms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def refused(self) -> bool:
+        """The calibration is not better than doing nothing (exit status 3)."""
+        return self.recommended in DOING_NOTHING
+
+    def candidate(self, name: str) -> Candidate:
+        for candidate in self.candidates:
+            if candidate.name == name:
+                return candidate
+        raise KeyError(f"no candidate {name!r}; have {[c.name for c in self.candidates]}")
+
+    @property
+    def robot(self) -> Robot:
+        """The geometry ``robot_calibrated.yaml`` holds."""
+        return self.candidate(self.delivered).robot
+
+    def __repr__(self) -> str:
+        return (f"Delivery(recommended={self.recommended!r}, delivered={self.delivered!r}, "
+                f"basis={self.basis!r}, candidates={list(self.candidates)})")
+
+
+@dataclass(frozen=True)
 class ErrorTerm:
     """What one per-measurement error is: ``kind`` is ``"position"`` (a 3-D point error,
     components x, y, z), ``"surface"`` (signed distance from a surface), ``"distance"``
@@ -350,112 +639,31 @@ class CalibrationResult:
     mounted: dict[str, tuple[float, float | None]] = field(default_factory=dict)
     mounted_quantities: dict[str, str] = field(default_factory=dict)  # name -> length | none
     placement: dict[str, float] = field(default_factory=dict)
-    solver: dict[str, Any] = field(default_factory=dict)
+    solver: dict[str, str | int | float] = field(default_factory=dict)
     effect_models: tuple[Effect, ...] = ()  # the effects fitted, values in ``effect_values``
     effect_values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     diagnosis: tuple[DiagnosisRecord, ...] = ()  # every candidate tested, with its numbers
     selection: dict[str, tuple[int, ...]] = field(default_factory=dict)  # dropped units
     parameters_geometric: tuple[ParameterEstimate, ...] = ()  # the geometric fit's estimates
-    unexplained: Any = None  # ``unexplained.Unexplained`` or None (consistent with noise)
+    unexplained: Unexplained | None = None  # None: what remains is consistent with noise
     recommended: str = "final"  # "final" | "geometric": the model held-out data support
     recommendation: str = ""  # why, in words
     prior: PriorSummary | None = None
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
-    profile: Any = None  # ``profiles.ProfileCost`` when restricted to a controller's set
-    delivered: Any = None  # ``calibration.job.measured``: RMS [m] each output delivers
+    profile: ProfileCost | None = None  # when restricted to a controller's parameter set
+    delivered: Delivered | None = None  # ``calibration.job.measured``: what each file delivers
     # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
     # its free robot and mounted parameters (``covariance_names``, in that order): what
     # the delivery and its predicted work-cell accuracy start from (``delivery``).
     mounted_geometric: dict[str, float] = field(default_factory=dict)
     covariance_names: tuple[str, ...] = ()
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
-    predicted_accuracy: Any = None  # ``delivery.accuracy.PredictedAccuracy``
-    delivery: Any = None  # ``delivery.choice.Delivery``: what robot_calibrated.yaml holds
+    predicted_accuracy: PredictedAccuracy | None = None  # over the work cell
+    delivery: Delivery | None = None  # what robot_calibrated.yaml holds, and why
     rejected: tuple[RejectedReading, ...] = ()  # units of data set aside as gross errors
     validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
     # over the readings kept)
-
-    @classmethod
-    def from_fit(cls, *, datasets: tuple[str, ...], robot: Robot, problem: Problem,
-                 final_problem: Problem, nominal: Solution, geometric: Solution,
-                 final: Solution, std: np.ndarray, identifiability: Identifiability,
-                 parameters: Sequence[ParameterEstimate],
-                 parameters_geometric: Sequence[ParameterEstimate],
-                 effects: Sequence[EffectFinding], diagnosis: Sequence[DiagnosisRecord],
-                 fit: RmsSummary,
-                 validation: RmsSummary | None, residuals: Sequence[DatasetResiduals],
-                 validation_residuals: Sequence[DatasetResiduals],
-                 spheres: Sequence[SphereEstimate], selection: Selection | None,
-                 unexplained: Any, recommended: str, recommendation: str,
-                 prior: PriorSummary | None, notes: Sequence[str], method: str,
-                 loss: str) -> CalibrationResult:
-        """The result of a calibration from its stages.
-
-        ``problem`` is the geometric identification problem (``nominal`` and ``geometric``
-        its solutions), ``final_problem`` the one with the effects diagnosis added
-        (``final`` its solution; the same problem when it added none); ``std`` [SI] the
-        standard error of every unknown of ``final_problem`` (NaN where not estimated).
-        The calibrated robot takes the ``recommended`` model's geometry.
-        """
-        names = final_problem.unknowns.names
-
-        def std_of(i: int) -> float | None:
-            return float(std[i]) if np.isfinite(std[i]) else None
-
-        mounted_slice = final_problem.slices["mounted"]
-        mounted = {names[i]: (float(final.x[i]), std_of(i))
-                   for i in range(mounted_slice.start, mounted_slice.stop)}
-        placement_slice = final_problem.slices["placement"]
-        placement = {names[i]: float(final.x[i])
-                     for i in range(placement_slice.start, placement_slice.stop)}
-        effects = tuple(replace(f, std={n: std_of(final_problem.unknowns.index(n))
-                                        for n in f.parameters}) for f in effects)
-        chosen = final.x if recommended == "final" else geometric.x
-        kept_slices = (problem.slices["robot"], problem.slices["mounted"])
-        robot_free = [i for i in np.flatnonzero(geometric.free)
-                      if any(part.start <= i < part.stop for part in kept_slices)]
-        position = {int(i): k for k, i in enumerate(np.flatnonzero(geometric.free))}
-        kept = [position[int(i)] for i in robot_free]
-        covariance = (np.asarray(geometric.covariance)[np.ix_(kept, kept)]
-                      if np.size(geometric.covariance) else np.zeros((0, 0)))
-        geometric_names = problem.unknowns.names
-        mounted_geometric = {geometric_names[i]: float(geometric.x[i])
-                             for i in range(problem.slices["mounted"].start,
-                                            problem.slices["mounted"].stop)}
-        return cls(
-            datasets=datasets,
-            robot_nominal=robot,
-            robot_calibrated=robot.with_parameters(chosen[problem.slices["robot"]]),
-            parameters=tuple(parameters),
-            identifiability=identifiability,
-            condition_number=identifiability.condition_number,
-            effects=effects,
-            fit=fit,
-            validation=validation,
-            residuals=tuple(residuals),
-            validation_residuals=tuple(validation_residuals),
-            mounted=mounted,
-            mounted_quantities={name: final_problem.unknowns.quantity(name) for name in mounted},
-            placement=placement,
-            solver={"method": method, "loss": loss, "iterations": final.iterations,
-                    "status": final.status, "seconds": geometric.seconds + nominal.seconds,
-                    "residuals": problem.size, "free_unknowns": int(geometric.free.sum())},
-            effect_models=tuple(final_problem.effects),
-            effect_values=final.x[final_problem.slices["effects"]].copy(),
-            diagnosis=tuple(diagnosis),
-            selection={} if selection is None else dict(selection.dropped),
-            parameters_geometric=tuple(parameters_geometric),
-            unexplained=unexplained,
-            recommended=recommended,
-            recommendation=recommendation,
-            prior=prior,
-            spheres=tuple(spheres),
-            notes=tuple(notes),
-            mounted_geometric=mounted_geometric,
-            covariance_names=tuple(geometric_names[i] for i in robot_free),
-            covariance=covariance,
-        )
 
     @property
     def warning(self) -> str:
@@ -491,33 +699,16 @@ class CalibrationResult:
                     "datasets": _per_dataset(self.residuals, units)},
         }
         if self.validation is not None:
-            every = self.validation_all or self.validation
-            out["validation"] = {**self.validation.to_json(units),
-                                 "kept": self.validation.to_json(units),
-                                 "all": every.to_json(units),
-                                 "rejected": sum(e.role == "validation" for e in self.rejected),
-                                 "datasets": _per_dataset(self.validation_residuals, units)}
+            out["validation"] = self._validation_json(self.validation, units)
         out["rejected"] = [e.to_json(units) for e in self.rejected]
-        out["mounted"] = {}
-        for name, (value, std) in self.mounted.items():
-            quantity = self.mounted_quantities.get(name, "length")
-            scale = units.scale(quantity)
-            out["mounted"][name] = {"estimate": value / scale,
-                                    "std": None if std is None else std / scale,
-                                    "unit": units.unit_name(quantity),
-                                    **(self.prior.entry(name, units) if self.prior else {})}
+        out["mounted"] = self._mounted_json(units)
         if self.prior is not None:
             out["prior"] = self.prior.to_json(units)
         if self.spheres:
             out["spheres"] = [s.to_json(units) for s in self.spheres]
         if self.notes:
             out["notes"] = list(self.notes)
-        out["identifiability"] = {
-            "identifiable": list(self.identifiability.identifiable),
-            "not_identifiable": dict(self.identifiability.unidentifiable),
-            "combinations": list(self.identifiability.combinations),
-            "singular_values": [float(v) for v in self.identifiability.singular_values],
-        }
+        out["identifiability"] = self.identifiability.to_json()
         out["solver"] = {k: v for k, v in self.solver.items()
                          if isinstance(v, (int, float, str, bool))}
         out["recommended"] = self.recommended
@@ -529,17 +720,34 @@ class CalibrationResult:
         if self.profile is not None:
             out["profile"] = self.profile.to_json(units, self.fit, self.validation)
         if self.delivered is not None:
-            out["delivered"] = delivered_json(self.delivered, units.length_scale, units.length)
-            # The instrument values that go with the delivered geometry, in the file's units.
-            out["delivered"]["robot_calibrated.yaml"]["mounted"] = {
-                name: value / units.scale(self.mounted_quantities.get(name, "length"))
-                for name, value in self.delivered.get("mounted", {}).items()}
+            out["delivered"] = self.delivered.to_json(units, self.mounted_quantities)
         if self.delivery is not None:
             out["recommendation"] = self.recommendation
         out["predicted_accuracy"] = (None if self.predicted_accuracy is None else
                                      self.predicted_accuracy.to_json(units.length_scale,
                                                                      units.length))
         return out
+
+    def _validation_json(self, validation: RmsSummary, units: Units) -> dict:
+        """The held-out block: RMS over the readings kept (also as ``kept``) and over all
+        of them, the count set aside, and per dataset."""
+        every = self.validation_all or validation
+        return {**validation.to_json(units), "kept": validation.to_json(units),
+                "all": every.to_json(units),
+                "rejected": sum(e.role == "validation" for e in self.rejected),
+                "datasets": _per_dataset(self.validation_residuals, units)}
+
+    def _mounted_json(self, units: Units) -> dict:
+        """Each mounted instrument value with its standard error, in the file's units."""
+        out = {}
+        for name, (value, std) in self.mounted.items():
+            quantity = self.mounted_quantities.get(name, "length")
+            scale = units.scale(quantity)
+            out[name] = {"estimate": value / scale, "std": None if std is None else std / scale,
+                         "unit": units.unit_name(quantity),
+                         **(self.prior.entry(name, units) if self.prior else {})}
+        return out
+
 
     def _parameter_json(self, parameter: ParameterEstimate, units: Units) -> dict:
         entry = parameter.to_json(units)
@@ -568,32 +776,6 @@ class CalibrationResult:
         if self.unexplained is not None:
             lines.append("  unexplained: " + self.unexplained.sentence(s, u.length))
         return "\n".join(lines)
-
-
-def delivered_json(delivered: dict, length_scale: float, unit: str) -> dict:
-    """``delivered`` in the robot file's length unit, with what each output applies."""
-    def scaled(block):
-        return {role: value / length_scale for role, value in block.items()} | {"unit": unit}
-
-    out = {"robot_calibrated.yaml": {"applies": "the calibrated geometry only (robocal fk, "
-                                                "robocal compensate, a controller's DH table)",
-                                     "model": delivered.get("model", "geometric"),
-                                     **scaled(delivered["robot_calibrated.yaml"])}}
-    if "basis" in delivered:
-        out["chosen_by"] = delivered["basis"]
-        out["reason"] = delivered.get("reason", "")
-    if delivered.get("candidates"):
-        out["candidates"] = {
-            name: {"fit": c["fit"] / length_scale,
-                   "held_out": None if c["held_out"] is None else c["held_out"] / length_scale,
-                   "unit": unit}
-            for name, c in delivered["candidates"].items()}
-    if delivered.get("with_effects"):
-        out["effects_calibrated.yaml"] = {"applies": "the calibrated geometry with the identified "
-                                                     "effects (robocal fk and robocal compensate "
-                                                     "--with-effects)",
-                                          **scaled(delivered["with_effects"])}
-    return out
 
 
 def mean_square_shares(nominal: float, geometric: float, final: float,

@@ -119,12 +119,12 @@ def test_clean_data_add_nothing(tmp_path, seed):
     assert result.fit.rms_final == result.fit.rms_geometric
     # every candidate was tested and none was supported (each effect offered on this
     # robot's drives: hysteresis is looked for on joints without gears, this arm has none)
-    decisions = {entry["decision"] for entry in result.diagnosis}
+    decisions = {entry.decision for entry in result.diagnosis}
     assert "added" not in decisions
     offered = {name for name, cls in EFFECTS.items()
                if cls.candidates(robot, {"temperature": [20.0, 21.0], "payload": [0.0, 1.0]})}
     assert "hysteresis" not in offered
-    assert {entry["effect"] for entry in result.diagnosis} == offered
+    assert {entry.effect for entry in result.diagnosis} == offered
 
 
 @pytest.mark.slow
@@ -209,9 +209,10 @@ def test_candidate_rows_read_as_mappings_and_diagnosis_is_frozen(tmp_path):
     outcome = diagnosis.run(problem, geometric, ident, progress=False)
     assert [f.name for f in outcome.added] == ["joint_scale"]
     row = outcome.tested[0]
-    assert dict(row)["effect"] == row.effect and set(row) >= {"bic_drop", "decision"}
-    # the decision is typed; the mapping (what the report tabulates) is the numbers and words
-    assert "outcome" not in row and row.as_dict() == dict(row)
+    numbers = row.as_dict()
+    assert numbers["effect"] == row.effect and set(numbers) >= {"bic_drop", "decision"}
+    # the decision is typed; what the report tabulates is the numbers and words
+    assert "outcome" not in numbers
     added = [t for t in outcome.tested if t.outcome is Decision.ADDED]
     assert [(t.effect, t.joints) for t in added] == [("joint_scale", (2,))]
     assert all((t.outcome is Decision.ADDED) == (t.decision == "added") for t in outcome.tested)

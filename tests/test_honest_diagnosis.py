@@ -229,8 +229,8 @@ def test_an_implausibly_large_periodic_error_is_not_named(tmp_path):
     result = calibrate([fit], [validation])
     assert all(e.name != "joint_cyclic" for e in result.effects)
     rejected = [t for t in result.diagnosis
-                if t["effect"] == "joint_cyclic" and t["joints"] == (3,)]
-    assert any("implausible" in t["decision"] for t in rejected)
+                if t.effect == "joint_cyclic" and t.joints == (3,)]
+    assert any("implausible" in t.decision for t in rejected)
     assert any(t.outcome is Decision.IMPLAUSIBLE for t in rejected)
     assert all((t.outcome is Decision.IMPLAUSIBLE) == ("implausible" in t.decision)
                for t in result.diagnosis)
@@ -286,9 +286,9 @@ def test_an_effect_that_stood_in_for_a_later_one_is_taken_out(tmp_path, monkeypa
                     effects=truth, seed=7, progress=False).load()
     result = calibrate([data])
     assert sorted(e.name for e in result.effects) == ["joint_compliance", "joint_scale"]
-    removed = [t for t in result.diagnosis if str(t["decision"]).startswith("removed")]
-    assert [t["effect"] for t in removed] == ["joint_coupling"]
-    assert "with the other effects in" in removed[0]["decision"]
+    removed = [t for t in result.diagnosis if t.decision.startswith("removed")]
+    assert [t.effect for t in removed] == ["joint_coupling"]
+    assert "with the other effects in" in removed[0].decision
     assert [t for t in result.diagnosis if t.outcome is Decision.TAKEN_OUT] == removed
     assert any(line.startswith("added, then taken out again") and "joint_coupling" in line
                for line in summary(result).splitlines())

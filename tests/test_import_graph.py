@@ -158,3 +158,14 @@ def test_the_project_graph_resolves_its_imports():
 def test_no_import_cycle():
     found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(" -> ".join(c) for c in found)
+
+
+def test_the_result_records_know_nothing_of_the_calibration_engine():
+    """``results`` holds the records a calibration fills in; it imports no module of the
+    engine, not even for type checking (the engine builds the result from what it
+    computed, nothing reads a ``Problem``'s inside from the outside)."""
+    tree = ast.parse((ROOT / "robocal_casadi" / "results.py").read_text())
+    modules = [node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
+    modules += [alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                for alias in node.names]
+    assert modules and not [m for m in modules if "calibration" in m.split(".")]

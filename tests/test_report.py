@@ -637,8 +637,8 @@ def test_diagnosis_shows_the_added_and_strongest_rejected_and_folds_the_rest(tmp
     decision = page.tables["diagnosis-summary"][0].index("decision")
     assert summary[0][1] == "joint compliance" and summary[0][decision] == "added"
     assert [float(row[7]) for row in summary[1:]] == pytest.approx(
-        [round(e["bic_drop"], 1) for e in rejected], abs=0.051)
-    assert [row[6] for row in summary[:1]] == [f"{100 * diagnosis[1]['rss_drop']:.1f} %"]
+        [round(e.bic_drop, 1) for e in rejected], abs=0.051)
+    assert [row[6] for row in summary[:1]] == [f"{100 * diagnosis[1].rss_drop:.1f} %"]
     # every candidate, in a folded block that opens for printing
     assert len(page.tables["diagnosis"]) == 1 + 60
     text = path.read_text(encoding="utf-8")

@@ -20,7 +20,7 @@ from robocal_casadi import examples
 from robocal_casadi.errors import InputError
 from robocal_casadi.report import build_document, write_report
 from robocal_casadi.report.info import ReportInfo, info_from_mapping
-from robocal_casadi.results import RmsSummary
+from robocal_casadi.results import RmsSummary, Unexplained
 
 
 def _figures(path: Path) -> set[str]:
@@ -189,8 +189,9 @@ def test_geometric_recommendation_comes_first():
 
 def test_unexplained_structure_in_words_and_against_its_variable(tmp_path):
     result = synthetic_result(validation=False, effects=False)
-    result = replace(result, unexplained={"rms": 0.004, "unit": "mm", "share": 0.42,
-                                          "variables": ["q2", "temperature"]})
+    result = replace(result, unexplained=Unexplained(
+        rms=4e-6, share=0.42, variables=("q2", "temperature"), parameters=("a2", "d3"),
+        noise_floor=1e-6))
     path = write_report(result, tmp_path / "report.html")
     texts = " ".join(t for _, t in read_page(path).paragraphs)
     assert "0.004 mm RMS, about 42 % of the error that remains and follows the angle of " \

@@ -61,8 +61,9 @@ def test_declared_work_cell_is_the_prediction_region(tracker, tmp_path):
     assert np.allclose(predicted.region, expected, atol=1e-12)
     # the same prediction as asked for directly over that box, and another than over the
     # data's own ranges (q6 moves the reflector, so its range changes the figure)
-    names = tuple(result.delivered["mounted"])[:3]
-    point = [result.delivered["mounted"][n] for n in names]
+    assert result.delivered is not None
+    names = tuple(result.delivered.mounted)[:3]
+    point = [result.delivered.mounted[n] for n in names]
     direct = predict(result, result.robot_calibrated, point, names,
                      region=tuple(expected), region_kind=PARTLY_DECLARED)
     assert predicted.rms == pytest.approx(direct.rms, rel=1e-12)

@@ -56,10 +56,9 @@ docs/formats.md#result-file (for tracker data the 3-D point error), as ``Problem
 
 from __future__ import annotations
 
-import functools
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -89,16 +88,11 @@ MAX_ROUNDS = 8
 # ----------------------------------------------------------------------------- results
 
 
-@functools.cache
-def _field_names(cls: type) -> tuple[str, ...]:
-    """The field names of a dataclass, in order (looked up once: read on every access)."""
-    return tuple(f.name for f in fields(cls))
-
-
 @dataclass(frozen=True)
-class CandidateTest(Mapping):
-    """One candidate tested in one round, with its numbers (also readable as a mapping of
-    every field but ``outcome``, the ``Decision``; ``decision`` gives its reason in words).
+class CandidateTest:
+    """One candidate tested in one round, with its numbers: ``outcome`` is the
+    ``Decision``, ``decision`` its reason in words (``as_dict``: every field but
+    ``outcome`` by name).
 
     ``parameters`` counts the columns kept after the identifiability check, ``held`` names
     those the geometry absorbs; ``remaining_norm`` is the smallest relative norm among
@@ -127,22 +121,7 @@ class CandidateTest(Mapping):
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
-        return {key: getattr(self, key) for key in self._keys()}
-
-    def __getitem__(self, key: str):
-        if key not in self._keys():
-            raise KeyError(key)
-        return getattr(self, key)
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._keys())
-
-    def __len__(self) -> int:
-        return len(self._keys())
-
-    @classmethod
-    def _keys(cls) -> tuple[str, ...]:
-        return tuple(name for name in _field_names(cls) if name != "outcome")
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "outcome"}
 
     def __repr__(self) -> str:
         return (f"CandidateTest(round {self.round}: {self.effect}{list(self.joints)}, "
@@ -488,6 +467,50 @@ class _Step:
     bic_drop: float
 
 
+@dataclass
+class _Search:
+    """The effect search between rounds: the problem holding every candidate (``big``),
+    the current solution (``x``, residual ``r``, ``free`` unknowns), the candidates not
+    yet added, the steps taken and every test recorded. ``jacobian`` holds the current
+    Jacobian until a round's screening takes it out (so that it is freed once copied)."""
+
+    big: Problem
+    x: np.ndarray
+    r: np.ndarray
+    free: np.ndarray
+    jacobian: list[np.ndarray]
+    schemes: list[FoldScheme]
+    n_errors: int
+    effect_of: dict[_Candidate, Effect]
+    remaining: list[_Candidate]
+    steps: list[_Step] = field(default_factory=list)
+    tested: list[CandidateTest] = field(default_factory=list)
+
+
+@dataclass
+class _Verdicts:
+    """One round's decisions so far, per screen (by ``id``): the reason in words ('' while
+    the candidate passes), the ``Decision`` where it is not ``NOT_PAYING``, and the numbers
+    recorded (screening numbers, or the refit's for a candidate refitted)."""
+
+    decisions: dict[int, str] = field(default_factory=dict)
+    outcomes: dict[int, Decision] = field(default_factory=dict)
+    numbers: dict[int, tuple] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Accepted:
+    """The candidate a round added, with its joint refit."""
+
+    screen: _Screen
+    solution: Solution
+    residual: np.ndarray
+    free: np.ndarray
+    bic_drop: float
+    cv_before: float
+    cv_after: float
+
+
 @reports_stages(default=True)
 def run(problem: Problem, geometric: Solution, identifiability: Identifiability | None = None,
         *, method: Method = "lm", loss: Loss = "linear", folds: int = FOLDS,
@@ -504,17 +527,36 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     """
     del identifiability, progress  # progress: read by ``reports_stages``
     start = time.perf_counter()
+    extras = _offered_extras(problem, available_columns)
+    candidates, candidate_effects = _candidates(problem, extras)
+    if not candidates or not any(model.uses_robot for model in problem.models):
+        return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
+    search = _set_up(problem, geometric, candidates, candidate_effects, folds, seed)
+    rounds = _search(search, max_rounds, method, loss, bic_threshold)
+    if not search.steps:
+        return Diagnosis((), tuple(search.tested), problem, geometric, rounds,
+                         time.perf_counter() - start)
+    final, solution, effects, findings = _settled(problem, search, extras, rounds, method,
+                                                  loss, bic_threshold)
+    return Diagnosis(tuple(findings), tuple(search.tested), final, solution, rounds,
+                     time.perf_counter() - start, effects)
+
+
+def _offered_extras(problem: Problem, available_columns) -> dict[str, np.ndarray]:
+    """The joined extra columns (``_joined_extras``) without those ``available_columns``
+    (when given) lacks."""
     extras = _joined_extras(problem)
     if available_columns is not None:
         for column in data_columns():
             if column in extras and column not in available_columns:
                 del extras[column]
-    candidates, candidate_effects = _candidates(problem, extras)
-    tested: list[CandidateTest] = []
-    steps: list[_Step] = []
-    if not candidates or not any(model.uses_robot for model in problem.models):
-        return Diagnosis((), (), problem, geometric, 0, time.perf_counter() - start)
+    return extras
 
+
+def _set_up(problem: Problem, geometric: Solution, candidates: list[_Candidate],
+            candidate_effects: list[Effect], folds: int, seed: int) -> _Search:
+    """The search's start: every candidate's parameters in one problem, at ``geometric``'s
+    solution, with its residual, Jacobian and fold schemes."""
     with stage(f"diagnosis set-up ({len(candidates)} candidates)"):
         big = sibling_problem(problem, tuple(problem.effects) + tuple(candidate_effects))
         x = embed(problem, geometric.x, big)
@@ -526,103 +568,167 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
     effect_of = {c: next(e for e in candidate_effects if set(c.names) <= set(e.parameter_names()))
                  for c in candidates}
     free = _mask_of(big, [problem.unknowns.names[i] for i in np.flatnonzero(geometric.free)])
-    remaining = list(candidates)
+    return _Search(big, x, r, free, jacobian, schemes, n_errors, effect_of, list(candidates))
+
+
+def _search(search: _Search, max_rounds: int, method: Method, loss: Loss,
+            bic_threshold: float) -> int:
+    """Rounds of screening and refitting until no candidate is added (or none is left);
+    the number of rounds run."""
     rounds = 0
     for rounds in range(1, max_rounds + 1):
-        with stage(f"diagnosis round {rounds} ({len(steps)} effect(s) added)"):
-            with stage(f"screening {len(remaining)} candidates"):
-                # The screening takes J out of the list and copies the columns it
-                # needs: J is then freed (an argument would stay alive during the call).
-                screening = _Screening(big, r, jacobian, free, remaining, schemes, n_errors)
-                screens = []
-                for k, candidate in enumerate(remaining):
-                    note(f"{k + 1}/{len(remaining)} {_label(candidate)}")
-                    screens.append(_unless_supported(screening.screen(candidate),
-                                                     bic_threshold))
-            decisions: dict[int, str] = {}
-            outcomes: dict[int, Decision] = {}  # the rest: Decision.NOT_PAYING
-            for s in screens:
-                decisions[id(s)] = s.decision or screening.verdict(
-                    s.bic_drop, s.held_out, bic_threshold)
-                if not decisions[id(s)]:
-                    reason = _implausible(effect_of[s.candidate], dict(s.values), big.robot)
-                    if reason:
-                        decisions[id(s)] = f"implausible ({reason}): stands in for something else"
-                        outcomes[id(s)] = Decision.IMPLAUSIBLE
-            passing = sorted((s for s in screens if not decisions[id(s)]),
-                             key=lambda s: -s.bic_drop)
-            numbers = {id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out) for s in screens}
-            accepted = None
-            for s in passing:
-                rivals = [t for t in screens if t is not s and t.P is not None
-                          and t.candidate.effect != s.candidate.effect
-                          and t.bic_drop > bic_threshold
-                          and _total(t.held_out) <= RIVAL_MARGIN * _total(s.held_out)
-                          and screening.overlap(s, t) > CONFOUNDED
-                          and screening.overlap(t, s) > CONFOUNDED]
-                if rivals:
-                    names = ", ".join(_label(t.candidate) for t in rivals)
-                    decisions[id(s)] = f"confounded with {names}: these data cannot tell them apart"
-                    outcomes[id(s)] = Decision.CONFOUNDED
-                    continue
-                trial_free = free | _mask_of(big, s.kept)
-                with stage(f"refit with {_label(s.candidate)}"):
-                    solution = solve(big, x, trial_free, method=method, loss=loss)
-                    # The refit's own held-out numbers, on the same folds (its free
-                    # columns only: the whole Jacobian is formed once a candidate is added).
-                    r_new = big.residual(solution.x)
-                    refit = _Screening(big, r_new, big.jacobian(solution.x, trial_free),
-                                       trial_free, [], schemes, n_errors, free_columns=True)
-                rss_new = float(r_new @ r_new)
-                bic = screening.bic_drop(rss_new, len(s.kept))
-                numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
-                                  refit.held_out_before)
-                verdict = screening.verdict(bic, refit.held_out_before, bic_threshold)
-                if not verdict:
-                    values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
-                    reason = _implausible(effect_of[s.candidate], values, big.robot)
-                    if reason:
-                        verdict = (f"implausible after refit ({reason}): stands in for "
-                                   f"something else")
-                        outcomes[id(s)] = Decision.IMPLAUSIBLE
-                if not verdict:
-                    decisions[id(s)] = "added"
-                    outcomes[id(s)] = Decision.ADDED
-                    accepted = (s, solution, r_new, trial_free, bic, refit.cv_before)
-                    break
-                decisions[id(s)] = f"rejected after refit: {verdict}"
-            for s in passing:
-                if not decisions[id(s)]:
-                    decisions[id(s)] = "supported, weaker than the one added"
-            for s in screens:
-                rss_drop, bic, after, held_out = numbers[id(s)]
-                total, worst, _ = screening.extrapolation(held_out) if held_out else (
-                    float("nan"), "", float("nan"))
-                tested.append(CandidateTest(
-                    round=rounds, effect=s.candidate.effect, joints=s.candidate.joints,
-                    parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
-                    rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
-                    cv_rms_after=after, decision=decisions[id(s)] or "not supported",
-                    extrapolation=total, worst_region=worst, estimate=s.values,
-                    label=_label(s.candidate),
-                    outcome=outcomes.get(id(s), Decision.NOT_PAYING)))
-            if accepted is None:
-                break
-            s, solution, r_new, trial_free, bic, after = accepted
-            steps.append(_Step(s.candidate, s.kept, s.held, big.rms(x), big.rms(solution.x),
-                               screening.cv_before, after, bic))
-            x, r, free = solution.x, r_new, trial_free
-            # This round's columns (its screening, every candidate's) go before the next
-            # round's Jacobian is formed.
-            del screening, screens, passing, refit, accepted
-            jacobian.append(big.jacobian(solution.x))
-            remaining = [c for c in remaining if c is not s.candidate]
-            if not remaining:
-                break
+        with stage(f"diagnosis round {rounds} ({len(search.steps)} effect(s) added)"):
+            accepted = _round(search, rounds, method, loss, bic_threshold)
+            if accepted is not None:
+                _take(search, accepted)
+        if accepted is None or not search.remaining:
+            break
+    return rounds
 
-    if not steps:
-        return Diagnosis((), tuple(tested), problem, geometric, rounds,
-                         time.perf_counter() - start)
+
+def _take(search: _Search, accepted: _Accepted) -> None:
+    """``accepted`` into the model: a step recorded, the solution moved on, the next
+    round's Jacobian formed (after the round's own columns have gone with its screening)."""
+    s, solution, big = accepted.screen, accepted.solution, search.big
+    search.steps.append(_Step(s.candidate, s.kept, s.held, big.rms(search.x),
+                              big.rms(solution.x), accepted.cv_before, accepted.cv_after,
+                              accepted.bic_drop))
+    search.x, search.r, search.free = solution.x, accepted.residual, accepted.free
+    search.jacobian.append(big.jacobian(solution.x))
+    search.remaining = [c for c in search.remaining if c is not s.candidate]
+
+
+def _round(search: _Search, rounds: int, method: Method, loss: Loss,
+           bic_threshold: float) -> _Accepted | None:
+    """One round: screen every remaining candidate, judge them, refit the strongest
+    passing ones until one holds; every test recorded in ``search.tested``."""
+    screening, screens = _screen_all(search, bic_threshold)
+    verdicts = _Verdicts()
+    _judge_screens(screening, screens, search, verdicts, bic_threshold)
+    passing = sorted((s for s in screens if not verdicts.decisions[id(s)]),
+                     key=lambda s: -s.bic_drop)
+    accepted = None
+    for s in passing:
+        rivals = _rivals(screening, screens, s, bic_threshold)
+        if rivals:
+            names = ", ".join(_label(t.candidate) for t in rivals)
+            verdicts.decisions[id(s)] = (f"confounded with {names}: these data cannot tell "
+                                         f"them apart")
+            verdicts.outcomes[id(s)] = Decision.CONFOUNDED
+            continue
+        accepted = _refit(search, screening, s, verdicts, method, loss, bic_threshold)
+        if accepted is not None:
+            break
+    for s in passing:
+        if not verdicts.decisions[id(s)]:
+            verdicts.decisions[id(s)] = "supported, weaker than the one added"
+    search.tested += _records(screening, screens, verdicts, rounds)
+    return accepted
+
+
+def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list[_Screen]]:
+    """The round's screening and every remaining candidate's screen."""
+    with stage(f"screening {len(search.remaining)} candidates"):
+        # The screening takes J out of the list and copies the columns it needs: J is
+        # then freed (an argument would stay alive during the call).
+        screening = _Screening(search.big, search.r, search.jacobian, search.free,
+                               search.remaining, search.schemes, search.n_errors)
+        screens = []
+        for k, candidate in enumerate(search.remaining):
+            note(f"{k + 1}/{len(search.remaining)} {_label(candidate)}")
+            screens.append(_unless_supported(screening.screen(candidate), bic_threshold))
+    return screening, screens
+
+
+def _judge_screens(screening: _Screening, screens: list[_Screen], search: _Search,
+                   verdicts: _Verdicts, bic_threshold: float) -> None:
+    """Each screen's decision from its linearised numbers and the plausibility of its
+    estimate ('' for those that pass), and the numbers recorded for it."""
+    for s in screens:
+        verdicts.decisions[id(s)] = s.decision or screening.verdict(
+            s.bic_drop, s.held_out, bic_threshold)
+        if not verdicts.decisions[id(s)]:
+            reason = _implausible(search.effect_of[s.candidate], dict(s.values),
+                                  search.big.robot)
+            if reason:
+                verdicts.decisions[id(s)] = (f"implausible ({reason}): stands in for "
+                                             f"something else")
+                verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+    verdicts.numbers.update({id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out)
+                             for s in screens})
+
+
+def _rivals(screening: _Screening, screens: list[_Screen], s: _Screen,
+            bic_threshold: float) -> list[_Screen]:
+    """Supported candidates of another effect type that explain what ``s`` explains
+    as well as it does, and it theirs (``CONFOUNDED``, ``RIVAL_MARGIN``)."""
+    return [t for t in screens if t is not s and t.P is not None
+            and t.candidate.effect != s.candidate.effect
+            and t.bic_drop > bic_threshold
+            and _total(t.held_out) <= RIVAL_MARGIN * _total(s.held_out)
+            and screening.overlap(s, t) > CONFOUNDED
+            and screening.overlap(t, s) > CONFOUNDED]
+
+
+def _refit(search: _Search, screening: _Screening, s: _Screen, verdicts: _Verdicts,
+           method: Method, loss: Loss, bic_threshold: float) -> _Accepted | None:
+    """``s`` refitted jointly with the model and judged again on its own numbers; the
+    accepted candidate, or None with the reason in ``verdicts``."""
+    big = search.big
+    trial_free = search.free | _mask_of(big, s.kept)
+    with stage(f"refit with {_label(s.candidate)}"):
+        solution = solve(big, search.x, trial_free, method=method, loss=loss)
+        # The refit's own held-out numbers, on the same folds (its free columns only:
+        # the whole Jacobian is formed once a candidate is added).
+        r_new = big.residual(solution.x)
+        refit = _Screening(big, r_new, big.jacobian(solution.x, trial_free), trial_free, [],
+                           search.schemes, search.n_errors, free_columns=True)
+    rss_new = float(r_new @ r_new)
+    bic = screening.bic_drop(rss_new, len(s.kept))
+    verdicts.numbers[id(s)] = (1 - rss_new / screening.rss, bic, refit.cv_before,
+                               refit.held_out_before)
+    verdict = screening.verdict(bic, refit.held_out_before, bic_threshold)
+    if not verdict:
+        values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
+        reason = _implausible(search.effect_of[s.candidate], values, big.robot)
+        if reason:
+            verdict = f"implausible after refit ({reason}): stands in for something else"
+            verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+    if verdict:
+        verdicts.decisions[id(s)] = f"rejected after refit: {verdict}"
+        return None
+    verdicts.decisions[id(s)] = "added"
+    verdicts.outcomes[id(s)] = Decision.ADDED
+    return _Accepted(s, solution, r_new, trial_free, bic, screening.cv_before, refit.cv_before)
+
+
+def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
+             rounds: int) -> list[CandidateTest]:
+    """The round's tests as recorded: each screen with its decision and numbers."""
+    out = []
+    for s in screens:
+        rss_drop, bic, after, held_out = verdicts.numbers[id(s)]
+        total, worst, _ = screening.extrapolation(held_out) if held_out else (
+            float("nan"), "", float("nan"))
+        out.append(CandidateTest(
+            round=rounds, effect=s.candidate.effect, joints=s.candidate.joints,
+            parameters=len(s.kept), held=s.held, remaining_norm=s.remaining,
+            rss_drop=rss_drop, bic_drop=bic, cv_rms_before=screening.cv_before,
+            cv_rms_after=after, decision=verdicts.decisions[id(s)] or "not supported",
+            extrapolation=total, worst_region=worst, estimate=s.values,
+            label=_label(s.candidate),
+            outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING)))
+    return out
+
+
+def _settled(problem: Problem, search: _Search, extras: dict, rounds: int, method: Method,
+             loss: Loss, bic_threshold: float
+             ) -> tuple[Problem, Solution, tuple[Effect, ...], list[EffectFinding]]:
+    """The final model with the effects added, each paying its way with the others in
+    (those that no longer do taken out, the weakest first, and recorded), and their
+    findings."""
+    big, x, free, steps = search.big, search.x, search.free, search.steps
+    schemes, n_errors = search.schemes, search.n_errors
     with stage("diagnosis: the final model and the evidence of each effect"):
         final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
         groups = _groups(steps)
@@ -637,7 +743,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
             break
         weakest = min(failing, key=lambda key: evidence[key]["bic_drop"])
         dropped = groups[weakest]
-        tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
+        search.tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
         taken_out = _mask_of(big, [n for step in dropped for n in step.kept])
         x = x.copy()
         x[taken_out] = 0.0
@@ -648,9 +754,7 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
                                               loss)
             groups = _groups(steps)
             evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
-    findings = _findings(final, solution, groups, evidence)
-    return Diagnosis(tuple(findings), tuple(tested), final, solution, rounds,
-                     time.perf_counter() - start, effects)
+    return final, solution, effects, _findings(final, solution, groups, evidence)
 
 
 def _unless_supported(screen: _Screen, bic_threshold: float) -> _Screen:

@@ -235,7 +235,7 @@ class DiagnosedFit:
     problem: Problem
     solution: Solution
     added: tuple[EffectFinding, ...]
-    tested: tuple = ()
+    tested: tuple[diagnosis.CandidateTest, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -289,85 +289,208 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     shows each stage (fits, identifiability, diagnosis rounds and refits, the
     unexplained test) with its elapsed time on standard error when it is a terminal.
     """
-    method = choice(method, METHODS, "method")
-    rule = choice(rule, RULES, "rule")
-    loss = choice(loss, CALIBRATION_LOSSES, "loss")
-    robust = loss == "robust"
-    fit_loss: Loss = "linear" if loss == "robust" else loss
-    max_iterations = count(max_iterations, "max_iterations")
-    if select_growth is not None:
-        select_growth = positive(select_growth, "select_growth", allow_zero=True)
-    datasets = _datasets(datasets, "datasets")
-    validation = _datasets(validation, "validation")
-    _check_effects(effects)
-    if not datasets:
-        raise InputError("no dataset given")
-    _check_same_robot(datasets + validation)
-    for dataset in datasets + validation:
-        check_dataset(dataset)
-    robot = datasets[0].robot
-    if parameters is not None:
-        parameters = parameter_names(parameters, robot.parameters().names, "parameters")
+    request = _Request.checked(datasets, validation, effects, method=method, loss=loss,
+                               rule=rule, max_iterations=max_iterations,
+                               select_growth=select_growth, parameters=parameters)
+    nominal, rejected, geometric, final = _fits(request, diagnose)
+    structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
+    if diagnose:
+        final = _learned(final, structure, method=request.method, loss=request.fit_loss)
+    return _result(request, nominal, geometric, final, structure, rejected)
 
-    nominal = _nominal_fit(robot, datasets, effects, select_growth, parameters, method=method,
+
+@dataclass(frozen=True)
+class _Request:
+    """``calibrate``'s arguments as checked at the door (see ``calibrate``), with the
+    robot the datasets share."""
+
+    robot: Robot
+    datasets: list[DatasetBase]
+    validation: list[DatasetBase]
+    effects: Sequence[Effect]
+    method: Method
+    loss: CalibrationLoss
+    rule: Rule
+    max_iterations: int
+    select_growth: float | None
+    parameters: tuple[str, ...] | None
+
+    @property
+    def robust(self) -> bool:
+        """Gross errors are set aside before the least-squares fits."""
+        return self.loss == "robust"
+
+    @property
+    def fit_loss(self) -> Loss:
+        """The loss of the fits themselves."""
+        return "linear" if self.loss == "robust" else self.loss
+
+    @classmethod
+    def checked(cls, datasets: Sequence, validation: Sequence, effects: Sequence[Effect], *,
+                method: Method, loss: CalibrationLoss, rule: Rule, max_iterations: int,
+                select_growth: float | None, parameters: Sequence[str] | None) -> _Request:
+        """The arguments checked, in canonical form (``ArgumentError``, ``InputError``)."""
+        method = choice(method, METHODS, "method")
+        rule = choice(rule, RULES, "rule")
+        loss = choice(loss, CALIBRATION_LOSSES, "loss")
+        max_iterations = count(max_iterations, "max_iterations")
+        if select_growth is not None:
+            select_growth = positive(select_growth, "select_growth", allow_zero=True)
+        datasets = _datasets(datasets, "datasets")
+        validation = _datasets(validation, "validation")
+        _check_effects(effects)
+        if not datasets:
+            raise InputError("no dataset given")
+        _check_same_robot(datasets + validation)
+        for dataset in datasets + validation:
+            check_dataset(dataset)
+        robot = datasets[0].robot
+        names = None if parameters is None else parameter_names(
+            parameters, robot.parameters().names, "parameters")
+        return cls(robot, datasets, validation, effects, method, loss, rule, max_iterations,
+                   select_growth, names)
+
+
+def _fits(request: _Request, diagnose: bool
+          ) -> tuple[NominalFit, tuple[RejectedReading, ...], GeometricFit, DiagnosedFit]:
+    """Stages 1-4 up to the effects diagnosis adds: the nominal fit (on the units kept
+    when robust), the geometric fit and the diagnosed model, and the units set aside."""
+    method, fit_loss, max_iterations = request.method, request.fit_loss, request.max_iterations
+    nominal = _nominal_fit(request.robot, request.datasets, request.effects,
+                           request.select_growth, request.parameters, method=method,
                            loss=fit_loss)
     rejected: tuple[RejectedReading, ...] = ()
     screened_from = nominal.datasets
     deferred = False  # too many set aside before the diagnosis: judged after it instead
-    if robust:
-        nominal, rejected, deferred = _screened(nominal, effects, method=method,
+    if request.robust:
+        nominal, rejected, deferred = _screened(nominal, request.effects, method=method,
                                                 max_iterations=max_iterations,
                                                 defer=diagnose)
     for attempt in range(2):
-        problem = nominal.problem
         identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
                                                         max_iterations=max_iterations)
-        geometric = _prior_fit(nominal, identifiability, least_squares, rule, method=method,
-                               loss=fit_loss, max_iterations=max_iterations)
-        final = _diagnose(problem, geometric, validation, diagnose, method=method,
-                          loss=fit_loss)
+        geometric = _prior_fit(nominal, identifiability, least_squares, request.rule,
+                               method=method, loss=fit_loss, max_iterations=max_iterations)
+        final = _diagnose(nominal.problem, geometric, request.validation, diagnose,
+                          method=method, loss=fit_loss)
         # Effects found change what the residual holds: readings set aside before they
         # were known are judged again under the final model (once).
-        if not robust or not (final.added or deferred) or attempt:
+        if not request.robust or not (final.added or deferred) or attempt:
             break
         revised = _rescreened(screened_from, final, rejected, method=method,
                               max_iterations=max_iterations)
         if revised is None:
             break
         kept, rejected = revised
-        nominal = _refitted(nominal, kept, effects, method=method)
-    structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
-    if diagnose:
-        final = _learned(final, structure, method=method, loss=fit_loss)
+        nominal = _refitted(nominal, kept, request.effects, method=method)
+    return nominal, rejected, geometric, final
+
+
+def _result(request: _Request, nominal: NominalFit, geometric: GeometricFit,
+            final: DiagnosedFit, structure: unexplained.Unexplained | None,
+            rejected: tuple[RejectedReading, ...]) -> CalibrationResult:
+    """Stage 5 and the result: the errors under each model, the held-out data, standard
+    errors, the recommended model and every estimate. The calibrated robot takes the
+    recommended model's geometry."""
+    problem, robot = nominal.problem, request.robot
     x_nominal_final = _embed(problem, nominal.solution.x, final.problem)
     x_geometric_final = _embed(problem, geometric.solution.x, final.problem)
     residuals = _residuals(final.problem, x_nominal_final, x_geometric_final, final.solution.x)
     fit = RmsSummary(problem.rms(nominal.solution.x), problem.rms(geometric.solution.x),
                      final.problem.rms(final.solution.x))
     held_out = Validation()
-    if validation:
-        held_out = _validate(robot, validation, problem, (nominal.solution.x,
-                                                           geometric.solution.x),
-                             final.problem, final.solution.x, robust=robust,
+    if request.validation:
+        held_out = _validate(robot, request.validation, problem, (nominal.solution.x,
+                                                                   geometric.solution.x),
+                             final.problem, final.solution.x, robust=request.robust,
                              identifiable=nominal.identifiability.identifiable)
-    std, prior_summary, notes = _standard_errors(final, geometric, rule)
+    std, prior_summary, notes = _standard_errors(final, geometric, request.rule)
     recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
-    result = CalibrationResult.from_fit(
-        datasets=tuple(d.path.name for d in nominal.datasets), robot=robot,
-        problem=problem, final_problem=final.problem, nominal=nominal.solution,
-        geometric=geometric.solution, final=final.solution, std=std,
+    chosen = final.solution if recommended == "final" else geometric.solution
+    ours = _final_estimates(final, std)
+    covariance_names, covariance = _geometric_covariance(problem, geometric.solution)
+    return CalibrationResult(
+        datasets=tuple(d.path.name for d in nominal.datasets), robot_nominal=robot,
+        robot_calibrated=robot.with_parameters(chosen.x[problem.slices["robot"]]),
+        parameters=tuple(_estimates(problem, geometric.identifiability, final.solution.x, std)),
         identifiability=geometric.identifiability,
-        parameters=_estimates(problem, geometric.identifiability, final.solution.x, std),
-        parameters_geometric=_estimates(problem, geometric.identifiability,
-                                        geometric.solution.x, geometric.solution.std),
-        effects=final.added, diagnosis=final.tested, fit=fit, validation=held_out.summary,
-        residuals=residuals, validation_residuals=held_out.residuals,
+        condition_number=geometric.identifiability.condition_number, effects=ours.effects,
+        fit=fit, validation=held_out.summary, residuals=tuple(residuals),
+        validation_residuals=held_out.residuals, mounted=ours.mounted,
+        mounted_quantities=ours.mounted_quantities, placement=ours.placement,
+        solver=_solver_summary(request.method, request.loss, problem, nominal.solution,
+                               geometric.solution, final.solution),
+        effect_models=tuple(final.problem.effects),
+        effect_values=final.solution.x[final.problem.slices["effects"]].copy(),
+        diagnosis=tuple(final.tested),
+        selection={} if nominal.selection is None else dict(nominal.selection.dropped),
+        parameters_geometric=tuple(_estimates(problem, geometric.identifiability,
+                                              geometric.solution.x, geometric.solution.std)),
+        unexplained=structure, recommended=recommended, recommendation=recommendation,
+        prior=prior_summary,
         spheres=_spheres(final.problem, final.solution.x, std, "fit") + held_out.spheres,
-        selection=nominal.selection,
-        unexplained=structure,
-        recommended=recommended, recommendation=recommendation, prior=prior_summary,
-        notes=geometric.notes + notes, method=method, loss=loss)
-    return replace(result, rejected=rejected + held_out.rejected, validation_all=held_out.all)
+        notes=geometric.notes + notes,
+        mounted_geometric=_mounted_values(problem, geometric.solution.x),
+        covariance_names=covariance_names, covariance=covariance,
+        rejected=rejected + held_out.rejected, validation_all=held_out.all)
+
+
+@dataclass(frozen=True)
+class _FinalEstimates:
+    """What the final model estimates beyond the robot: the mounted instrument (value and
+    standard error [SI]) with each one's quantity, the placements [SI], and the effects
+    found with their standard errors."""
+
+    mounted: dict[str, tuple[float, float | None]]
+    mounted_quantities: dict[str, str]
+    placement: dict[str, float]
+    effects: tuple[EffectFinding, ...]
+
+
+def _final_estimates(final: DiagnosedFit, std: np.ndarray) -> _FinalEstimates:
+    """The final model's mounted, placement and effect estimates; ``std`` [SI] the
+    standard error of every unknown of ``final.problem`` (NaN where not estimated)."""
+    problem, x = final.problem, final.solution.x
+    names = problem.unknowns.names
+    mounted = {names[i]: (float(x[i]), _finite(std[i]))
+               for i in range(problem.slices["mounted"].start, problem.slices["mounted"].stop)}
+    placement = {names[i]: float(x[i]) for i in range(problem.slices["placement"].start,
+                                                      problem.slices["placement"].stop)}
+    effects = tuple(replace(f, std={n: _finite(std[problem.unknowns.index(n)])
+                                    for n in f.parameters}) for f in final.added)
+    return _FinalEstimates(mounted, {name: problem.unknowns.quantity(name) for name in mounted},
+                           placement, effects)
+
+
+def _mounted_values(problem: Problem, x: np.ndarray) -> dict[str, float]:
+    """The mounted instrument's values [SI] in ``x`` by name."""
+    names = problem.unknowns.names
+    return {names[i]: float(x[i])
+            for i in range(problem.slices["mounted"].start, problem.slices["mounted"].stop)}
+
+
+def _geometric_covariance(problem: Problem, geometric: Solution
+                          ) -> tuple[tuple[str, ...], np.ndarray]:
+    """The names of the geometric fit's free robot and mounted parameters and their
+    posterior covariance [SI], in that order (what the delivery starts from)."""
+    kept_slices = (problem.slices["robot"], problem.slices["mounted"])
+    robot_free = [i for i in np.flatnonzero(geometric.free)
+                  if any(part.start <= i < part.stop for part in kept_slices)]
+    position = {int(i): k for k, i in enumerate(np.flatnonzero(geometric.free))}
+    kept = [position[int(i)] for i in robot_free]
+    covariance = (np.asarray(geometric.covariance)[np.ix_(kept, kept)]
+                  if np.size(geometric.covariance) else np.zeros((0, 0)))
+    return tuple(problem.unknowns.names[i] for i in robot_free), covariance
+
+
+def _solver_summary(method: Method, loss: CalibrationLoss, problem: Problem, nominal: Solution,
+                    geometric: Solution, final: Solution) -> dict[str, str | int | float]:
+    """How the solver ran: the final fit's iterations and status, the time of the
+    nominal and geometric fits [s], the residual entries and free unknowns of the
+    geometric fit."""
+    return {"method": method, "loss": loss, "iterations": final.iterations,
+            "status": final.status, "seconds": geometric.seconds + nominal.seconds,
+            "residuals": problem.size, "free_unknowns": int(geometric.free.sum())}
 
 
 def parameter_names(value, valid: Sequence[str], argument: str) -> tuple[str, ...]:

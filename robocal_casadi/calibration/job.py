@@ -12,21 +12,32 @@ this one job, so their results are the same, key by key:
    delivered file is computed by reading that file back and running the forward
    kinematics ``robocal fk`` runs; the predicted accuracy over the work cell; then
    ``result.json`` and the report; the folder moved into place as a whole.
+
+Each step runs the linear algebra library (OpenBLAS, MKL, ...) on one thread. A matrix
+product split over several threads adds its terms in another order, so the last digits
+of every estimate would depend on the machine's cores, and a fleet's worker processes
+(started with one thread each) would write other bytes than ``robocal calibrate`` for the
+same robot. On one thread every caller writes the same ``result.json``; the products of
+a calibration are too small for more threads to pay for starting them.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..delivery.accuracy import predict, work_cell
-from ..delivery.choice import Delivery, choose
+from ..delivery.choice import choose
 from ..effect_model import EFFECTS_FILE, load_effects, save_effects
+from ..errors import ArgumentError
 from ..memory import release_freed
 from ..output import atomic_directory
 from ..output import json_safe as _clean
@@ -34,12 +45,14 @@ from ..profiles import ProfileCost, profile_parameters
 from ..progress import reports_stages, stage
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from ..results import CalibrationResult
+from ..results import CalibrationResult, CandidateFigures, Delivered
 from ..robot import load_robot, save_robot
 from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
 from .outliers import kept_datasets
 
+P = ParamSpec("P")
+R = TypeVar("R")
 ROBOT_FILE = "robot_calibrated.yaml"
 REFUSED = 3  # exit status: the calibration is not better than doing nothing
 
@@ -95,6 +108,18 @@ class JobOutcome:
                 f"written={list(self.written)})")
 
 
+def on_one_blas_thread(function: Callable[P, R]) -> Callable[P, R]:
+    """``function`` run with the linear algebra library on one thread (the module
+    docstring says why); the caller's setting is restored after."""
+    @functools.wraps(function)
+    def run(*args: P.args, **kwargs: P.kwargs) -> R:
+        with threadpool_limits(limits=1, user_api="blas"):
+            return function(*args, **kwargs)
+
+    return run
+
+
+@on_one_blas_thread
 def calibrate_job(datasets: Sequence, validation: Sequence = (),
                   options: JobOptions = JobOptions()) -> CalibrationResult:
     """Steps 1 and 2: the calibration with its delivery chosen (nothing written)."""
@@ -135,6 +160,7 @@ def run_job(datasets: Sequence, validation: Sequence = (), options: JobOptions =
     return write(result, datasets, validation, Path(out), report, verb=verb)
 
 
+@on_one_blas_thread
 def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence = (),
              robot_file: Path | None = None, effects_folder: Path | None = None
              ) -> CalibrationResult:
@@ -144,7 +170,10 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     the models in memory."""
     datasets, validation = _kept(result, datasets, validation)
     robot = load_robot(robot_file) if robot_file is not None else result.robot_calibrated
-    delivery: Delivery = result.delivery
+    delivery = result.delivery
+    if delivery is None:
+        raise ArgumentError("expected a result whose delivery is chosen (calibrate_job or "
+                            "deliver), got one without", argument="result")
     mounted = delivery.candidate(delivery.delivered).mounted
     figures: dict[str, dict[str, float]] = {ROBOT_FILE: {}}
     errors: dict[str, np.ndarray] = {}
@@ -164,12 +193,11 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None
-    delivered = {ROBOT_FILE: figures[ROBOT_FILE], "with_effects": with_effects,
-                 "model": delivery.delivered, "mounted": dict(mounted), "errors": errors,
-                 "basis": delivery.basis,
-                 "reason": delivery.reason,
-                 "candidates": {c.name: {"fit": c.fit_rms, "held_out": c.held_out_rms}
-                                for c in delivery.candidates}}
+    delivered = Delivered(model=delivery.delivered, robot_file=figures[ROBOT_FILE],
+                          with_effects=with_effects, mounted=dict(mounted), errors=errors,
+                          basis=delivery.basis, reason=delivery.reason,
+                          candidates=tuple(CandidateFigures(c.name, c.fit_rms, c.held_out_rms)
+                                           for c in delivery.candidates))
     return replace(result, delivered=delivered, predicted_accuracy=predicted)
 
 
@@ -225,6 +253,7 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     return float(np.sqrt(np.mean(np.sum((T[:, :3, 3] - T_target[:, :3, 3]) ** 2, axis=1))))
 
 
+@on_one_blas_thread
 def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, out: Path,
           report: ReportOptions = ReportOptions(), *, verb: str = "calibrate") -> JobOutcome:
     """Step 3: stage every file, measure the delivered ones as written, move into place

@@ -29,19 +29,20 @@ reported.
 ``find`` returns None when nothing is significant, the cross-validation does not
 improve, or the structured part is below ``MIN_SHARE`` of the remaining mean square.
 Linearised at the final solution; residuals [m] are those of ``Problem.residual``,
-RMS values over the per-measurement errors as ``Problem.rms``.
+RMS values over the per-measurement errors as ``Problem.rms``. The records it returns
+(``Unexplained``, ``StructureTest``) are results, defined in ``results``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from statistics import NormalDist
-from typing import Any
 
 import numpy as np
 
 from ..effects.motion import directions_of_motion
+from ..results import StructureTest, Unexplained
 from .folds import FoldGrams, fold_schemes
 
 ALPHA = 1e-3  # family-wise false-alarm level over all tests
@@ -55,62 +56,6 @@ STEMS = ("theta", "d", "a", "alpha", "x", "y", "z", "roll", "pitch", "yaw")  # D
 PAIR_GAIN = 1.25  # a pair's statistic over the better of its two variables alone
 LISTED = 0.25  # variables listed down to this fraction of the strongest statistic
 CV_SLACK = 3.0  # held-out error of the model alone, over what a sound fold split gives
-
-
-@dataclass(frozen=True)
-class StructureTest:
-    """One variable against one geometric parameter: the numbers of its test."""
-
-    variable: str
-    parameter: str
-    columns: int  # free columns after projection
-    statistic: float  # n log(RSS0 / RSS1)
-    threshold: float  # chi-square quantile it must exceed
-    rss_drop: float  # relative
-
-    @property
-    def significant(self) -> bool:
-        return self.statistic > self.threshold
-
-    def __repr__(self) -> str:
-        return (f"StructureTest({self.parameter} ~ {self.variable}: {self.statistic:.4g} "
-                f"vs {self.threshold:.4g}, rss -{100 * self.rss_drop:.3g}%)")
-
-
-@dataclass(frozen=True)
-class Unexplained:
-    """A structured residual the model does not explain.
-
-    ``rms`` [m] is the structured part (per-measurement RMS, as the fit RMS; at most the
-    fit RMS), ``share`` its fraction of the remaining mean square, ``variables`` the
-    variables it follows, strongest first, ``parameters`` the geometric parameter that
-    varies with each (the likeliest carrier, not a diagnosis), ``noise_floor`` [m] the
-    held-out RMS once the structure is fitted. ``curve`` holds per data row the strongest
-    variable's value (SI, or the column's own unit) and the RMS [m] of the row's residual
-    entries before
-    and after removing the structure, for a plot.
-    """
-
-    rms: float
-    share: float
-    variables: tuple[str, ...]
-    parameters: tuple[str, ...]
-    noise_floor: float
-    tests: tuple[StructureTest, ...] = field(repr=False, default=())
-    curve: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
-
-    def to_json(self, length_scale: float, unit: str) -> dict[str, Any]:
-        """The result file's form: rms in the file's length unit."""
-        return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
-                "variables": list(self.variables)}
-
-    def sentence(self, length_scale: float, unit: str) -> str:
-        """One sentence for a person, in the file's length unit."""
-        pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
-        return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
-                f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
-                f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
-                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
 
 
 # ----------------------------------------------------------------------------- variables
@@ -228,115 +173,185 @@ def _units_subset(problem, n: int, seed: int) -> np.ndarray:
     return np.flatnonzero(np.isin(keys, chosen))
 
 
+@dataclass(frozen=True)
+class _Linearised:
+    """The residual at the final solution, on the entries tested (``keep`` of all of them):
+    ``r`` those entries, ``U`` an orthonormal basis of the model's own (free) columns
+    there, ``r_perp`` the residual off them and ``rss0`` its sum of squares [m^2]."""
+
+    r_all: np.ndarray
+    keep: np.ndarray
+    r: np.ndarray
+    U: np.ndarray
+    r_perp: np.ndarray
+    rss0: float
+
+    @property
+    def n(self) -> int:
+        return len(self.r)
+
+
+@dataclass(frozen=True)
+class _Sensitivities:
+    """How each tested geometric parameter (``names``) of each data row moves the tested
+    residual entries: per non-zero, the entry (``entries``, 0-based among those tested),
+    the data row (``rows``) and one value per parameter (``values``)."""
+
+    names: list[str]
+    entries: np.ndarray
+    rows: np.ndarray
+    values: np.ndarray
+
+    def projected_columns(self, variable: _Variable, lin: _Linearised) -> np.ndarray:
+        """(n x channels x K) columns of every parameter varying with ``variable``,
+        unit-scaled and projected off the model's own columns (one product for all)."""
+        n, names = lin.n, self.names
+        K = variable.basis.shape[1]
+        rows_of_columns = np.empty((len(names) * K, n))  # one column per row, for speed
+        basis = variable.basis[self.rows]
+        for channel in range(len(names)):
+            weights = self.values[:, channel]
+            for k in range(K):
+                rows_of_columns[channel * K + k] = np.bincount(
+                    self.entries, weights=weights * basis[:, k], minlength=n)
+        size = np.sqrt(np.einsum("ij,ij->i", rows_of_columns, rows_of_columns))
+        rows_of_columns[size > 0] /= size[size > 0, None]
+        rows_of_columns -= (rows_of_columns @ lin.U) @ lin.U.T
+        return rows_of_columns.reshape(len(names), K, n).transpose(2, 0, 1)
+
+    def basis(self, variable: _Variable, parameter: str, lin: _Linearised) -> np.ndarray:
+        """The orthonormal columns of ``parameter`` varying with ``variable`` (a pair
+        tested before, so not zero)."""
+        columns = self.projected_columns(variable, lin)
+        Q = _orthonormal(columns[:, self.names.index(parameter), :])
+        assert Q is not None  # it was tested
+        return Q
+
+
 def find(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0) -> Unexplained | None:
     """Test the residual of ``problem`` at ``x`` (``free``: the unknowns fitted) for
     structure; see the module. None when what remains is consistent with noise."""
-    robot = problem.robot
     if not any(m.uses_robot for m in problem.models):
         return None
-    r_all = problem.residual(x)
+    lin = _linearised(problem, x, free, seed)
+    if lin.n < 10 or lin.rss0 <= 0:
+        return None
+    sensitivities = _sensitivities(problem, x, lin)
+    variables = _variables(problem)
+    tests = _tests(variables, sensitivities, lin)
+    significant = sorted((t for t in tests if t.significant), key=lambda t: -t.statistic)
+    if not significant:
+        return None
+    chosen = _strongest(significant)
+    # The chosen bases are formed again (the same numbers) rather than every test's
+    # basis held meanwhile: hundreds of them at thousands of rows each.
+    by_name = {variable.name: variable for variable in variables}
+    X = np.column_stack([sensitivities.basis(by_name[t.variable], t.parameter, lin)
+                         for t in chosen])
+    held_out = _held_out(problem, lin, X, seed)
+    if held_out is None:
+        return None
+    sse0, sse1 = held_out
+    share = (sse0 - sse1) / sse0
+    if share < MIN_SHARE:
+        return None
+    # The structured part is the share of what the fit leaves (its mean square over the
+    # per-measurement errors), so it can never exceed the fit RMS it is part of.
     n_errors = sum(len(m.errors(np.zeros(m.residual_size()))) for m in problem.models)
+    fit_ms = float(lin.r_all @ lin.r_all) / n_errors
+    ordered, carriers = _ranking(significant)
+    fitted = X @ np.linalg.lstsq(X, lin.r_perp, rcond=None)[0]
+    curve = _curve(problem, chosen[0].variable, sensitivities.entries, sensitivities.rows,
+                   lin.r, lin.r - fitted)
+    scale = len(lin.keep) / len(lin.r_all)
+    return Unexplained(rms=math.sqrt(share * fit_ms), share=float(share),
+                       variables=tuple(ordered[:6]), parameters=tuple(carriers[:6]),
+                       noise_floor=math.sqrt(sse1 / (n_errors * scale)), tests=tuple(tests),
+                       curve=curve)
+
+
+def _linearised(problem, x: np.ndarray, free: np.ndarray, seed: int) -> _Linearised:
+    """The residual at ``x`` on the entries tested, and what the model already fits
+    there (``free``'s columns)."""
+    r_all = problem.residual(x)
     keep = _units_subset(problem, len(r_all), seed)
-    scale = len(keep) / len(r_all)
     r = r_all[keep]
-    n = len(r)
     A = problem.jacobian(x, np.flatnonzero(free))[keep]
     norms = np.linalg.norm(A, axis=0)
     A = A[:, norms > 0] / norms[norms > 0]
     U, singular, _ = np.linalg.svd(A, full_matrices=False)
     U = U[:, singular > singular[0] * 1e-10] if singular.size else U[:, :0]
     r_perp = r - U @ (U.T @ r)
-    rss0 = float(r_perp @ r_perp)
-    if n < 10 or rss0 <= 0:
-        return None
+    return _Linearised(r_all, keep, r, U, r_perp, float(r_perp @ r_perp))
 
-    names = [f"{stem}{j}" for j in range(1, robot.dof + 1) for stem in STEMS
-             if f"{stem}{j}" in problem.kinematics.registry.names]
-    indices = [problem.kinematics.registry.names.index(name) for name in names]
+
+def _sensitivities(problem, x: np.ndarray, lin: _Linearised) -> _Sensitivities:
+    """The row sensitivities of every geometric parameter of every joint, restricted to
+    the entries tested."""
+    registry = problem.kinematics.registry.names
+    names = [f"{stem}{j}" for j in range(1, problem.robot.dof + 1) for stem in STEMS
+             if f"{stem}{j}" in registry]
+    indices = [registry.index(name) for name in names]
     entries, rows, values = problem.row_sensitivities(x, indices)
-    position = np.full(len(r_all), -1)
-    position[keep] = np.arange(n)
+    position = np.full(len(lin.r_all), -1)
+    position[lin.keep] = np.arange(lin.n)
     inside = position[entries] >= 0
-    entries, rows, values = position[entries[inside]], rows[inside], values[inside]
-    variables = _variables(problem)
+    return _Sensitivities(names, position[entries[inside]], rows[inside], values[inside])
 
-    def projected_columns(variable: _Variable) -> np.ndarray:
-        """(n x channels x K) columns of every parameter varying with ``variable``,
-        unit-scaled and projected off the model's own columns (one product for all)."""
-        K = variable.basis.shape[1]
-        rows_of_columns = np.empty((len(names) * K, n))  # one column per row, for speed
-        basis = variable.basis[rows]
-        for channel in range(len(names)):
-            weights = values[:, channel]
-            for k in range(K):
-                rows_of_columns[channel * K + k] = np.bincount(
-                    entries, weights=weights * basis[:, k], minlength=n)
-        size = np.sqrt(np.einsum("ij,ij->i", rows_of_columns, rows_of_columns))
-        rows_of_columns[size > 0] /= size[size > 0, None]
-        rows_of_columns -= (rows_of_columns @ U) @ U.T
-        return rows_of_columns.reshape(len(names), K, n).transpose(2, 0, 1)
 
+def _tests(variables: list[_Variable], sensitivities: _Sensitivities,
+           lin: _Linearised) -> list[StructureTest]:
+    """Every variable against every parameter, with its chi-square threshold at the
+    family-wise level ``ALPHA`` shared over all of them."""
+    n, U = lin.n, lin.U
     tests = []
     for variable in variables:
-        X_all = projected_columns(variable)
-        for channel in range(len(names)):
+        X_all = sensitivities.projected_columns(variable, lin)
+        for channel, parameter in enumerate(sensitivities.names):
             Q = _orthonormal(X_all[:, channel, :])
             if Q is None or not Q.shape[1] or Q.shape[1] >= n - U.shape[1] - 1:
                 continue
-            drop = float(np.sum((Q.T @ r_perp) ** 2))
-            rss1 = max(rss0 - drop, 1e-300)
-            statistic = n * math.log(rss0 / rss1)
-            tests.append(StructureTest(variable.name, names[channel], Q.shape[1], statistic,
-                                       0.0, drop / rss0))
+            drop = float(np.sum((Q.T @ lin.r_perp) ** 2))
+            rss1 = max(lin.rss0 - drop, 1e-300)
+            statistic = n * math.log(lin.rss0 / rss1)
+            tests.append(StructureTest(variable.name, parameter, Q.shape[1], statistic,
+                                       0.0, drop / lin.rss0))
     if not tests:
-        return None
+        return []
     tail = ALPHA / len(tests)
-    tests = [StructureTest(t.variable, t.parameter, t.columns, t.statistic,
-                           _chi2_quantile(t.columns, tail), t.rss_drop) for t in tests]
-    significant = sorted((t for t in tests if t.significant), key=lambda t: -t.statistic)
-    if not significant:
-        return None
+    return [StructureTest(t.variable, t.parameter, t.columns, t.statistic,
+                          _chi2_quantile(t.columns, tail), t.rss_drop) for t in tests]
 
+
+def _strongest(significant: list[StructureTest]) -> list[StructureTest]:
+    """The strongest tests of distinct variables, at most ``COMBINED``."""
     chosen: list[StructureTest] = []
     for test in significant:
         if test.variable not in {t.variable for t in chosen}:
             chosen.append(test)
         if len(chosen) == COMBINED:
             break
-    # The chosen bases are formed again (the same numbers) rather than every test's
-    # basis held meanwhile: hundreds of them at thousands of rows each.
-    by_name = {variable.name: variable for variable in variables}
-    chosen_bases = []
-    for t in chosen:
-        Q = _orthonormal(projected_columns(by_name[t.variable])[:, names.index(t.parameter), :])
-        assert Q is not None  # it was tested
-        chosen_bases.append(Q)
-    X = np.column_stack(chosen_bases)
+    return chosen
+
+
+def _held_out(problem, lin: _Linearised, X: np.ndarray, seed: int
+              ) -> tuple[float, float] | None:
+    """Held-out SSE [m^2] of the model alone and with the structure ``X`` fitted, over
+    folds of units of data; None when they do not show an improvement the folds can be
+    trusted for (``_cross_validation_holds``)."""
     schemes = [s for s in fold_schemes(problem, 5, seed) if not s.extrapolating]
     if not schemes:
         return None
-    fold = schemes[0].fold[keep]
-    Z = np.column_stack([U, X, r])
-    grams = FoldGrams(Z, fold)
+    U = lin.U
+    fold = schemes[0].fold[lin.keep]
+    grams = FoldGrams(np.column_stack([U, X, lin.r]), fold)
     sse0 = grams.held_out_sse(list(range(U.shape[1])))
     sse1 = grams.held_out_sse(list(range(U.shape[1] + X.shape[1])))
     if not (np.isfinite(sse0) and np.isfinite(sse1)) or sse1 >= sse0:
         return None
-    if not _cross_validation_holds(sse0, rss0, n, U.shape[1], fold):
+    if not _cross_validation_holds(sse0, lin.rss0, lin.n, U.shape[1], fold):
         return None
-    share = (sse0 - sse1) / sse0
-    if share < MIN_SHARE:
-        return None
-    # The structured part is the share of what the fit leaves (its mean square over the
-    # per-measurement errors), so it can never exceed the fit RMS it is part of.
-    fit_ms = float(r_all @ r_all) / n_errors
-    ordered, carriers = _ranking(significant)
-    fitted = X @ np.linalg.lstsq(X, r_perp, rcond=None)[0]
-    curve = _curve(problem, chosen[0].variable, entries, rows, r, r - fitted)
-    return Unexplained(rms=math.sqrt(share * fit_ms), share=float(share),
-                       variables=tuple(ordered[:6]), parameters=tuple(carriers[:6]),
-                       noise_floor=math.sqrt(sse1 / (n_errors * scale)), tests=tuple(tests),
-                       curve=curve)
+    return sse0, sse1
 
 
 def _cross_validation_holds(sse0: float, rss0: float, n: int, p: int, fold: np.ndarray) -> bool:

@@ -195,7 +195,7 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
             "effects": [e.name for e in result.effects],
             "learned_effects": [e.name for e in result.effects if is_learned(e.name)],
             "recommended": result.recommended, "warning": result.warning or None,
-            "delivered_model": (result.delivered or {}).get("model"),
+            "delivered_model": None if result.delivered is None else result.delivered.model,
             "predicted_accuracy": None if result.predicted_accuracy is None else {
                 "rms": result.predicted_accuracy.rms / s, "p95": result.predicted_accuracy.p95 / s,
                 "max": result.predicted_accuracy.max / s,

@@ -54,7 +54,6 @@ from ``DRAWS`` draws of ``z`` with a fixed seed.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -62,70 +61,19 @@ import numpy as np
 from ..calibration.prior import tolerance_of
 from ..kinematics import Kinematics
 from ..parameters import perturbed_stems
+from ..results import (  # noqa: F401 (the record and its region kinds, re-exported)
+    BAND,
+    DATA_RANGES,
+    DECLARED,
+    MEASURED,
+    PARTLY_DECLARED,
+    SAMPLES,
+    PredictedAccuracy,
+)
 from ..robot import Robot
 
-SAMPLES = 400
 SEED = 9283  # fixed: a prediction is repeatable
-BAND = (0.1, 0.9)  # quantiles of one robot's RMS over the work cell that ``band`` gives
 DRAWS = 20000  # draws of the parameter error behind ``band`` (quantile error ~0.5%)
-DATA_RANGES = "joint ranges of the fit data"
-DECLARED = "declared work cell"
-PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
-MEASURED = "poses of the fit data"
-
-
-@dataclass(frozen=True)
-class PredictedAccuracy:
-    """Predicted tool-position error over ``region`` [m]: ``rms``, ``p95``, ``max``;
-    ``structured`` [m] the part from what the model does not describe (``s``);
-    ``region`` the joint ranges (per joint ``[low, high]``, rad or m); ``band`` [m] the
-    ``BAND`` quantiles of one robot's RMS over the region (module docstring)."""
-
-    rms: float
-    p95: float
-    max: float
-    structured: float
-    region: tuple[tuple[float, float], ...]
-    samples: int = SAMPLES
-    errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
-    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
-    band: tuple[float, float] | None = None
-
-    def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
-        return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
-                "max": self.max / length_scale, "structured": self.structured / length_scale,
-                "rms_band": (None if self.band is None else
-                             [self.band[0] / length_scale, self.band[1] / length_scale]),
-                "rms_band_quantiles": list(BAND),
-                "unit": unit,
-                "region": {"kind": self.region_kind, "samples": self.samples,
-                           "joints_rad_or_m": [list(r) for r in self.region]}}
-
-    @property
-    def region_words(self) -> str:
-        """Where the prediction holds, for sentences."""
-        return {DECLARED: "the declared work cell",
-                PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
-                                 "cover)",
-                MEASURED: "the poses the fit data were measured in"}.get(
-            self.region_kind, "the joint ranges the data cover")
-
-    @property
-    def band_words(self) -> str:
-        """The band in words (its quantiles as a probability), for sentences."""
-        return f"{round(100 * (BAND[1] - BAND[0]))}% of robots calibrated like this"
-
-    def sentence(self, length_scale: float, unit: str) -> str:
-        band = "" if self.band is None else (
-            f" ({self.band[0] / length_scale:.3g} to {self.band[1] / length_scale:.3g} for "
-            f"{self.band_words})")
-        return (f"predicted tool-position error over {self.region_words}: RMS "
-                f"{self.rms / length_scale:.4g}{band}, 95% {self.p95 / length_scale:.4g}, max "
-                f"{self.max / length_scale:.4g} {unit}")
-
-    def __repr__(self) -> str:
-        return (f"PredictedAccuracy(rms={self.rms:.4g} m, p95={self.p95:.4g} m, "
-                f"max={self.max:.4g} m)")
 
 
 def region_of(result) -> tuple[tuple[float, float], ...] | None:

@@ -25,7 +25,6 @@ Every RMS here is [m]; the held-out RMS of a candidate is computed with its plac
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,70 +33,19 @@ from ..calibration.folds import FoldGrams, fold_schemes
 from ..calibration.identification import evaluate, models_for
 from ..calibration.problem import Problem
 from ..calibration.solver import solve
+from ..results import (  # noqa: F401 (the records, re-exported)
+    DOING_NOTHING,
+    Candidate,
+    Delivery,
+)
 from ..robot import Robot
 
 GEOMETRY_ONLY = ("geometric", "final_geometry", "projected")
-DOING_NOTHING = ("nominal", "instrument_only")
 # Held-out RMS values closer than this [m] (or this share of them) are a tie, and a tie
 # never refuses a calibration: equal models (data without error, a robot on its drawing)
 # differ only in the last digits of their sums.
 TIE = 1e-9
 TIE_SHARE = 1e-9
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """One model a controller could run: ``robot`` (geometry only) with the ``mounted``
-    instrument values [SI] that belong to it; ``fit_rms`` and ``held_out_rms`` [m] (None
-    where not measured)."""
-
-    name: str
-    robot: Robot = field(repr=False)
-    mounted: dict[str, float] = field(repr=False)
-    fit_rms: float
-    held_out_rms: float | None = None
-
-    def __repr__(self) -> str:
-        held = "" if self.held_out_rms is None else f", held out {self.held_out_rms:.4g} m"
-        return f"Candidate({self.name!r}, fit {self.fit_rms:.4g} m{held})"
-
-
-@dataclass(frozen=True)
-class Delivery:
-    """The choice: ``recommended`` (``final``, ``geometric``, ``nominal`` or
-    ``instrument_only``), ``delivered`` the candidate ``robot_calibrated.yaml`` holds,
-    the ``basis`` of the decision (``held-out data`` or ``cross-validation``), every
-    ``candidates`` scored, the held-out RMS [m] of the calibrated model the user would
-    otherwise take (``calibrated_rms``) and of doing nothing (``nothing_rms``), and the
-    ``reason`` in words."""
-
-    recommended: str
-    delivered: str
-    basis: str
-    candidates: tuple[Candidate, ...]
-    reason: str
-    calibrated_rms: float | None = None
-    nothing_rms: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def refused(self) -> bool:
-        """The calibration is not better than doing nothing (exit status 3)."""
-        return self.recommended in DOING_NOTHING
-
-    def candidate(self, name: str) -> Candidate:
-        for candidate in self.candidates:
-            if candidate.name == name:
-                return candidate
-        raise KeyError(f"no candidate {name!r}; have {[c.name for c in self.candidates]}")
-
-    @property
-    def robot(self) -> Robot:
-        """The geometry ``robot_calibrated.yaml`` holds."""
-        return self.candidate(self.delivered).robot
-
-    def __repr__(self) -> str:
-        return (f"Delivery(recommended={self.recommended!r}, delivered={self.delivered!r}, "
-                f"basis={self.basis!r}, candidates={list(self.candidates)})")
 
 
 def choose(result, datasets: Sequence, validation: Sequence = ()) -> Delivery:

@@ -222,7 +222,7 @@ def robot_summary(result) -> dict:
             "validation": rms(result.validation), "effects": effects,
             "compliance": compliance, "joint_offsets": offsets,
             "recommended": result.recommended,
-            "delivered_model": (result.delivered or {}).get("model"),
+            "delivered_model": None if result.delivered is None else result.delivered.model,
             "predicted_accuracy": None if result.predicted_accuracy is None else {
                 "rms": result.predicted_accuracy.rms, "p95": result.predicted_accuracy.p95,
                 "max": result.predicted_accuracy.max,

@@ -94,7 +94,7 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
     _, residuals = judged_on(result)
     stats = {m: Accuracy.of(pooled(residuals, m)) for m in MODELS}
     written = _written_errors(result)
-    model = (result.delivered or {}).get("model", "geometric")
+    model = "geometric" if result.delivered is None else result.delivered.model
     contents = ("calibrated geometry only: joint offsets, link lengths and twists, base and "
                 "tool; load it into the controller or the offline programming system")
     if model in ("nominal", "instrument_only"):
@@ -121,7 +121,7 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
 def _written_errors(result: CalibrationResult) -> np.ndarray | None:
     """Per-measurement errors [m] of robot_calibrated.yaml as written, on the data the
     delivered accuracy is judged on (``calibration.job.measured``), or None."""
-    errors = (result.delivered or {}).get("errors") or {}
+    errors = {} if result.delivered is None else result.delivered.errors
     role, _ = judged_on(result)
     return errors.get(role)
 
