@@ -26,11 +26,11 @@ from pathlib import Path
 import numpy as np
 
 from robocal_casadi.calibration import Problem, analyse_identifiability, models_for, solve
-from robocal_casadi.datasets import TrackerPoints
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.simulate import simulate
-from robocal_casadi.transforms import pose_from_xyz_rpy
+from robocal_casadi.instruments.datasets import TrackerPoints
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.transforms import pose_from_xyz_rpy
 
 
 def numpy_points(robot, Q: np.ndarray, p: np.ndarray, offset: np.ndarray) -> np.ndarray:

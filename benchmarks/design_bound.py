@@ -36,7 +36,7 @@ from planning.rows import RowModel  # noqa: E402
 from planning.runnable import runnable_setup  # noqa: E402
 from planning.selection import random_designs  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
-from robocal_casadi.datasets import load_dataset  # noqa: E402
+from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
 
 COUNTS = {"tracker_points": [12, 16, 24, 36], "cross_bar": [10, 14, 20, 28]}
 POOLS = {"tracker_points": (360, 6000), "cross_bar": (120, 1200)}

@@ -46,8 +46,8 @@ def outliers(count: int) -> set[int]:
 
 
 def simulate_one(job: tuple[int, int, str, bool]) -> str:
-    from robocal_casadi import examples
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
+    from robocal_casadi.model import examples
 
     k, rows, folder, outlying = job
     rng = np.random.default_rng(1000 + k)

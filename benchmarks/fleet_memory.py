@@ -37,8 +37,8 @@ MIB = 2.0**20
 
 def simulate_fleet(folder: Path, robots: int, rows: int) -> Path:
     """``robots`` tracker datasets, each with its own errors; the fleet file naming them."""
-    from robocal_casadi import examples
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
+    from robocal_casadi.model import examples
 
     nominal = examples.ROBOTS["industrial_6r"]()
     for k in range(robots):

@@ -38,13 +38,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from real_data import PANDA, split_every_fourth  # noqa: E402
 
-from robocal_casadi import examples  # noqa: E402
 from robocal_casadi.calibration import calibrate, evaluate  # noqa: E402
-from robocal_casadi.datasets import (
+from robocal_casadi.instruments.datasets import (
     dataset_rows,  # noqa: E402
     load_dataset,  # noqa: E402
 )
-from robocal_casadi.simulate import simulate  # noqa: E402
+from robocal_casadi.instruments.simulate import simulate  # noqa: E402
+from robocal_casadi.model import examples  # noqa: E402
 
 RULES = ("fraction", "prior")
 MM = 1e3

@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.ik import inverse_kinematics, random_joints
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.ik import inverse_kinematics, random_joints
+from robocal_casadi.model.kinematics import Kinematics
 
 OFFSET = np.array([0.0, 0.0, 0.15])  # [m] probe in the flange frame (point mode)
 

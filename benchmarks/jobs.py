@@ -67,8 +67,8 @@ def _dataset(case: str, folder: Path) -> Path:
     """The dataset file of ``case`` (simulated into ``folder`` unless shipped)."""
     if case == "series_a":
         return SERIES_A if SERIES_A.is_file() else SHARED_SERIES_A
-    from robocal_casadi.examples import industrial_6r
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
+    from robocal_casadi.model.examples import industrial_6r
 
     kind, rows = CASES[case]
     tracker = case == "tracker"

@@ -35,11 +35,12 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
-from robocal_casadi import codegen, examples
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import pinocchio_model
-from robocal_casadi.progress import Progress
-from robocal_casadi.transforms import pose_from_xyz_rpy
+from robocal_casadi.common import codegen
+from robocal_casadi.common.progress import Progress
+from robocal_casadi.model import examples
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.pinocchio_model import pinocchio_model
+from robocal_casadi.model.transforms import pose_from_xyz_rpy
 
 BATCH = 1000
 REPEATS = 5

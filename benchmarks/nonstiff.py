@@ -38,10 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.datasets import dataset_rows
 from robocal_casadi.effects.motion import is_derived_column
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import dataset_rows
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
 
 NOISE = 2e-5  # [m] per coordinate
 HELD_OUT_ROWS = 150

@@ -1,7 +1,7 @@
 """Designed against random feasible plans of the same size, on a simulated truth.
 
 For each set-up (tracker points and cross bar, on the 6R example arm and the 7-DOF
-one): a true robot (``robocal_casadi.simulate.true_parameters``: random errors on the
+one): a true robot (``robocal_casadi.instruments.simulate.true_parameters``: random errors on the
 parameters the data identify, 0.5 mm and 1 mrad), measurements of each plan simulated
 by a forward pass of the true robot with the same noise (tracker 0.01 mm per axis in a
 random instrument frame; bar: the true robot seated on the planned sockets, 0.01 mm
@@ -44,13 +44,13 @@ from planning.reach import Workspace  # noqa: E402
 from planning.runnable import runnable_setup  # noqa: E402
 from planning.setup import setup_from_dataset  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
-from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.examples import industrial_6r, panda_7dof  # noqa: E402
+from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
+from robocal_casadi.instruments.simulate import true_parameters  # noqa: E402
 from robocal_casadi.instruments.tracker.model import rigid_registration  # noqa: E402
-from robocal_casadi.kinematics import Kinematics  # noqa: E402
-from robocal_casadi.robot import save_robot  # noqa: E402
-from robocal_casadi.simulate import true_parameters  # noqa: E402
-from robocal_casadi.transforms import pose_from_xyz_rpy  # noqa: E402
+from robocal_casadi.model.examples import industrial_6r, panda_7dof  # noqa: E402
+from robocal_casadi.model.kinematics import Kinematics  # noqa: E402
+from robocal_casadi.model.robot import save_robot  # noqa: E402
+from robocal_casadi.model.transforms import pose_from_xyz_rpy  # noqa: E402
 
 NOISE = 10e-6  # [m]
 LENGTH_ERROR, ANGLE_ERROR = 0.5e-3, 1e-3  # [m], [rad] standard deviations of the truth

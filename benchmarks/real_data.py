@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.datasets import load_dataset
+from robocal_casadi.instruments.datasets import load_dataset
 
 PANDA = ("back_left", "back_right", "front_center", "front_left", "front_right", "high",
          "mid-high", "mid_left", "mid_right")

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.datasets import dataset_rows, load_dataset
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.simulate import inject_gross_errors, simulate, true_parameters
+from robocal_casadi.instruments.datasets import dataset_rows, load_dataset
+from robocal_casadi.instruments.simulate import inject_gross_errors, simulate, true_parameters
+from robocal_casadi.model.examples import industrial_6r
 
 MM = 1e3
 NOISE = 5e-5  # [m]

@@ -30,12 +30,12 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__)
 
 from planning.trajectory import design_scan  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
-from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.examples import industrial_6r  # noqa: E402
-from robocal_casadi.kinematics import Kinematics  # noqa: E402
-from robocal_casadi.robot import save_robot  # noqa: E402
-from robocal_casadi.simulate import true_parameters  # noqa: E402
-from robocal_casadi.sphere_fit import fit_sensor  # noqa: E402
+from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
+from robocal_casadi.instruments.laser.sphere_fit import fit_sensor  # noqa: E402
+from robocal_casadi.instruments.simulate import true_parameters  # noqa: E402
+from robocal_casadi.model.examples import industrial_6r  # noqa: E402
+from robocal_casadi.model.kinematics import Kinematics  # noqa: E402
+from robocal_casadi.model.robot import save_robot  # noqa: E402
 
 NOISE = 10e-6  # [m]
 

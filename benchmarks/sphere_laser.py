@@ -41,8 +41,8 @@ from robocal_casadi.calibration import (  # noqa: E402
     models_for,
     solve,
 )
-from robocal_casadi.datasets import load_dataset  # noqa: E402
-from robocal_casadi.sphere_fit import (  # noqa: E402
+from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
+from robocal_casadi.instruments.laser.sphere_fit import (  # noqa: E402
     Scan,
     _ipopt,
     _ipopt_solver,

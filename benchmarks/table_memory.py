@@ -28,7 +28,7 @@ COLUMNS = [f"q{i}" for i in range(1, 7)] + ["x", "y", "z", "temperature"]
 CHILD = """
 import json, resource, sys, time
 import numpy as np
-from robocal_casadi.table import read_table
+from robocal_casadi.common.table import read_table
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 start = time.perf_counter()
 table = read_table(sys.argv[1])

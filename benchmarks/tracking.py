@@ -34,10 +34,10 @@ import time
 import casadi as ca
 import numpy as np
 
-from robocal_casadi import codegen
-from robocal_casadi.examples import industrial_6r, panda_7dof
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.progress import Progress
+from robocal_casadi.common import codegen
+from robocal_casadi.common.progress import Progress
+from robocal_casadi.model.examples import industrial_6r, panda_7dof
+from robocal_casadi.model.kinematics import nominal_pose
 from robocal_casadi.tracking import Tracker, TrackingProblem, observation_for
 from robocal_casadi.tracking.problem import error_expressions
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal_casadi.beam import beam_direction, tangent_basis
+from robocal_casadi.model.beam import beam_direction, tangent_basis
 
 from .reach import Workspace
 from .setup import PlanSetup
@@ -46,7 +46,7 @@ def measured_point(setup: PlanSetup) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if setup.model.reach != "beam":
         return np.asarray(setup.offset, float), np.zeros(3), np.zeros(3)
     n0 = beam_direction(setup.axis)
-    t1, t2 = tangent_basis(n0).T  # the beam's two coordinates (robocal_casadi.beam)
+    t1, t2 = tangent_basis(n0).T  # the beam's two coordinates (robocal_casadi.model.beam)
     reach = 0.5 * (setup.laser_range[0] + setup.laser_range[1])
     return setup.offset + reach * n0, reach * t1, reach * t2
 

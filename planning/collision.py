@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.kinematics import Kinematics
 
 RADIUS_FRACTION = 0.1
 RADIUS_BOUNDS = (0.02, 0.08)  # [m]

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robocal_casadi.datasets import Dataset
+from robocal_casadi.common.progress import Progress
 from robocal_casadi.errors import ArgumentError, InputError
 from robocal_casadi.instruments import instrument
-from robocal_casadi.progress import Progress
+from robocal_casadi.instruments.datasets import Dataset
 
 from .accuracy import tool_error, tool_weights
 from .approximate import optimal_approximate

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal_casadi.common.output import atomic_file
+from robocal_casadi.common.table import write_table
 from robocal_casadi.errors import InputError
-from robocal_casadi.output import atomic_file
-from robocal_casadi.robot import Robot
-from robocal_casadi.table import write_table
-from robocal_casadi.transforms import quaternion_from_matrix
+from robocal_casadi.model.robot import Robot
+from robocal_casadi.model.transforms import quaternion_from_matrix
 
 PAUSE = 0.5  # [s] standstill at each pose before the reading
 UR_ACCELERATION, UR_SPEED = 0.8, 0.5  # [rad/s^2], [rad/s] of movej between poses

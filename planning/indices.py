@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal_casadi.checks import choice
+from robocal_casadi.common.checks import choice
 
 INDICES = ("O1", "O2", "O3", "O4", "O5", "tool")
 ALIASES = {"cond": "O2"}

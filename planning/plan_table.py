@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_casadi.output import atomic_file
-from robocal_casadi.table import write_table
+from robocal_casadi.common.output import atomic_file
+from robocal_casadi.common.table import write_table
 
 from .design import Plan
 

@@ -13,9 +13,9 @@ from collections.abc import Iterable
 import numpy as np
 
 from robocal_casadi.calibration import Problem, analyse_identifiability
-from robocal_casadi.datasets import Dataset
 from robocal_casadi.instruments import instrument, model_for
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.instruments.datasets import Dataset
+from robocal_casadi.model.kinematics import Kinematics
 
 from .candidates import Candidate
 

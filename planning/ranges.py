@@ -23,8 +23,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import Robot
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.robot import Robot
 
 ELBOW_LIMIT = np.radians(175.0)
 DEFAULT_LIMIT = np.radians(175.0)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.kinematics import Kinematics
 
 CHUNK = 64  # targets solved together (one mapped CasADi call)
 DEFAULT_SPAN = np.pi  # [rad] half-range for seeds of joints without limits

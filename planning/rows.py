@@ -23,7 +23,7 @@ import casadi as ca
 import numpy as np
 
 from robocal_casadi.instruments import MeasurementModel
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.kinematics import Kinematics
 
 from .candidates import Candidate
 from .setup import PlanSetup

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.kinematics import Kinematics
 
 from .collision import Body
 from .ranges import working_ranges

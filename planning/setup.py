@@ -25,12 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from robocal_casadi.datasets import Dataset
+from robocal_casadi.common.fields import number
+from robocal_casadi.common.units import Units
 from robocal_casadi.errors import InputError
-from robocal_casadi.fields import number
 from robocal_casadi.instruments import MeasurementModel, instrument
-from robocal_casadi.robot import Robot
-from robocal_casadi.units import Units
+from robocal_casadi.instruments.datasets import Dataset
+from robocal_casadi.model.robot import Robot
 
 PLANNING_KEYS = {"table_height", "touches_per_socket", "max_tilt", "laser_range",
                  "max_incidence", "visibility_cone", "noise", "laser_rate", "max_joint_speed",

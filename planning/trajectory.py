@@ -50,10 +50,10 @@ import numpy as np
 from scipy import sparse
 from scipy.interpolate import BSpline
 
-from robocal_casadi.datasets import Dataset
+from robocal_casadi.common.progress import Progress
 from robocal_casadi.errors import ArgumentError, InputError
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.progress import Progress
+from robocal_casadi.instruments.datasets import Dataset
+from robocal_casadi.model.kinematics import Kinematics
 
 from .accuracy import tool_error, tool_weights
 from .best_iterate import BestFeasible

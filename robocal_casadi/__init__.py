@@ -4,19 +4,19 @@ The public API is re-exported here; see the README for a worked example.
 """
 
 # First, before the heavy imports: a worker process of a command must not answer Ctrl-C.
-from . import workers  # noqa: F401, I001
+from .common import workers  # noqa: F401, I001
 from .calibration import calibrate
-from .compensation import compensate
-from .datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
+from .common.units import Units
+from .delivery.compensation import compensate
+from .delivery.results import CalibrationResult
 from .errors import InputError, RobocalError, SolverError
-from .ik import inverse_kinematics
-from .kinematics import Kinematics
-from .parameters import ParameterRegistry
-from .results import CalibrationResult
-from .robot import Frame, Joint, Robot, load_robot, save_robot
-from .simulate import simulate
+from .instruments.datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
+from .instruments.simulate import simulate
+from .model.ik import inverse_kinematics
+from .model.kinematics import Kinematics
+from .model.parameters import ParameterRegistry
+from .model.robot import Frame, Joint, Robot, load_robot, save_robot
 from .tracking import Tracker, TrackStep
-from .units import Units
 
 __all__ = [
     "ArtifactTouches", "CalibrationResult", "Frame", "InputError", "Joint", "Kinematics",

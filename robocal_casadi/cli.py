@@ -20,9 +20,9 @@ import threading
 
 from . import __version__
 from .commands.console import Console
+from .common.output import clear_interrupt, interrupted, note_interrupt
+from .common.workers import command_started
 from .errors import RobocalError
-from .output import clear_interrupt, interrupted, note_interrupt
-from .workers import command_started
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet")

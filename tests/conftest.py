@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robocal_casadi import examples
-from robocal_casadi.robot import Robot, load_robot
+from robocal_casadi.model import examples
+from robocal_casadi.model.robot import Robot, load_robot
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 

@@ -21,7 +21,6 @@ import casadi as ca
 import numpy as np
 
 from robocal_casadi.errors import InputError
-from robocal_casadi.ik import random_joints
 from robocal_casadi.instruments import Instrument, MeasurementModel, register
 from robocal_casadi.instruments.dataset import (
     DatasetBase,
@@ -37,7 +36,8 @@ from robocal_casadi.instruments.simulation import (
     in_units,
     run_extras,
 )
-from robocal_casadi.parameters import ParameterRegistry
+from robocal_casadi.model.ik import random_joints
+from robocal_casadi.model.parameters import ParameterRegistry
 
 KIND = "string_gauge"
 DEFAULT_HOOK = (0.0, 0.02, 0.08)  # [m] flange frame

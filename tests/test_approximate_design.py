@@ -17,9 +17,9 @@ from planning.refine import _rebuild
 from planning.rows import Block
 from planning.runnable import runnable_setup
 from planning.setup import setup_from_dataset
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.robot import save_robot
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.robot import save_robot
 
 
 def test_quadratic_regression_gets_the_known_a_optimal_design():

@@ -27,10 +27,10 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.robot import save_robot
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.robot import save_robot
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 
@@ -1028,7 +1028,7 @@ def test_merge_keys_are_read_as_yaml_defines_them(templates, tmp_path):
     explicit = dict(first, theta=second["theta"], d=123.5)
     content["joints"][1] = explicit
     (folder / "explicit.yaml").write_text(yaml.safe_dump(content))
-    from robocal_casadi.robot import load_robot
+    from robocal_casadi.model.robot import load_robot
 
     assert load_robot(folder / "robot.yaml") == load_robot(folder / "explicit.yaml").with_units(
         load_robot(folder / "robot.yaml").units)

@@ -7,9 +7,9 @@ import json
 import pytest
 
 from robocal_casadi.cli import main
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.robot import load_robot
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.robot import load_robot
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import calibrate, evaluate
-from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r, panda_7dof, ur_type
 
 NOISE = 10e-6  # [m]
 ERRORS = (0.3e-3, 0.3e-3)  # [m], [rad] standard deviations of the true geometric errors

@@ -10,7 +10,7 @@ import pytest
 
 from robocal_casadi import __version__
 from robocal_casadi.cli import VERBS, build_parser, main
-from robocal_casadi.table import read_table
+from robocal_casadi.common.table import read_table
 
 SIMULATE = ["simulate", "--example", "industrial_6r", "--kind", "tracker_points", "--rows", "40",
             "--noise", "0.01", "--error", "a2=0.3", "--error", "theta3=0.05"]

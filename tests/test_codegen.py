@@ -13,8 +13,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from robocal_casadi import codegen, examples
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.common import codegen
+from robocal_casadi.model import examples
+from robocal_casadi.model.kinematics import Kinematics
 
 needs_compiler = pytest.mark.skipif(codegen.compiler() is None,
                                     reason="no C compiler (cc/gcc) on this machine")
@@ -163,7 +164,7 @@ def _compile_in_another_process(cache, *functions: tuple[str, str]) -> None:
     """Compile ``(name, expression in x)`` functions into ``cache`` from a separate
     process, as an earlier run would: this process never maps those libraries, so the
     test may change the files on disk."""
-    lines = ["import casadi as ca", "from robocal_casadi import codegen",
+    lines = ["import casadi as ca", "from robocal_casadi.common import codegen",
              "x = ca.SX.sym('x', 2)"]
     for name, expression in functions:
         lines.append(f"assert codegen.compiled(ca.Function({name!r}, [x], [{expression}]))"

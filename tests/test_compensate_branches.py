@@ -16,10 +16,10 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.compensation import compensate
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.robot import load_robot
-from robocal_casadi.transforms import quaternion_from_matrix
+from robocal_casadi.delivery.compensation import compensate
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.robot import load_robot
+from robocal_casadi.model.transforms import quaternion_from_matrix
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 # A calibration-sized change: a millimetre and a tenth of a degree
@@ -86,9 +86,9 @@ def test_a_changed_model_keeps_each_seeds_branch(with_orientation):
 def test_unseeded_targets_keep_the_nominal_solutions_branch():
     """Without seeds the nominal robot's own inverse kinematics picks the branch and the
     calibrated answer stays on it."""
-    from robocal_casadi.compensation import target_poses
-    from robocal_casadi.ik import inverse_kinematics
-    from robocal_casadi.kinematics import Kinematics
+    from robocal_casadi.delivery.compensation import target_poses
+    from robocal_casadi.model.ik import inverse_kinematics
+    from robocal_casadi.model.kinematics import Kinematics
 
     nominal = load_robot(UR10)
     calibrated = _changed(nominal)
@@ -106,7 +106,7 @@ def test_a_target_only_another_branch_reaches_is_reported():
     cannot be reached on a seed's unflipped wrist (q4 would need about 180 deg)."""
     content = yaml.safe_load(UR10.read_text())
     content["joints"][3]["limits"] = [-90, 90]
-    from robocal_casadi.robot import robot_from_dict
+    from robocal_casadi.model.robot import robot_from_dict
 
     robot = robot_from_dict(content)
     flipped = np.radians([20.0, -80.0, 70.0, 0.0, -60.0, 30.0])

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from robocal_casadi.cli import main
-from robocal_casadi.compensation import compensate
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.ik import orientation_angle, random_joints
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.robot import save_robot
-from robocal_casadi.simulate import simulate
-from robocal_casadi.transforms import matrix_from_quaternion, quaternion_from_matrix
+from robocal_casadi.delivery.compensation import compensate
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.ik import orientation_angle, random_joints
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.robot import save_robot
+from robocal_casadi.model.transforms import matrix_from_quaternion, quaternion_from_matrix
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,8 @@ from robocal_casadi.calibration.degeneracy import check_finite
 from robocal_casadi.calibration.identifiability import analyse
 from robocal_casadi.cli import main
 from robocal_casadi.errors import RobocalError, SolverError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
 
 
 @pytest.fixture(scope="module")

@@ -15,12 +15,12 @@ import pytest
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.job import JobOptions, calibrate_job
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
+from robocal_casadi.common.table import read_table
 from robocal_casadi.delivery.accuracy import BAND, MEASURED, SAMPLES, SEED, predict, region_of
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.robot import load_robot
-from robocal_casadi.simulate import simulate
-from robocal_casadi.table import read_table
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.robot import load_robot
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 ERRORS = {"a2": 4e-4, "d4": -3e-4, "alpha3": 5e-4, "theta3": -4e-4, "theta2": 3e-4}

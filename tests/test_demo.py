@@ -19,9 +19,9 @@ from test_shipped_reports import REPORTS, check_report_folder
 import robocal_casadi.report as report_package
 from robocal_casadi.cli import main
 from robocal_casadi.commands import demo
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.output import MARKER
-from robocal_casadi.simulate import simulate
+from robocal_casadi.common.output import MARKER
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 64  # stands in for a rendered screenshot

@@ -9,8 +9,8 @@ import pytest
 
 from robocal_casadi.effects import EFFECTS
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.robot import DRIVES, load_robot, save_robot
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.robot import DRIVES, load_robot, save_robot
 
 ROBOT_TEXT = """\
 convention: dh

@@ -16,13 +16,13 @@ import pytest
 import yaml
 
 from robocal_casadi.calibration import calibrate, diagnosis
-from robocal_casadi.effect_model import EffectModel, load_effects, save_effects
+from robocal_casadi.common.units import Units
 from robocal_casadi.effects import EFFECTS, Effect, Plausible, RowContext, TrueWorld, register
+from robocal_casadi.effects.effect_model import EffectModel, load_effects, save_effects
 from robocal_casadi.effects.motion import direction_column, travel_column
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.robot import dump_yaml
-from robocal_casadi.simulate import simulate
-from robocal_casadi.units import Units
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.robot import dump_yaml
 
 NAMES = sorted(EFFECTS)
 ROBOT = ROBOTS["industrial_6r"]()

@@ -22,8 +22,8 @@ from robocal_casadi.effects import (
 from robocal_casadi.effects.compliance import independent_terms
 from robocal_casadi.effects.gravity import GravityModel
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.transforms import rot_x, rot_y, rot_z, translation
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.transforms import rot_x, rot_y, rot_z, translation
 
 RNG_SEED = 7
 
@@ -131,7 +131,7 @@ def test_gravity_torque_matches_pinocchio(name):
 
 
 def test_gravity_torque_matches_project_pinocchio_model():
-    module = pytest.importorskip("robocal_casadi.pinocchio_model")
+    module = pytest.importorskip("robocal_casadi.model.pinocchio_model")
     rng = np.random.default_rng(1)
     robot = perturbed(ROBOTS["panda_7dof"](), rng)
     Q = readings(robot, rng, 4)
@@ -409,8 +409,8 @@ def test_data_selection_keeps_the_directions_of_the_full_table():
     is fitted with the same per-row inputs as the whole."""
     from dataclasses import dataclass
 
-    from robocal_casadi.datasets import dataset_rows
     from robocal_casadi.effects.motion import direction_values, directions_of_motion
+    from robocal_casadi.instruments.datasets import dataset_rows
 
     rng = np.random.default_rng(2)
     Q = rng.normal(size=(12, 3))

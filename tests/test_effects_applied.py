@@ -12,11 +12,11 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.compensation import compensate
-from robocal_casadi.effect_model import load_effects
-from robocal_casadi.robot import load_robot
-from robocal_casadi.simulate import TrueRobot, simulate
-from robocal_casadi.table import read_table
+from robocal_casadi.common.table import read_table
+from robocal_casadi.delivery.compensation import compensate
+from robocal_casadi.effects.effect_model import load_effects
+from robocal_casadi.instruments.simulate import TrueRobot, simulate
+from robocal_casadi.model.robot import load_robot
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 # identifiable geometry only, so the calibrated world frame is the truth's
@@ -114,7 +114,7 @@ def test_pose_targets_with_effects(calibrated):
     model = load_effects(out, robot)
     Q_goal = _readings(5, 13)
     goal = _true_flange(world, Q_goal, PAYLOAD)
-    from robocal_casadi.transforms import quaternion_from_matrix
+    from robocal_casadi.model.transforms import quaternion_from_matrix
 
     targets = np.column_stack([goal[:, :3, 3], [quaternion_from_matrix(T[:3, :3]) for T in goal]])
     result = compensate(robot, targets, start=Q_goal[0], effects=model,

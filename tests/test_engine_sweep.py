@@ -24,13 +24,13 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import Problem, calibrate, evaluate, models_for
+from robocal_casadi.common.units import Units
 from robocal_casadi.effects import make_effect
-from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp, ur_type
 from robocal_casadi.instruments.model import MeasurementModel
+from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.instruments.tracker.model import TrackerModel
-from robocal_casadi.robot import Frame
-from robocal_casadi.simulate import simulate
-from robocal_casadi.units import Units
+from robocal_casadi.model.examples import industrial_6r, panda_7dof, prismatic_rrp, ur_type
+from robocal_casadi.model.robot import Frame
 
 NOISE = 10e-6  # [m]
 ERRORS = (0.3e-3, 0.3e-3)  # [m], [rad]
@@ -186,7 +186,7 @@ def test_compiled_code_does_not_depend_on_the_data(tmp_path):
     """Numbers fixed from the data (the tracker's reference rotation, the thermal
     reference temperature) reach the row functions as inputs: two datasets of one robot
     and effect set generate the same code, so compiled code is built once for both."""
-    from robocal_casadi.codegen import generated_source
+    from robocal_casadi.common.codegen import generated_source
 
     robot = industrial_6r()
     sources, rotations = [], []

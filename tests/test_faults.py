@@ -22,8 +22,8 @@ import pytest
 from robocal_casadi import calibrate, compensate, load_dataset, load_robot
 from robocal_casadi.cli import MAX_MESSAGE, main
 from robocal_casadi.errors import ArgumentError, InputError, SolverError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.simulate import MAX_ROWS, simulate
+from robocal_casadi.instruments.simulate import MAX_ROWS, simulate
+from robocal_casadi.model.examples import ROBOTS
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 UR10 = REPOSITORY / "robocal_casadi" / "data" / "ur10-ipa"
@@ -129,7 +129,7 @@ def test_paths_and_wrong_types_at_the_api_door(tmp_path):
 
 def test_compensate_takes_a_robot_file(tmp_path):
     robot = load_robot(UR10 / "robot.yaml")
-    from robocal_casadi.kinematics import Kinematics
+    from robocal_casadi.model.kinematics import Kinematics
 
     q = np.array([0.3, -1.2, 1.0, -0.5, 1.1, 0.2])
     point = Kinematics(robot).tool_poses(q[None])[0, :3, 3]
@@ -169,7 +169,7 @@ def test_an_interruption_a_library_swallowed_still_stops_the_output(tmp_path, mo
                                                                      capsys):
     """The handler notes the interruption; a run that carries on writes nothing."""
     from robocal_casadi.commands import simulate as simulate_verb
-    from robocal_casadi.output import atomic_directory, note_interrupt
+    from robocal_casadi.common.output import atomic_directory, note_interrupt
 
     def carries_on(args) -> int:
         note_interrupt()  # as the handler does before a solver catches the exception
@@ -218,7 +218,7 @@ def test_an_interruption_a_library_turned_into_its_error_is_one_line(monkeypatch
                                                                      raised):
     """A solver that catches Ctrl-C and raises its own error: still 'interrupted'."""
     from robocal_casadi.commands import simulate as simulate_verb
-    from robocal_casadi.output import note_interrupt
+    from robocal_casadi.common.output import note_interrupt
 
     def stopped(args) -> int:
         note_interrupt()

@@ -22,14 +22,15 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from robocal_casadi import codegen, examples  # noqa: E402
 from robocal_casadi.calibration import calibrate  # noqa: E402
 from robocal_casadi.cli import main  # noqa: E402
-from robocal_casadi.datasets import load_dataset  # noqa: E402
+from robocal_casadi.common import codegen
 from robocal_casadi.errors import InputError  # noqa: E402
 from robocal_casadi.fleet import high_outliers, load_fleet, spread  # noqa: E402
 from robocal_casadi.fleet.outliers import LIMIT, Move  # noqa: E402
-from robocal_casadi.simulate import simulate  # noqa: E402
+from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
+from robocal_casadi.instruments.simulate import simulate  # noqa: E402
+from robocal_casadi.model import examples  # noqa: E402
 
 ROWS = 100
 COMPLIANT = "r2"  # simulated with four times the fleet's compliance at joint 3
@@ -260,7 +261,7 @@ exit $status
 
 COMPILE_ONE = """
 import casadi as ca, numpy as np
-from robocal_casadi import codegen
+from robocal_casadi.common import codegen
 x = ca.SX.sym("x", 3)
 f = ca.Function("fleet_lock_probe", [x], [ca.sin(x) * 7.25 + ca.dot(x, x)])
 g = codegen.compiled(f)
@@ -317,8 +318,8 @@ def test_summary_of_an_effect_without_a_standard_error(tmp_path):
     instead of failing the robot (a simulated fleet robot whose calibration kept a map)."""
     from dataclasses import replace
 
+    from robocal_casadi.delivery.results import EffectFinding
     from robocal_casadi.fleet.robot_task import robot_summary
-    from robocal_casadi.results import EffectFinding
 
     data = simulate(examples.industrial_6r(), "tracker_points", out_dir=tmp_path / "d", rows=30,
                     noise=2e-5, seed=3, progress=False).load()

@@ -17,11 +17,11 @@ from planning.indices import canonical
 from robocal_casadi import Tracker, calibrate, compensate, load_dataset, simulate
 from robocal_casadi.calibration import Problem, models_for
 from robocal_casadi.calibration.solver import solve
-from robocal_casadi.checks import choice, count, positive, rotation_matrix
+from robocal_casadi.common.checks import choice, count, positive, rotation_matrix
 from robocal_casadi.errors import ArgumentError, RobocalError
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.ik import InverseKinematics
-from robocal_casadi.kinematics import Kinematics
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.ik import InverseKinematics
+from robocal_casadi.model.kinematics import Kinematics
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,7 @@ NOT_DONE_YET = (  # a name ending in "/" stands for a whole folder
     "robocal_casadi/calibration/problem.py",
     "robocal_casadi/calibration/solver.py",
     "robocal_casadi/delivery/",
-    "robocal_casadi/effect_model.py",
+    "robocal_casadi/effects/effect_model.py",
     "robocal_casadi/fleet/",
 )
 

@@ -27,9 +27,9 @@ import pytest
 
 from robocal_casadi import calibrate, compensate, load_dataset, load_robot, simulate
 from robocal_casadi.cli import MAX_MESSAGE, main
+from robocal_casadi.common.table import read_table
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.table import read_table
+from robocal_casadi.model.examples import ROBOTS
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 UR10 = REPOSITORY / "robocal_casadi" / "data" / "ur10-ipa"

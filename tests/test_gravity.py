@@ -14,10 +14,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from robocal_casadi import examples
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import gravity_torques
-from robocal_casadi.robot import Frame, Joint, Robot
+from robocal_casadi.model import examples
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.pinocchio_model import gravity_torques
+from robocal_casadi.model.robot import Frame, Joint, Robot
 
 
 def axis_frame(robot, joint_index: int, frame_before: np.ndarray) -> np.ndarray:

@@ -11,8 +11,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.ik import (
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.ik import (
     IKResult,
     inverse_kinematics,
     orientation_angle,
@@ -20,8 +20,8 @@ from robocal_casadi.ik import (
     solve_ik,
     solve_ik_batch,
 )
-from robocal_casadi.kinematics import Kinematics, nominal_pose
-from robocal_casadi.transforms import pose_from_xyz_rpy
+from robocal_casadi.model.kinematics import Kinematics, nominal_pose
+from robocal_casadi.model.transforms import pose_from_xyz_rpy
 
 ROBOT_NAMES = ("industrial_6r", "panda_7dof", "prismatic_rrp")
 OFFSET = np.array([0.01, -0.02, 0.15])  # [m] a probe in the flange frame

@@ -148,11 +148,11 @@ def test_a_planted_cycle_through_a_function_level_import_is_found(tmp_path):
 
 def test_the_project_graph_resolves_its_imports():
     graph = import_graph()
-    assert "robocal_casadi.errors" in graph["robocal_casadi.robot"]
+    assert "robocal_casadi.errors" in graph["robocal_casadi.model.robot"]
     assert "robocal_casadi.calibration.diagnosis" in graph[
         "robocal_casadi.calibration.identification"]  # ``from . import diagnosis``
     assert {"planning", "planning.design"} <= graph["robocal_casadi.commands.plan"]
-    assert "robocal_casadi.robot" not in graph["robocal_casadi.parameters"]
+    assert "robocal_casadi.model.robot" not in graph["robocal_casadi.model.parameters"]
 
 
 def test_no_import_cycle():
@@ -164,7 +164,7 @@ def test_the_result_records_know_nothing_of_the_calibration_engine():
     """``results`` holds the records a calibration fills in; it imports no module of the
     engine, not even for type checking (the engine builds the result from what it
     computed, nothing reads a ``Problem``'s inside from the outside)."""
-    tree = ast.parse((ROOT / "robocal_casadi" / "results.py").read_text())
+    tree = ast.parse((ROOT / "robocal_casadi" / "delivery" / "results.py").read_text())
     modules = [node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
     modules += [alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
                 for alias in node.names]

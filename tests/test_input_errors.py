@@ -15,10 +15,10 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import ROBOTS
 
 
 @pytest.fixture(scope="module")

@@ -17,12 +17,12 @@ import pytest
 import yaml
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.datasets import dataset_rows, load_dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import industrial_6r
 from robocal_casadi.instruments import INSTRUMENTS, Instrument, instrument, kinds, register
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import dataset_rows, load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.kinematics import Kinematics
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULE = "string_gauge_instrument"

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from robocal_casadi import examples
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import (
+from robocal_casadi.model import examples
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.pinocchio_model import (
     export_urdf,
     frame_placements,
     gravity_torques,

@@ -20,13 +20,13 @@ from robocal_casadi.calibration import Problem, calibrate, models_for
 from robocal_casadi.calibration.evaluation import refit_placement
 from robocal_casadi.calibration.learned import fit_map, joints_named, learn
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import dataset_rows
-from robocal_casadi.effect_model import EFFECTS_FILE, load_effects
 from robocal_casadi.effects import ResidualMap, is_learned
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.pinocchio_model import frame_placements, pinocchio_model
-from robocal_casadi.robot import dump_yaml, load_robot, save_robot
+from robocal_casadi.effects.effect_model import EFFECTS_FILE, load_effects
+from robocal_casadi.instruments.datasets import dataset_rows
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.pinocchio_model import frame_placements, pinocchio_model
+from robocal_casadi.model.robot import dump_yaml, load_robot, save_robot
 
 NOISE = 1e-5  # [m] per tracker coordinate
 TARGET = np.array([0.0, 0.0, 0.1])  # [m] reflector in the flange frame
@@ -171,7 +171,7 @@ def test_the_map_follows_only_joint_readings():
 
 
 def test_shares_of_the_mean_square_add_up():
-    from robocal_casadi.results import EffectFinding, mean_square_shares
+    from robocal_casadi.delivery.results import EffectFinding, mean_square_shares
 
     mapped = EffectFinding(name="residual_map", joints=(2, 3), parameters={"map_gain": 1.0},
                            unit="1", evidence={"fit_rms_without": 0.3})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal_casadi.least_squares import (
+from robocal_casadi.common.least_squares import (
     STATUS,
     Damping,
     Tolerances,

@@ -18,10 +18,10 @@ import pytest
 import yaml
 
 from robocal_casadi.calibration import Problem
-from robocal_casadi.examples import industrial_6r
 from robocal_casadi.instruments import INSTRUMENTS, MeasurementModel, model_for
-from robocal_casadi.simulate import simulate
-from robocal_casadi.transforms import invert, pose_from_xyz_rpy
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.transforms import invert, pose_from_xyz_rpy
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = {"rows": 6, "sockets": 2, "touches": 3}  # small: readings or placements
@@ -223,8 +223,8 @@ def test_planner_rows_are_the_engine_jacobian_of_the_planned_data(kind, tmp_path
     from planning.reach import Workspace
     from planning.rows import RowModel
     from planning.setup import setup_from_dataset
-    from robocal_casadi.datasets import load_dataset
-    from robocal_casadi.kinematics import Kinematics
+    from robocal_casadi.instruments.datasets import load_dataset
+    from robocal_casadi.model.kinematics import Kinematics
 
     sim = simulate(industrial_6r(), kind, out_dir=tmp_path / kind, rows=2, seed=1,
                    progress=False, sockets=2, touches=2)

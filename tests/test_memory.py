@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from robocal_casadi import memory
+from robocal_casadi.common import memory
 
 STATM = Path("/proc/self/statm")
 

@@ -19,8 +19,8 @@ from robocal_casadi.effects.motion import (
     with_directions,
 )
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.simulate import directions_in_order, simulate, travels_in_order
+from robocal_casadi.instruments.simulate import directions_in_order, simulate, travels_in_order
+from robocal_casadi.model.examples import ROBOTS
 
 ROBOT = ROBOTS["industrial_6r"]()
 
@@ -94,7 +94,7 @@ def test_hysteresis_is_simulated_for_tracker_data_only(tmp_path):
 def test_simulated_hysteresis_follows_the_written_order(tmp_path):
     """The truth of a simulated table: true joints differ from the readings by the loop's
     offset at each row's direction and travel, recomputed here from the written rows."""
-    from robocal_casadi.simulate import TrueRobot
+    from robocal_casadi.instruments.simulate import TrueRobot
 
     robot = driven(ROBOT, "cable")
     h, w = 2e-3, TRANSITION["cable"]
@@ -119,7 +119,7 @@ def test_simulated_hysteresis_follows_the_written_order(tmp_path):
 def _time_split(tmp_path, effects, rows=300, held_out=150, seed=21, robot=ROBOT, payload=None):
     """One simulated table in measurement order, cut into the fit rows and the later rows,
     each a table of its own (the later one knows nothing of the rows before it)."""
-    from robocal_casadi.datasets import dataset_rows
+    from robocal_casadi.instruments.datasets import dataset_rows
 
     whole = simulate(robot, "tracker_points", out_dir=tmp_path / "all", rows=rows + held_out,
                      noise=NOISE, seed=seed, effects=effects, payload=payload,
@@ -231,8 +231,8 @@ def test_calibrated_effects_file_applies_the_new_effects_as_the_truth_does(tmp_p
     link: fk's effect model puts the tool where the simulator's truth does, rows in order."""
     import yaml
 
-    from robocal_casadi.effect_model import load_effects
-    from robocal_casadi.simulate import TrueRobot, parse_effects
+    from robocal_casadi.effects.effect_model import load_effects
+    from robocal_casadi.instruments.simulate import TrueRobot, parse_effects
 
     robot = replace(ROBOT, joints=tuple(replace(j, drive=d) for j, d in zip(
         ROBOT.joints, ["cable", "gear", "gear", "gear", "gear", "gear"])))

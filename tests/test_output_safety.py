@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from robocal_casadi.cli import main
-from robocal_casadi.output import MARKER, read_marker
+from robocal_casadi.common.output import MARKER, read_marker
 
 SIMULATE = ["simulate", "--example", "industrial_6r", "--kind", "tracker_points", "--rows", "40",
             "--noise", "0.01", "--error", "a2=0.3"]

@@ -16,12 +16,12 @@ from planning.collision import Body, segment_distance, segment_distances
 from planning.order import largest_moves, nearest_turns, open_path
 from planning.ranges import ELBOW_LIMIT, elbows, working_ranges
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.examples import industrial_6r, panda_7dof, ur_type
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import save_robot
-from robocal_casadi.sphere_fit import fit_sensor
-from robocal_casadi.table import read_table
+from robocal_casadi.common.table import read_table
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.laser.sphere_fit import fit_sensor
+from robocal_casadi.model.examples import industrial_6r, panda_7dof, ur_type
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.robot import save_robot
 
 # ----------------------------------------------------------------------------- geometry
 

@@ -14,10 +14,10 @@ import yaml
 from planning.design import design_plan
 from planning.information import exact_condition
 from planning.rows import RowModel
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import save_robot
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.robot import save_robot
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 

@@ -10,12 +10,12 @@ import yaml
 from planning import design_plan, engine_identifiability, index_of_jacobian, index_value, write_plan
 from planning.indices import better, canonical, maximise, scale_columns
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
+from robocal_casadi.common.table import read_table
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import industrial_6r, panda_7dof
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import save_robot
-from robocal_casadi.table import read_table
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.model.examples import industrial_6r, panda_7dof
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.robot import save_robot
 
 # ----------------------------------------------------------------------------- indices
 
@@ -322,7 +322,7 @@ def test_reference_scaling_keeps_size_and_design_scaling_does_not(setups):
 
 def test_a_dataset_pointing_at_an_unmeasured_plan_can_be_planned_again(tmp_path):
     """The set-up is what matters: a table with empty measured columns is not read."""
-    from robocal_casadi.simulate import simulate as write_simulated
+    from robocal_casadi.instruments.simulate import simulate as write_simulated
 
     sim = write_simulated(industrial_6r(), "tracker_points", out_dir=tmp_path / "sim", rows=30,
                           seed=1, progress=False)

@@ -12,9 +12,9 @@ import yaml
 from urdf_robots import ur10_urdf, write
 
 from robocal_casadi.cli import main
-from robocal_casadi.profiles import profile_parameters
-from robocal_casadi.robot import load_robot
-from robocal_casadi.simulate import simulate
+from robocal_casadi.delivery.profiles import profile_parameters
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.robot import load_robot
 
 UR10_DH = (Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa"
            / "robot.yaml")

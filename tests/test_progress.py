@@ -14,15 +14,15 @@ from pathlib import Path
 
 import pytest
 
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.progress import Stages, reports_stages, stage
-from robocal_casadi.simulate import simulate
+from robocal_casadi.common.progress import Stages, reports_stages, stage
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.examples import industrial_6r
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_stages_show_names_and_elapsed_time_and_a_line_for_long_ones(monkeypatch) -> None:
-    monkeypatch.setattr("robocal_casadi.progress.KEEP_AFTER", 0.0)
+    monkeypatch.setattr("robocal_casadi.common.progress.KEEP_AFTER", 0.0)
     stream = io.StringIO()
     stages = Stages(stream=stream, force=True)
     with stages.stage("identification"):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.commands.demo import PANDA_FIT, PANDA_VALIDATION, data_folder
-from robocal_casadi.datasets import load_dataset
+from robocal_casadi.instruments.datasets import load_dataset
 
 
 def test_ur10_tracker_slice():

@@ -19,11 +19,9 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from robocal_casadi import examples
 from robocal_casadi.calibration.diagnosis import CandidateTest
-from robocal_casadi.errors import InputError
-from robocal_casadi.report import write_report
-from robocal_casadi.results import (
+from robocal_casadi.common.units import Units
+from robocal_casadi.delivery.results import (
     CalibrationResult,
     DatasetResiduals,
     Decision,
@@ -32,7 +30,9 @@ from robocal_casadi.results import (
     ParameterEstimate,
     RmsSummary,
 )
-from robocal_casadi.units import Units
+from robocal_casadi.errors import InputError
+from robocal_casadi.model import examples
+from robocal_casadi.report import write_report
 
 HELD_AT_NOMINAL = {
     "base_x": "bar data carries no absolute position",
@@ -445,7 +445,7 @@ def test_report_of_a_simulated_tracker_calibration(tmp_path):
             "figure-joints-fit"} <= figures
     # the effect's plot: error against the gravity torque at each joint (pinocchio), with
     # the fitted deflection from the effect model (CasADi) equal to -c tau
-    from robocal_casadi.pinocchio_model import gravity_torques
+    from robocal_casadi.model.pinocchio_model import gravity_torques
     from robocal_casadi.report.effect_views import effect_view
 
     view = effect_view(result, result.effects[0])

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from test_report import synthetic_result
 
-from robocal_casadi import examples
-from robocal_casadi.datasets import load_dataset
+from robocal_casadi.common.units import Units
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.model import examples
 from robocal_casadi.report.errors_table import COLUMNS, write_errors_csv
-from robocal_casadi.units import Units
 
 STAGES = ("nominal", "geometric", "final")
 OUTLIER = 5e-3  # [m] added to one reading's x: hundreds of times the simulated noise
@@ -53,7 +53,7 @@ def test_lines_point_at_the_corrupted_reading_and_rms_match_result_json(tmp_path
     by 5 mm and a blank line before it: the largest error after calibration is on that
     reading's line, and every dataset's RMS over the file's rows is result.json's."""
     identification = pytest.importorskip("robocal_casadi.calibration")
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
 
     robot = examples.industrial_6r().with_units(Units("mm", "deg"))
     common = dict(noise=1e-5, geometric_errors=(3e-4, 3e-4), progress=False)
@@ -121,7 +121,7 @@ def test_readings_set_aside_are_listed_too(tmp_path):
     """The robust default sets the corrupted reading aside; errors.csv still has a row for
     its line, with the error it showed (nothing dropped silently)."""
     identification = pytest.importorskip("robocal_casadi.calibration")
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
 
     robot = examples.industrial_6r().with_units(Units("mm", "deg"))
     fit = simulate(robot, "tracker_points", out_dir=tmp_path / "fit", rows=60, seed=3,

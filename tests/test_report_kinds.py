@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from test_report import body_rows, read_page, synthetic_result
 
-from robocal_casadi import examples
+from robocal_casadi.delivery.results import RmsSummary, Unexplained
 from robocal_casadi.errors import InputError
+from robocal_casadi.model import examples
 from robocal_casadi.report import build_document, write_report
 from robocal_casadi.report.info import ReportInfo, info_from_mapping
-from robocal_casadi.results import RmsSummary, Unexplained
 
 
 def _figures(path: Path) -> set[str]:
@@ -30,7 +30,7 @@ def _figures(path: Path) -> set[str]:
 @pytest.fixture(scope="module")
 def bar(tmp_path_factory):
     from robocal_casadi.calibration import calibrate
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
 
     folder = tmp_path_factory.mktemp("bar")
     data = simulate(examples.industrial_6r(), "cross_bar", out_dir=folder / "data", rows=14,
@@ -50,7 +50,7 @@ def test_bar_report_shows_lengths_and_perpendicularity_per_placement(bar):
 def test_signed_bar_errors_equal_pinocchio_kinematics_of_the_nominal_robot(bar):
     """Before calibration: |AC| - L from the nominal robot's flange poses (pinocchio) and
     the nominal probe, and the perpendicularity AC.BD / L, placement by placement."""
-    from robocal_casadi.pinocchio_model import pinocchio_tool_pose
+    from robocal_casadi.model.pinocchio_model import pinocchio_tool_pose
 
     dataset, result, _ = bar
     residuals = result.residuals[0]
@@ -100,7 +100,7 @@ def test_accuracy_summary_equals_numpy_of_the_errors(bar):
 ])
 def test_each_kind_gets_its_plots(tmp_path, kind, expected):
     from robocal_casadi.calibration import calibrate
-    from robocal_casadi.simulate import simulate
+    from robocal_casadi.instruments.simulate import simulate
 
     rows = {"tracker_points": 60, "sphere_laser": 80, "artifact_touches": 8}[kind]
     data = simulate(examples.industrial_6r(), kind, out_dir=tmp_path / "data", rows=rows,
@@ -200,7 +200,7 @@ def test_unexplained_structure_in_words_and_against_its_variable(tmp_path):
 
 
 def test_numbers_equal_result_json_in_millimetres_for_a_metre_file(tmp_path):
-    from robocal_casadi.units import Units
+    from robocal_casadi.common.units import Units
 
     result = synthetic_result(Units("m", "rad"), validation=True, effects=False)
     content = json.loads(json.dumps(result.to_json()))

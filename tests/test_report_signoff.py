@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from test_report import _with_effect_models, read_page, synthetic_result
 
+from robocal_casadi.common.units import Units
 from robocal_casadi.report import write_report
 from robocal_casadi.report.info import ReportInfo
-from robocal_casadi.units import Units
 
 
 def _signatures(page) -> list[list[list[str]]]:

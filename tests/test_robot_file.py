@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from robocal_casadi.errors import InputError
-from robocal_casadi.robot import load_robot, save_robot
+from robocal_casadi.model.robot import load_robot, save_robot
 
 MM_DEG = """\
 name: test-arm
@@ -95,7 +95,7 @@ def test_values_are_read_in_si(tmp_path):
 
 def test_saving_in_other_units_reads_back_the_same_robot(tmp_path):
     original = load_robot(write(tmp_path, MM_DEG))
-    from robocal_casadi.units import SI
+    from robocal_casadi.common.units import SI
 
     save_robot(original, tmp_path / "si.yaml", units=SI)
     again = load_robot(tmp_path / "si.yaml")

@@ -22,10 +22,10 @@ from robocal_casadi.calibration.outliers import (
     readings,
 )
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import dataset_rows
-from robocal_casadi.examples import industrial_6r
 from robocal_casadi.fleet.summary import REJECTED_SHARE, _rejections
-from robocal_casadi.simulate import inject_gross_errors, simulate, true_parameters
+from robocal_casadi.instruments.datasets import dataset_rows
+from robocal_casadi.instruments.simulate import inject_gross_errors, simulate, true_parameters
+from robocal_casadi.model.examples import industrial_6r
 
 NOISE = 5e-5  # [m]
 # (kind, rows, options): small enough for seconds per calibration
@@ -265,7 +265,7 @@ def test_report_lists_every_reading_set_aside(tmp_path):
 def test_an_error_repeated_at_one_configuration_is_the_model_s_a_lone_one_is_not(tmp_path):
     """Each pose measured four times (fresh noise): four alike 2 mm errors at one pose are
     the model's (kept for the diagnosis), one 3 mm error among four visits is gross."""
-    from robocal_casadi.table import read_table, write_table
+    from robocal_casadi.common.table import read_table, write_table
 
     fit, _, _ = _pair(tmp_path, "tracker_points")
     table = read_table(fit.table_path)

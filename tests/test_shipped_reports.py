@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
+from robocal_casadi.common.units import LENGTH_SCALE
+from robocal_casadi.model.robot import load_robot
 from robocal_casadi.report import find_chromium, page_state
 from robocal_casadi.report.numbers import format_number
-from robocal_casadi.robot import load_robot
-from robocal_casadi.units import LENGTH_SCALE
 
 REPORTS = Path(__file__).resolve().parents[1] / "reports"
 CASES = sorted(p for p in REPORTS.iterdir() if (p / "result.json").is_file()) \

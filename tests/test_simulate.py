@@ -12,12 +12,12 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import ROBOTS
-from robocal_casadi.kinematics import dh_transform, nominal_pose
-from robocal_casadi.simulate import ray_sphere_distance, simulate
-from robocal_casadi.transforms import invert, matrix_from_quaternion
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import ray_sphere_distance, simulate
+from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.model.kinematics import dh_transform, nominal_pose
+from robocal_casadi.model.transforms import invert, matrix_from_quaternion
 
 KINDS = ("tracker_points", "cross_bar", "artifact_touches", "sphere_laser")
 ROWS = {"tracker_points": 30, "cross_bar": 3, "artifact_touches": 2, "sphere_laser": 20}
@@ -356,7 +356,7 @@ def test_cli_coupling_and_backlash_effects(tmp_path):
     """``--effect joint_coupling:J@K=s/c`` and ``--effect backlash:J=b`` reach the truth, and
     the backlash truth follows the order of the written rows."""
     from robocal_casadi.effects.motion import directions_of_motion
-    from robocal_casadi.simulate import directions_in_order
+    from robocal_casadi.instruments.simulate import directions_in_order
 
     out = tmp_path / "sim"
     assert main(["simulate", "--example", "industrial_6r", "--kind", "tracker_points",

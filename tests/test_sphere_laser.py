@@ -15,13 +15,11 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal_casadi import examples
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
 from robocal_casadi.instruments import INSTRUMENTS
+from robocal_casadi.instruments.datasets import load_dataset
 from robocal_casadi.instruments.laser.model import SphereLaserModel
-from robocal_casadi.robot import save_robot
-from robocal_casadi.sphere_fit import (
+from robocal_casadi.instruments.laser.sphere_fit import (
     Scan,
     algebraic_start,
     fit_dataset,
@@ -29,6 +27,8 @@ from robocal_casadi.sphere_fit import (
     surface_residuals,
     tangent_basis,
 )
+from robocal_casadi.model import examples
+from robocal_casadi.model.robot import save_robot
 
 # The published method's example (docs/methods.md#point-laser-and-sphere):
 # [x0, y0, z0, nx, ny, xc, yc, zc] in mm (nx, ny unitless).
@@ -295,7 +295,7 @@ def test_a_wrong_guess_does_not_mislead():
 
 def test_fallback_starts_recover_when_the_closed_form_start_is_useless(monkeypatch):
     """Guesses, then the six flange axes, take over from a failed closed-form start."""
-    import robocal_casadi.sphere_fit as sphere_fit
+    import robocal_casadi.instruments.laser.sphere_fit as sphere_fit
 
     useless = (np.full(3, 5.0), np.array([1.0, 0.0, 0.0]), np.full(3, -5.0))
     monkeypatch.setattr(sphere_fit, "algebraic_start", lambda scan: useless)
@@ -594,7 +594,7 @@ def test_robot_and_sensor_recovered_together_by_calibrate(tmp_path):
 
 def test_joint_model_jacobian_through_the_problem_matches_finite_differences(tmp_path):
     from robocal_casadi.calibration import Problem, models_for
-    from robocal_casadi.kinematics import Kinematics
+    from robocal_casadi.model.kinematics import Kinematics
 
     path, truth, p0, n, centre, _ = joint_scan(tmp_path, np.random.default_rng(9), count=30)
     dataset = load_dataset(path)

@@ -16,8 +16,8 @@ from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.evaluation import evaluate, models_for
 from robocal_casadi.calibration.problem import Problem, StationFrames
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 ERRORS = {"a2": 4e-4, "d4": -3e-4, "alpha3": 5e-4, "theta2": 3e-4}

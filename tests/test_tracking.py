@@ -18,14 +18,14 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
+from robocal_casadi.common.units import Units
 from robocal_casadi.errors import InputError
-from robocal_casadi.examples import industrial_6r, panda_7dof, prismatic_rrp
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.robot import Joint, Robot, save_robot
+from robocal_casadi.model.examples import industrial_6r, panda_7dof, prismatic_rrp
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.robot import Joint, Robot, save_robot
+from robocal_casadi.model.transforms import rpy_from_matrix
 from robocal_casadi.tracking import R_B, Tracker, TrackingProblem
 from robocal_casadi.tracking import observation_for as observation_for_pose
-from robocal_casadi.transforms import rpy_from_matrix
-from robocal_casadi.units import Units
 
 CAMERA = np.array([0.04, -0.03, 0.06])  # [m] camera origin in the end frame
 STANDOFF = 0.25  # [m]

@@ -18,10 +18,10 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from robocal_casadi.cli import main
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.pinocchio_model import pinocchio_tool_pose
-from robocal_casadi.robot import save_robot
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.pinocchio_model import pinocchio_tool_pose
+from robocal_casadi.model.robot import save_robot
 from robocal_casadi.tracking import Tracker
 
 STANDOFF = 0.3  # [m]

@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from robocal_casadi.examples import industrial_6r, panda_7dof
-from robocal_casadi.ik import random_joints
-from robocal_casadi.kinematics import nominal_pose
-from robocal_casadi.pinocchio_model import pinocchio_tool_pose
+from robocal_casadi.model.examples import industrial_6r, panda_7dof
+from robocal_casadi.model.ik import random_joints
+from robocal_casadi.model.kinematics import nominal_pose
+from robocal_casadi.model.pinocchio_model import pinocchio_tool_pose
 from robocal_casadi.tracking import Tracker, TrackingProblem, observation_for
 
 CAMERA = np.array([0.04, -0.03, 0.06])  # [m]

@@ -16,8 +16,8 @@ import pytest
 from test_tracking import CAMERA, STANDOFF, observation_for, read_csv, write_job
 
 from robocal_casadi.cli import main
-from robocal_casadi.examples import industrial_6r
-from robocal_casadi.kinematics import nominal_pose
+from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.model.kinematics import nominal_pose
 from robocal_casadi.tracking import Tracker
 from robocal_casadi.tracking.problem import DEGENERATE_TILT
 

@@ -13,11 +13,11 @@ from urdf_robots import panda_urdf, ur10_urdf, write
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.cli import main
-from robocal_casadi.datasets import load_dataset
 from robocal_casadi.errors import InputError
-from robocal_casadi.kinematics import Kinematics
-from robocal_casadi.robot import load_robot, robot_from_dict, robot_to_dict
-from robocal_casadi.simulate import simulate
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model.kinematics import Kinematics
+from robocal_casadi.model.robot import load_robot, robot_from_dict, robot_to_dict
 
 PACKAGE_DATA = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data"
 UR10_DH = PACKAGE_DATA / "ur10-ipa" / "robot.yaml"

@@ -26,13 +26,10 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from ..checks import choice, count, positive
-from ..datasets import DatasetBase, dataset_rows
-from ..effects.base import Effect
-from ..errors import ArgumentError, InputError, SolverError
-from ..fields import cut
-from ..progress import reports_stages, stage
-from ..results import (
+from ..common.checks import choice, count, positive
+from ..common.fields import cut
+from ..common.progress import reports_stages, stage
+from ..delivery.results import (
     DOMINATED_SHARE,
     CalibrationResult,
     DatasetResiduals,
@@ -44,7 +41,10 @@ from ..results import (
     RmsSummary,
     SphereEstimate,
 )
-from ..robot import Robot
+from ..effects.base import Effect
+from ..errors import ArgumentError, InputError, SolverError
+from ..instruments.datasets import DatasetBase, dataset_rows
+from ..model.robot import Robot
 from . import diagnosis, learned, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)

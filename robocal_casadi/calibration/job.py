@@ -34,19 +34,19 @@ from typing import ParamSpec, TypeVar
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..common.memory import release_freed
+from ..common.output import atomic_directory
+from ..common.output import json_safe as _clean
+from ..common.progress import reports_stages, stage
 from ..delivery.accuracy import predict, work_cell
 from ..delivery.choice import choose
-from ..effect_model import EFFECTS_FILE, load_effects, save_effects
+from ..delivery.profiles import ProfileCost, profile_parameters
+from ..delivery.results import CalibrationResult, CandidateFigures, Delivered
+from ..effects.effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..errors import ArgumentError
-from ..memory import release_freed
-from ..output import atomic_directory
-from ..output import json_safe as _clean
-from ..profiles import ProfileCost, profile_parameters
-from ..progress import reports_stages, stage
+from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from ..results import CalibrationResult, CandidateFigures, Delivered
-from ..robot import load_robot, save_robot
 from .evaluation import evaluate, held_out
 from .identification import calibrate as _calibrate
 from .outliers import kept_datasets
@@ -241,7 +241,7 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     if result.recommended != "final" or not result.effects:
         return 0.0
     from ..delivery.projection import model_targets
-    from ..kinematics import Kinematics
+    from ..model.kinematics import Kinematics
 
     final_robot = result.robot_nominal.with_parameters(
         np.array([p.estimate for p in result.parameters], dtype=float))

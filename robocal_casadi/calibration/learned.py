@@ -38,10 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
+from ..common.memory import release_freed
+from ..common.units import Units
+from ..delivery.results import EffectFinding
 from ..effects.residual_map import FADE, GAIN, SHIFT, ResidualMap, fade_weight, gaussian
-from ..memory import release_freed
-from ..results import EffectFinding
-from ..units import Units
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
 from .folds import fold_schemes
 from .problem import Problem

@@ -47,9 +47,9 @@ from scipy.linalg import qr, solve_triangular
 from scipy.spatial import cKDTree
 from scipy.stats import chi2, norm
 
-from ..datasets import dataset_rows
+from ..delivery.results import RejectedReading
 from ..errors import InputError
-from ..results import RejectedReading
+from ..instruments.datasets import dataset_rows
 from .problem import Problem
 from .solver import Method, solve
 

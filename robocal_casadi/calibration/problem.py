@@ -26,14 +26,14 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from ..codegen import BatchFunction
+from ..common.codegen import BatchFunction
 from ..effects.base import Effect, RowContext
 from ..effects.motion import direction_values, is_derived_column
 from ..errors import InputError
 from ..instruments.model import STATION_PREFIX, MeasurementModel
-from ..kinematics import Kinematics, mapped
-from ..parameters import ParameterRegistry
-from ..robot import Robot
+from ..model.kinematics import Kinematics, mapped
+from ..model.parameters import ParameterRegistry
+from ..model.robot import Robot
 
 
 def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Sequence[str]):

@@ -26,10 +26,10 @@ from typing import Literal, Protocol, get_args
 import casadi as ca
 import numpy as np
 
-from ..checks import array, choice, count, positive
+from ..common.checks import array, choice, count, positive
+from ..common.least_squares import DAMPING, Tolerances, levenberg_marquardt
 from ..errors import ArgumentError, SolverError
-from ..least_squares import DAMPING, Tolerances, levenberg_marquardt
-from ..parameters import ParameterRegistry
+from ..model.parameters import ParameterRegistry
 
 Method = Literal["lm", "ipopt", "linearised", "two_stage"]
 Loss = Literal["linear", "huber"]

@@ -23,9 +23,9 @@ import os
 import stat
 from pathlib import Path
 
+from ..common.output import not_replacing_inputs, replace_refusal
+from ..common.output import resolved_path as _resolved
 from ..errors import InputError
-from ..output import not_replacing_inputs, replace_refusal
-from ..output import resolved_path as _resolved
 
 
 def _nearest_existing(path: Path) -> Path | None:

@@ -16,7 +16,7 @@ within the joint limits from the seed, the first start and --restarts random one
 cells empty).
 
 Each target is solved from its seed and kept on the seed's branch (no singularity between
-the seed and the answer, see robocal_casadi.configuration). A row without seed joints is
+the seed and the answer, see robocal_casadi.model.configuration). A row without seed joints is
 seeded with the inverse kinematics of the nominal robot (the folder's result.json nominal
 values; the robot file itself otherwise), solved in order from --start and then from the
 previous solution, so a path of targets gives a smooth joint path. Position-only targets
@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
-from ..datasets import check_unit_quaternions
+from ..common.fields import MAX_LENGTH, check_magnitude
+from ..common.output import atomic_file
+from ..common.table import read_table, write_table
+from ..delivery.compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
 from ..errors import InputError
-from ..fields import MAX_LENGTH, check_magnitude
-from ..output import atomic_file
-from ..robot import Robot, load_robot
-from ..table import read_table, write_table
+from ..instruments.datasets import check_unit_quaternions
+from ..model.robot import Robot, load_robot
 from .arguments import output_file, seed
 from .console import summarise
 
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         if folder is None:
             raise InputError("effects come from a calibration: give --calibrated DIR",
                              where="--with-effects")
-        from ..effect_model import load_effects, row_values
+        from ..effects.effect_model import load_effects, row_values
 
         model = load_effects(folder, robot)
         extras_values = row_values(model, table, payload=args.payload,

@@ -20,7 +20,7 @@ import warnings
 from collections.abc import Iterator
 from typing import Any, TextIO
 
-from ..output import json_safe
+from ..common.output import json_safe
 
 
 class Console:

@@ -24,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..calibration.job import JobOptions, ReportOptions, run_job
-from ..datasets import load_dataset
+from ..instruments.datasets import load_dataset
 from .arguments import add_force, output_folder
 from .calibrate import summary, summary_fields
 from .console import summarise

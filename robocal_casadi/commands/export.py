@@ -21,10 +21,10 @@ import argparse
 import json
 from pathlib import Path
 
+from ..common.fields import read_text
+from ..common.output import atomic_file
 from ..errors import InputError
-from ..fields import read_text
-from ..output import atomic_file
-from ..robot import Robot, dump_yaml, load_robot
+from ..model.robot import Robot, dump_yaml, load_robot
 from .arguments import output_file
 from .console import summarise
 
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     texts = {}
     if args.urdf is not None:
         if like is None:
-            from ..pinocchio_model import urdf_text
+            from ..model.pinocchio_model import urdf_text
 
             texts[args.urdf] = urdf_text(calibrated)
         else:

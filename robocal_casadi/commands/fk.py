@@ -21,13 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets import joint_readings as checked_joint_readings
+from ..common.output import atomic_file
+from ..common.table import read_table, write_table
 from ..errors import InputError
-from ..kinematics import Kinematics
-from ..output import atomic_file
-from ..robot import Robot, load_robot
-from ..table import read_table, write_table
-from ..transforms import quaternion_from_matrix
+from ..instruments.datasets import joint_readings as checked_joint_readings
+from ..model.kinematics import Kinematics
+from ..model.robot import Robot, load_robot
+from ..model.transforms import quaternion_from_matrix
 from .arguments import input_file, output_file
 from .console import summarise
 
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         if args.calibrated is None:
             raise InputError("effects come from a calibration: give --calibrated DIR",
                              where="--with-effects")
-        from ..effect_model import load_effects, row_values
+        from ..effects.effect_model import load_effects, row_values
 
         model = load_effects(Path(args.calibrated), robot)
         values = row_values(model, table, payload=args.payload, temperature=args.temperature)

@@ -37,9 +37,9 @@ from typing import Any
 
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
+from ..common.output import MARKER, Marker, atomic_file, read_marker
+from ..common.progress import Progress
 from ..errors import InputError
-from ..output import MARKER, Marker, atomic_file, read_marker
-from ..progress import Progress
 from .arguments import add_allow_outside_data, positive_count
 from .calibrate import REPORT_FIELDS, add_model_options, add_report_options, command_line_info
 from .console import summarise
@@ -228,10 +228,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_locked(args: argparse.Namespace, fleet, settings, previous) -> tuple[list, Any]:
     """Calibrate every robot into ``args.out`` under its lock; write the fleet's files."""
+    from ..common.output import json_safe as _clean
     from ..fleet import summarise as compare
     from ..fleet.engine import run_fleet
     from ..fleet.page import render
-    from ..output import json_safe as _clean
 
     with _only_run(args.out):
         failed = 0

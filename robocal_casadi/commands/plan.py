@@ -14,10 +14,10 @@ import argparse
 import os
 from pathlib import Path
 
-from ..datasets import load_dataset
+from ..common.table import Table, read_table
 from ..errors import InputError
 from ..instruments import instrument
-from ..table import Table, read_table
+from ..instruments.datasets import load_dataset
 from .arguments import add_allow_outside_data, output_file, seed
 from .console import summarise
 

@@ -33,15 +33,15 @@ import argparse
 import math
 from pathlib import Path
 
+from ..common.fields import check_magnitude
+from ..common.units import Units, parse_units
 from ..effects import EFFECTS
 from ..errors import InputError
-from ..examples import ROBOTS
-from ..fields import check_magnitude
 from ..instruments import kinds
+from ..instruments.simulate import MAX_ROWS, READINGS, simulate, table_rows_of
 from ..instruments.tracker import TrackerModel
-from ..robot import Robot, load_robot
-from ..simulate import MAX_ROWS, READINGS, simulate, table_rows_of
-from ..units import Units, parse_units
+from ..model.examples import ROBOTS
+from ..model.robot import Robot, load_robot
 from .arguments import add_force, output_folder, seed
 from .console import summarise
 

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.output import atomic_file
+from ..common.progress import Progress
+from ..common.table import write_table
 from ..errors import InputError
-from ..output import atomic_file
-from ..progress import Progress
-from ..table import write_table
 from ..tracking.job import load_tracking_job
 from ..tracking.tracker import STATUSES, Tracker
 from .arguments import add_allow_outside_data, output_file

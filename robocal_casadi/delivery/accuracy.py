@@ -59,9 +59,10 @@ import casadi as ca
 import numpy as np
 
 from ..calibration.prior import tolerance_of
-from ..kinematics import Kinematics
-from ..parameters import perturbed_stems
-from ..results import (  # noqa: F401 (the record and its region kinds, re-exported)
+from ..model.kinematics import Kinematics
+from ..model.parameters import perturbed_stems
+from ..model.robot import Robot
+from .results import (  # noqa: F401 (the record and its region kinds, re-exported)
     BAND,
     DATA_RANGES,
     DECLARED,
@@ -70,7 +71,6 @@ from ..results import (  # noqa: F401 (the record and its region kinds, re-expor
     SAMPLES,
     PredictedAccuracy,
 )
-from ..robot import Robot
 
 SEED = 9283  # fixed: a prediction is repeatable
 DRAWS = 20000  # draws of the parameter error behind ``band`` (quantile error ~0.5%)

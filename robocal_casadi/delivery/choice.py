@@ -33,12 +33,12 @@ from ..calibration.folds import FoldGrams, fold_schemes
 from ..calibration.identification import evaluate, models_for
 from ..calibration.problem import Problem
 from ..calibration.solver import solve
-from ..results import (  # noqa: F401 (the records, re-exported)
+from ..model.robot import Robot
+from .results import (  # noqa: F401 (the records, re-exported)
     DOING_NOTHING,
     Candidate,
     Delivery,
 )
-from ..robot import Robot
 
 GEOMETRY_ONLY = ("geometric", "final_geometry", "projected")
 # Held-out RMS values closer than this [m] (or this share of them) are a tie, and a tie

@@ -18,10 +18,10 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..effect_model import EffectModel
+from ..effects.effect_model import EffectModel
 from ..effects.motion import is_direction_column
-from ..kinematics import Kinematics
-from ..robot import Robot
+from ..model.kinematics import Kinematics
+from ..model.robot import Robot
 
 LEVER = 0.1  # [m] points on the tool axes: an orientation error of 1 mrad counts 0.1 mm
 MAX_ROWS = 400  # readings the projection is fitted on (spread evenly over the data)

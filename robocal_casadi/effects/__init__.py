@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..errors import InputError
-from ..robot import Robot
+from ..model.robot import Robot
 from .backlash import Backlash
 from .base import Contribution, Effect, Implausible, Plausible, RowContext, TrueWorld, joint_list
 from .compliance import JointCompliance

@@ -41,10 +41,10 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError
-from ..parameters import ParameterRegistry
-from ..robot import DEFAULT_DRIVE, DRIVES, Robot
-from ..units import Units
+from ..model.parameters import ParameterRegistry
+from ..model.robot import DEFAULT_DRIVE, DRIVES, Robot
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import casadi as ca
 
 from ..errors import InputError
-from ..robot import Robot
+from ..model.robot import Robot
 
 
 def check_joints(effect, robot: Robot, *, revolute_only: bool = False) -> None:

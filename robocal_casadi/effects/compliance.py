@@ -50,9 +50,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError
-from ..robot import Robot
-from ..units import Units
+from ..model.robot import Robot
 from .base import Effect, Plausible, RowContext, TrueWorld, joint_list
 from .checks import check_joints, column
 from .drives import per_drive, scaled
@@ -271,7 +271,7 @@ class JointCompliance(Effect):
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         if not robot.has_inertia:
             return Q[:, joint - 1]
-        from ..pinocchio_model import gravity_torques
+        from ..model.pinocchio_model import gravity_torques
 
         return gravity_torques(robot, Q, payload_mass=extras.get("payload", 0.0),
                                payload_com=payload_com)[:, joint - 1]
@@ -286,7 +286,7 @@ class JointCompliance(Effect):
     def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
         """``-c_j tau_j(q)`` with pinocchio's gravity torque of the true robot's links and the
         row's payload (needs masses in the robot file)."""
-        from ..pinocchio_model import gravity_torques
+        from ..model.pinocchio_model import gravity_torques
 
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         dq = np.zeros(Q.shape)

@@ -24,9 +24,9 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError
-from ..robot import Robot
-from ..units import Units
+from ..model.robot import Robot
 from .base import Effect, Plausible, RowContext, TrueWorld, amplitude_check
 from .checks import column
 from .drives import per_drive

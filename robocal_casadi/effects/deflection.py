@@ -56,10 +56,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError
-from ..kinematics import Kinematics, symbolic_frames
-from ..robot import Robot
-from ..units import Units
+from ..model.kinematics import Kinematics, symbolic_frames
+from ..model.robot import Robot
 from .base import Effect, Implausible, Plausible, RowContext, TrueWorld, joint_list
 from .checks import column
 

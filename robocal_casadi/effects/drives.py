@@ -16,7 +16,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import replace
 
-from ..robot import DEFAULT_DRIVE, DRIVES
+from ..model.robot import DEFAULT_DRIVE, DRIVES
 from .base import Plausible
 
 DEG = math.pi / 180.0

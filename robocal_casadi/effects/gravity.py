@@ -28,9 +28,9 @@ import casadi as ca
 import numpy as np
 
 from ..errors import InputError
-from ..kinematics import symbolic_frames
-from ..parameters import ParameterRegistry
-from ..robot import Robot
+from ..model.kinematics import symbolic_frames
+from ..model.parameters import ParameterRegistry
+from ..model.robot import Robot
 
 FIRST_MOMENT_COMPONENTS = ("x", "y", "z", "m")  # h_x, h_y, h_z [kg m] and m [kg] per link
 

@@ -32,7 +32,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..units import Units
+from ..common.units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import check_joints, column
 from .drives import per_drive

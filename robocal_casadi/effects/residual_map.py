@@ -35,9 +35,9 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError
-from ..robot import Robot
-from ..units import Units
+from ..model.robot import Robot
 from .base import Effect, Plausible, RowContext
 from .checks import column
 

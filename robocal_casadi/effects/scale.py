@@ -16,7 +16,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..units import Units
+from ..common.units import Units
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import check_joints, column
 from .drives import per_drive

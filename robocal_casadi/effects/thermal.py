@@ -22,10 +22,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common.units import Units
 from ..errors import InputError, RobocalError
-from ..parameters import length_names
-from ..robot import Robot
-from ..units import Units
+from ..model.parameters import length_names
+from ..model.robot import Robot
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import column
 

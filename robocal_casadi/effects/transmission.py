@@ -28,8 +28,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..robot import Robot
-from ..units import Units
+from ..common.units import Units
+from ..model.robot import Robot
 from .base import Plausible, RowContext, TrueWorld
 from .checks import column
 from .coupling import JointCoupling

@@ -19,9 +19,9 @@ import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from ..common.fields import cut
+from ..common.output import note_interrupt
 from ..errors import InputError
-from ..fields import cut
-from ..output import note_interrupt
 from .robot_task import RobotOutcome, Settings, calibrate_robot
 from .spec import Fleet
 

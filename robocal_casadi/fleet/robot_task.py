@@ -26,9 +26,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..common.output import atomic_file, not_replacing_inputs, replace_refusal, written_by_robocal
 from ..effects import EFFECTS
 from ..errors import InputError, RobocalError
-from ..output import atomic_file, not_replacing_inputs, replace_refusal, written_by_robocal
 from .spec import FleetRobot
 
 if TYPE_CHECKING:
@@ -257,7 +257,7 @@ def _finish(clock: _Clock, name: str, status: str, caught: list, **fields) -> Ro
 def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> RobotOutcome:
     """Calibrate ``robot`` into ``out/<name>/`` unless complete for the same inputs; never
     raises (see the module docstring)."""
-    from ..datasets import load_dataset
+    from ..instruments.datasets import load_dataset
 
     clock = _Clock()
     folder = Path(out) / robot.name

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..common.fields import check_keys, cut, file_name, load_yaml, mapping, require
 from ..errors import InputError
-from ..fields import check_keys, cut, file_name, load_yaml, mapping, require
 
 TOP_KEYS = ("robots",)
 ROBOT_KEYS = ("name", "datasets", "validate")

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..output import json_safe as _clean
-from ..units import ANGLE_SCALE, LENGTH_SCALE, SI, Units
+from ..common.output import json_safe as _clean
+from ..common.units import ANGLE_SCALE, LENGTH_SCALE, SI, Units
 from .outliers import FLOOR, LIMIT, MAD_TO_SD, MIN_ROBOTS, Finding, Move, Spread, high_outliers
 from .robot_task import RobotOutcome
 from .spec import Fleet

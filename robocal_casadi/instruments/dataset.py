@@ -17,9 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..effects.motion import with_directions
-from ..errors import InputError
-from ..fields import (
+from ..common.fields import (
     MAX_ANGLE,
     MAX_LENGTH,
     check_magnitude,
@@ -31,9 +29,11 @@ from ..fields import (
     require,
     resolved,
 )
-from ..robot import Robot, load_robot
-from ..table import Table
-from ..units import Units
+from ..common.table import Table
+from ..common.units import Units
+from ..effects.motion import with_directions
+from ..errors import InputError
+from ..model.robot import Robot, load_robot
 
 QUATERNION_TOLERANCE = 1e-6
 COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",

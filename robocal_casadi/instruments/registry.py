@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..common.fields import cut
 from ..errors import InputError
-from ..fields import cut
 
 if TYPE_CHECKING:
     from .dataset import DatasetBase

@@ -16,14 +16,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..common.progress import Progress
+from ..common.units import Units
 from ..errors import InputError
-from ..progress import Progress
-from ..robot import Robot
-from ..transforms import matrix_from_quaternion
-from ..units import Units
+from ..model.robot import Robot
+from ..model.transforms import matrix_from_quaternion
 
 if TYPE_CHECKING:
-    from ..simulate import TrueRobot
+    from .simulate import TrueRobot
 
 LIMIT_MARGIN = 0.03  # fraction of each joint range kept free at both ends for configurations
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..results import CalibrationResult, DatasetResiduals
+from ..delivery.results import CalibrationResult, DatasetResiduals
 from .numbers import MODELS, pooled
 
 

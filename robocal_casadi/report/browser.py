@@ -16,8 +16,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+from ..common.output import atomic_file
 from ..errors import RobocalError
-from ..output import atomic_file
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

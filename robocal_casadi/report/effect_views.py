@@ -29,12 +29,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..common.units import Units
+from ..delivery.results import CalibrationResult, DatasetResiduals, EffectFinding
 from ..effects import EFFECTS, data_columns, effect_title
 from ..effects.base import Effect
 from ..effects.motion import with_directions
-from ..results import CalibrationResult, DatasetResiduals, EffectFinding
-from ..robot import Robot
-from ..units import Units
+from ..model.robot import Robot
 from .numbers import display_units, errors_of, joint_reading_unit
 
 
@@ -118,7 +118,7 @@ def gravity_torque_at(robot: Robot, Q: np.ndarray, extras: dict[str, np.ndarray]
                       payload_com: np.ndarray | None = None) -> np.ndarray:
     """Gravity torques [N m] (forces [N] at prismatic joints), N x dof, from pinocchio,
     with the ``payload`` column [kg] (0 without it)."""
-    from ..pinocchio_model import gravity_torques
+    from ..model.pinocchio_model import gravity_torques
 
     payload = extras.get("payload", 0.0)
     return gravity_torques(robot, Q, payload_mass=payload, payload_com=payload_com)

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..output import atomic_file
-from ..results import CalibrationResult, DatasetResiduals, ErrorTerm
-from ..table import format_number
+from ..common.output import atomic_file
+from ..common.table import format_number
+from ..delivery.results import CalibrationResult, DatasetResiduals, ErrorTerm
 
 FILE_NAME = "errors.csv"
 MM = 1e-3  # [m] per mm

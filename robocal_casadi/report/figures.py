@@ -21,9 +21,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..results import DatasetResiduals, Identifiability
-from ..robot import Robot
-from ..units import Units
+from ..common.units import Units
+from ..delivery.results import DatasetResiduals, Identifiability
+from ..model.robot import Robot
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
 
 if TYPE_CHECKING:

@@ -18,9 +18,9 @@ from pathlib import Path
 import jinja2
 from markupsafe import Markup
 
+from ..common.output import atomic_file
+from ..delivery.results import CalibrationResult
 from ..errors import ArgumentError, InputError
-from ..output import atomic_file
-from ..results import CalibrationResult
 from .content import Details, Document, Paragraph, Plot, Table
 from .figures import png_bytes
 from .info import ReportInfo

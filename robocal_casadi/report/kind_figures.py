@@ -19,9 +19,9 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..results import DatasetResiduals
-from ..robot import Robot
-from ..units import Units
+from ..common.units import Units
+from ..delivery.results import DatasetResiduals
+from ..model.robot import Robot
 from .figures import COLOURS, WIDTH, _binned_rms, _thin, new_figure, report_style
 from .numbers import errors_of, format_at_resolution, joint_reading_unit, resolution_of
 

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..common.units import Units
+from ..delivery.results import DatasetResiduals
 from ..instruments import INSTRUMENTS
-from ..results import DatasetResiduals
-from ..robot import Robot
-from ..units import Units
+from ..model.robot import Robot
 
 MODELS = ("nominal", "geometric", "final")
 MODEL_TITLES = {"nominal": "nominal robot", "geometric": "geometric calibration",

@@ -20,7 +20,7 @@ import matplotlib.image
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
 
-from ..output import atomic_file
+from ..common.output import atomic_file
 from .content import Details, Document, Paragraph, Plot, Table
 from .figures import new_figure, png_bytes, report_style
 

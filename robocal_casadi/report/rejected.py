@@ -9,9 +9,9 @@ from functools import partial
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..kinematics import Kinematics
-from ..results import CalibrationResult, RejectedReading
-from ..units import Units
+from ..common.units import Units
+from ..delivery.results import CalibrationResult, RejectedReading
+from ..model.kinematics import Kinematics
 from .content import Paragraph, Plot, Section, Table
 from .figures import new_figure
 from .numbers import display_units

@@ -16,11 +16,11 @@ from functools import partial
 
 import numpy as np
 
+from ..common.units import Units
 from ..delivery.accuracy import BAND
+from ..delivery.results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from ..effects import is_learned
 from ..instruments import INSTRUMENTS
-from ..results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
-from ..units import Units
 from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
 from .conclusion import conclusion_paragraphs
@@ -467,7 +467,7 @@ def kind_blocks(result: CalibrationResult, role: str, residuals: tuple, units: U
 
 def _flange_positions(result: CalibrationResult, residuals) -> list[np.ndarray]:
     """Flange positions [m] (rows x 3, base frame) of the calibrated robot per dataset."""
-    from ..kinematics import Kinematics
+    from ..model.kinematics import Kinematics
 
     kinematics = Kinematics(result.robot_calibrated)
     return [kinematics.flange_poses(np.asarray(r.joints, dtype=float))[:, :3, 3]

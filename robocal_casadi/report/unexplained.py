@@ -15,8 +15,8 @@ from functools import partial
 
 import numpy as np
 
-from ..results import CalibrationResult, DatasetResiduals
-from ..units import LENGTH_SCALE, Units
+from ..common.units import LENGTH_SCALE, Units
+from ..delivery.results import CalibrationResult, DatasetResiduals
 from . import kind_figures
 from .accuracy import judged_on
 from .content import Paragraph, Plot

@@ -27,7 +27,7 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from ..transforms import pose_from_xyz_rpy, rot_x, rpy_from_matrix
+from ..model.transforms import pose_from_xyz_rpy, rot_x, rpy_from_matrix
 from .goal import R_B
 
 MarkerConvention = Literal["method", "opencv"]

@@ -29,7 +29,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..transforms import pose_from_xyz_rpy, rot_x, rot_z, rpy_from_matrix, translation
+from ..model.transforms import pose_from_xyz_rpy, rot_x, rot_z, rpy_from_matrix, translation
 
 #: Fixed rotation of the target frame in the end frame: ``Rx(90 deg) Rz(90 deg)`` (4x4).
 R_B = rot_x(math.pi / 2) @ rot_z(math.pi / 2)

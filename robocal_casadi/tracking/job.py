@@ -36,10 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets import joint_readings as checked_joint_readings
-from ..datasets import referenced_robot
-from ..errors import InputError
-from ..fields import (
+from ..common.fields import (
     check_keys,
     check_magnitude,
     cut,
@@ -51,10 +48,13 @@ from ..fields import (
     require,
     vector,
 )
-from ..robot import Robot
-from ..table import read_table
-from ..transforms import matrix_from_quaternion, pose_from_xyz_rpy
-from ..units import Units, units_of
+from ..common.table import read_table
+from ..common.units import Units, units_of
+from ..errors import InputError
+from ..instruments.datasets import joint_readings as checked_joint_readings
+from ..instruments.datasets import referenced_robot
+from ..model.robot import Robot
+from ..model.transforms import matrix_from_quaternion, pose_from_xyz_rpy
 from .conventions import (
     MARKER_CONVENTIONS,
     MarkerConvention,

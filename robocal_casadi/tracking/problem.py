@@ -40,9 +40,9 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from ..codegen import compiled
-from ..kinematics import Kinematics
-from ..robot import Robot
+from ..common.codegen import compiled
+from ..model.kinematics import Kinematics
+from ..model.robot import Robot
 from .goal import goal_pose
 
 #: [rad] A goal whose z axis is within this angle of the worktable normal has a free turn

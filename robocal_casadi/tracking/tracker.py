@@ -20,10 +20,10 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from ..checks import choice, rotation_matrix
+from ..common.checks import choice, rotation_matrix
 from ..errors import InputError
-from ..ik import inverse_kinematics
-from ..robot import Robot
+from ..model.ik import inverse_kinematics
+from ..model.robot import Robot
 from .conventions import (
     MARKER_CONVENTIONS,
     MarkerConvention,

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..robot import Frame, Robot, robot_from_dict
-from ..transforms import rpy_from_matrix
+from ..model.robot import Frame, Robot, robot_from_dict
+from ..model.transforms import rpy_from_matrix
 from .description import chain_description, is_urdf
 from .document import UrdfDocument, read_document
 

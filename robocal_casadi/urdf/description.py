@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..transforms import invert, rpy_from_matrix
+from ..model.transforms import invert, rpy_from_matrix
 from .document import UrdfDocument, read_document
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.fields import read_text
 from ..errors import InputError
-from ..fields import read_text
-from ..transforms import pose_from_xyz_rpy
+from ..model.transforms import pose_from_xyz_rpy
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic",
                "fixed": "fixed"}

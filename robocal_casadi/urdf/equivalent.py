@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..robot import Joint, Robot
-from ..transforms import invert
+from ..model.robot import Joint, Robot
+from ..model.transforms import invert
 from .chain import frame_of
 
 PARALLEL = 1e-9  # |z_a x z_b| below which two axes are parallel

@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..robot import Robot, UrdfSource
-from ..transforms import invert, rot_x, rot_y, rot_z, rpy_from_matrix, translation
+from ..model.robot import Robot, UrdfSource
+from ..model.transforms import invert, rot_x, rot_y, rot_z, rpy_from_matrix, translation
 from .chain import frame_of, robot_from_document
 from .document import UrdfDocument, read_document
 
@@ -74,7 +74,7 @@ def _dh_moving_frames(robot: Robot, q) -> list[np.ndarray]:
 
 def _urdf_link_frames(robot: Robot, q) -> list[np.ndarray]:
     """``[L_1(q), ..., L_n(q), L_tip(q)]`` world frames [m] of a ``urdf`` robot."""
-    from ..kinematics import axis_motion
+    from ..model.kinematics import axis_motion
 
     T, out = robot.base.matrix(), []
     for joint, reading in zip(robot.joints, q):

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ...errors import InputError
-from ...transforms import rot_x, rot_z
+from ...model.transforms import rot_x, rot_z
 from ..planning import Candidate, reach_radius
 from .reader import ArtifactTouches
 

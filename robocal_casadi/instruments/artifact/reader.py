@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from ...common.fields import cut, mapping, quantity, require
+from ...common.table import Table
+from ...common.units import Units
 from ...errors import InputError
-from ...fields import cut, mapping, quantity, require
-from ...table import Table
-from ...units import Units
 from ..dataset import DatasetBase, extra_columns, length3, same_rows, with_table
 
 MAX_POSE_ID = 10**9

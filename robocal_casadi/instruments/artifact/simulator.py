@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from ...common.units import Units
 from ...errors import InputError
-from ...ik import inverse_kinematics, random_joints
-from ...kinematics import Kinematics
-from ...transforms import rot_z
-from ...units import Units
+from ...model.ik import inverse_kinematics, random_joints
+from ...model.kinematics import Kinematics
+from ...model.transforms import rot_z
 from ..simulation import Generated, Setup, in_units, progress_of, random_rotation, run_extras, tilt
 
 DEFAULT_PROBE = (0.0, 0.0, 0.15)  # [m] flange frame

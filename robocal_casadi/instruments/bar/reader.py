@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from ...common.fields import cut
+from ...common.table import Table
 from ...errors import InputError
-from ...fields import cut
-from ...table import Table
 from ..artifact.reader import ArtifactTouches, touch_columns
 from ..dataset import extra_columns, length3, positive_length, with_table
 

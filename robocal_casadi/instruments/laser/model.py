@@ -14,7 +14,7 @@ Residual per reading ``i`` [m], the distance of the laser point from the sphere 
 of pendant poses (``x, y, z, qw, qx, qy, qz``), the pose as read (the robot then plays no
 part, ``uses_robot`` is False).
 
-Unit beam direction (``robocal_casadi.beam``): the engine treats mounted values as free
+Unit beam direction (``robocal_casadi.model.beam``): the engine treats mounted values as free
 unknowns, so the model uses ``n = beam_direction(v) = v / |v|`` (any direction, no pole,
 no sign choice) and adds one last residual ``(|v| - 1) * 1 m``. The distance residuals
 do not change with ``|v|``, so that row is zero at the solution and only fixes the
@@ -30,12 +30,12 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from ...beam import beam_direction, tangent_basis
+from ...delivery.results import ErrorTerm
 from ...errors import InputError
-from ...parameters import ParameterRegistry
-from ...results import ErrorTerm
-from ...sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
+from ...model.beam import beam_direction, tangent_basis
+from ...model.parameters import ParameterRegistry
 from ..model import MeasurementModel, PointsFunction
+from .sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
 
 MOUNTED_NAMES = ("laser_x", "laser_y", "laser_z", "laser_nx", "laser_ny", "laser_nz")
 GAUGE_LENGTH = 1.0  # [m] weight of the |v| = 1 row
@@ -194,7 +194,7 @@ class SphereLaserModel(MeasurementModel):
 
     def mounted_chart(self, nominal):
         """``[p0 + d(0:3), n0 + E(n0) d(3:5)]``: the beam moved in its tangent plane
-        (``robocal_casadi.beam``), two coordinates ``laser_n1, laser_n2`` instead of the
+        (``robocal_casadi.model.beam``), two coordinates ``laser_n1, laser_n2`` instead of the
         engine's three with their length fixed by a residual."""
         nominal = np.asarray(nominal, float)
         n0 = beam_direction(nominal[3:6])

@@ -11,8 +11,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ...common.fields import vector
 from ...errors import InputError
-from ...fields import vector
 from ..planning import ANGLE_MARGIN, MARGIN, Candidate, reach_radius, shoulder, unit
 from .reader import SphereLaser
 

@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
+from ...common.fields import quantities, vector
+from ...common.table import Table
+from ...common.units import Units
 from ...errors import InputError
-from ...fields import quantities, vector
-from ...table import Table
-from ...transforms import matrix_from_quaternion
-from ...units import Units
+from ...model.transforms import matrix_from_quaternion
 from ..dataset import (
     DatasetBase,
     check_unit_quaternions,

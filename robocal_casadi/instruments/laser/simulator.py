@@ -8,12 +8,12 @@ import math
 
 import numpy as np
 
+from ...common.units import Units
 from ...errors import InputError
-from ...ik import inverse_kinematics, random_joints
-from ...kinematics import Kinematics
-from ...robot import Robot
-from ...transforms import quaternion_from_matrix
-from ...units import Units
+from ...model.ik import inverse_kinematics, random_joints
+from ...model.kinematics import Kinematics
+from ...model.robot import Robot
+from ...model.transforms import quaternion_from_matrix
 from ..simulation import Generated, Setup, in_units, progress_of, run_extras, tilt
 
 DEFAULT_LASER_ORIGIN = (0.06, -0.015, 0.14)  # [m]

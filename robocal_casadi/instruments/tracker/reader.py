@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from ...common.table import Table
+from ...common.units import Units
 from ...errors import InputError
-from ...robot import Robot
-from ...table import Table
-from ...units import Units
+from ...model.robot import Robot
 from ..dataset import DatasetBase, extra_columns, length3, lengths, same_rows, with_table
 
 BLOCKS = {"target": ("xyz",), "instrument": ("xyz",)}

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from ...ik import random_joints
-from ...transforms import invert, pose_from_xyz_rpy, rpy_from_matrix
-from ...units import Units
+from ...common.units import Units
+from ...model.ik import random_joints
+from ...model.transforms import invert, pose_from_xyz_rpy, rpy_from_matrix
 from ..simulation import LIMIT_MARGIN, Generated, Setup, in_units, run_extras
 
 DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]

@@ -23,13 +23,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .effects import EFFECTS, LEARNED, Effect, RowContext
-from .effects.motion import is_derived_column, with_directions
-from .errors import InputError
-from .fields import load_yaml
-from .kinematics import Kinematics
-from .results import Delivered
-from .robot import Robot, dump_yaml
+from ..common.fields import load_yaml
+from ..delivery.results import Delivered
+from ..errors import InputError
+from ..model.kinematics import Kinematics
+from ..model.robot import Robot, dump_yaml
+from . import EFFECTS, LEARNED, Effect, RowContext
+from .motion import is_derived_column, with_directions
 
 EFFECTS_FILE = "effects_calibrated.yaml"
 

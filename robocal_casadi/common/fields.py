@@ -17,7 +17,7 @@ from typing import IO, Any, Literal, overload
 
 import yaml
 
-from .errors import InputError
+from ..errors import InputError
 
 _FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 

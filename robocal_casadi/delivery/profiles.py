@@ -21,10 +21,10 @@ and stay free under every profile.
 
 from __future__ import annotations
 
-from .errors import InputError
-from .parameters import FRAME_PARAMETERS
+from ..errors import InputError
+from ..model.parameters import FRAME_PARAMETERS
+from ..model.robot import Robot
 from .results import ProfileCost  # noqa: F401 (the record, re-exported)
-from .robot import Robot
 
 PROFILES = ("dh-only", "ur", "kuka")
 

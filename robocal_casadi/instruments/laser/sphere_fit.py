@@ -9,7 +9,7 @@ residual [m] is the distance of the laser point from the sphere surface::
 
     r_i = || R_i (p0 + l_i n) + t_i - c || - R
 
-Direction without poles or signs (``robocal_casadi.beam``): ``n`` moves on the unit
+Direction without poles or signs (``robocal_casadi.model.beam``): ``n`` moves on the unit
 sphere as ``n <- beam_direction(n, (a, b))`` = ``normalise(n + a e1 + b e2)`` with
 ``e1, e2`` the tangent basis of the current ``n``; ``(a, b)`` are re-centred to zero
 after every step, so any beam direction is reached with the same conditioning. The 8
@@ -36,10 +36,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .beam import beam_direction, tangent_basis
-from .errors import InputError, SolverError
-from .kinematics import Kinematics
-from .least_squares import Tolerances, levenberg_marquardt
+from ...common.least_squares import Tolerances, levenberg_marquardt
+from ...errors import InputError, SolverError
+from ...model.beam import beam_direction, tangent_basis
+from ...model.kinematics import Kinematics
 
 DEGENERACY_RATIO = 1e-6  # smallest / largest scaled singular value below which a scan is refused
 PARAMETER_NAMES = ("x0", "y0", "z0", "a", "b", "xc", "yc", "zc")  # local unknowns, in order

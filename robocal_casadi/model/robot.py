@@ -28,9 +28,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .checks import path_argument
-from .errors import InputError
-from .fields import (
+from ..common.checks import path_argument
+from ..common.fields import (
     MAX_LENGTH,
     check_keys,
     cut,
@@ -42,9 +41,10 @@ from .fields import (
     require,
     vector,
 )
+from ..common.units import SI, Units, units_of
+from ..errors import InputError
 from .parameters import ParameterRegistry
 from .transforms import pose_from_xyz_rpy
-from .units import SI, Units, units_of
 
 JOINT_TYPES = ("revolute", "prismatic")
 # How a joint's motor turns it (docs/formats.md#robot-file); the plausible sizes of the
@@ -241,7 +241,7 @@ def load_robot(path: str | Path, *, base_link: str | None = None,
     that starts with ``<``); errors name the file and the key. ``base_link`` and
     ``tip_link`` choose a URDF's chain (default: its root to its single leaf)."""
     path = path_argument(path, "path", what="a robot file path")
-    from .urdf.description import is_urdf, read_description
+    from ..urdf.description import is_urdf, read_description
 
     if is_urdf(path):
         return robot_from_dict(read_description(path, base_link=base_link, tip_link=tip_link),

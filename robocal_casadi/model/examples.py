@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 
+from ..common.units import Units
 from .robot import Frame, Joint, Robot
-from .units import Units
 
 D = math.pi / 180.0
 

@@ -315,7 +315,7 @@ def resolved_path(path: Path) -> Path:
 def not_replacing_inputs(folder: Path, inputs, option: str = "--out") -> None:
     """Refuse an output folder that is, or holds, one of the inputs (files or folders the
     run reads): replacing the folder as a whole would delete them."""
-    from .errors import InputError
+    from ..errors import InputError
 
     root = resolved_path(Path(folder))
     for item in inputs:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 from .fields import MAX_TABLE_BYTES, cut, open_checked
 
 # A decimal number as people write it in a table; float() alone would also take

@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from .checks import count, path_argument
-from .configuration import same_configuration
-from .errors import ArgumentError, InputError
-from .ik import IKBatchResult, inverse_kinematics
-from .kinematics import Kinematics
-from .robot import Robot, load_robot
-from .transforms import matrix_from_quaternion
+from ..common.checks import count, path_argument
+from ..errors import ArgumentError, InputError
+from ..model.configuration import same_configuration
+from ..model.ik import IKBatchResult, inverse_kinematics
+from ..model.kinematics import Kinematics
+from ..model.robot import Robot, load_robot
+from ..model.transforms import matrix_from_quaternion
 
 STATUS_OK = "ok"
 EFFECT_TOLERANCE = 1e-11  # [m], [rad]: what the refinement may leave of the target
@@ -273,7 +273,7 @@ def _with_effects(kinematics: Kinematics, effects, extras: dict, targets: np.nda
             break
         if any(c.startswith(("direction_q", "travel_q")) for c in effects.columns()):
             # backlash: the directions of motion along the whole path of solutions
-            from .effects.motion import with_directions
+            from ..effects.motion import with_directions
 
             T = effects.tool_poses(Q[rows], _rows_of(with_directions(Q, extras), rows, count))
         else:

@@ -70,20 +70,20 @@ from typing import Any
 
 import numpy as np
 
-from .checks import choice, count, path_argument, positive
+from ..common.checks import choice, count, path_argument, positive
+from ..common.output import atomic_directory, replace_refusal
+from ..common.table import read_table, write_table
+from ..common.units import Units
+from ..effects import EFFECTS, Effect, TrueWorld
+from ..effects.motion import direction_column, is_direction_column, travel_column
+from ..errors import ArgumentError, InputError
+from ..model.kinematics import Kinematics
+from ..model.parameters import perturbed_stems
+from ..model.robot import Robot, dump_yaml, load_robot, save_robot
+from . import instrument, kinds
 from .datasets import Dataset, load_dataset
-from .effects import EFFECTS, Effect, TrueWorld
-from .effects.motion import direction_column, is_direction_column, travel_column
-from .errors import ArgumentError, InputError
-from .instruments import instrument, kinds
-from .instruments.laser.simulator import ray_sphere_distance
-from .instruments.simulation import Generated, Setup
-from .kinematics import Kinematics
-from .output import atomic_directory, replace_refusal
-from .parameters import perturbed_stems
-from .robot import Robot, dump_yaml, load_robot, save_robot
-from .table import read_table, write_table
-from .units import Units
+from .laser.simulator import ray_sphere_distance
+from .simulation import Generated, Setup
 
 READINGS = ("joints", "pendant")
 

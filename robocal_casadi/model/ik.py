@@ -40,10 +40,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .checks import array, choice, count, positive
-from .errors import InputError
+from ..common.checks import array, choice, count, positive
+from ..common.least_squares import Damping, Tolerances, levenberg_marquardt
+from ..errors import InputError
 from .kinematics import Kinematics
-from .least_squares import Damping, Tolerances, levenberg_marquardt
 
 MODES = ("pose", "flange_pose", "point")
 METHODS = ("lm", "ipopt")

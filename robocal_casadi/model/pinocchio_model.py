@@ -33,7 +33,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pinocchio as pin
 
-from .output import atomic_file
+from ..common.output import atomic_file
 from .robot import Robot
 from .transforms import rot_x, rot_y, rot_z, rpy_from_matrix, translation
 

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .robot import Robot
-from .units import Units
+from ..common.units import Units
+from ..model.robot import Robot
 
 if TYPE_CHECKING:
-    from .effects.base import Effect
+    from ..effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 

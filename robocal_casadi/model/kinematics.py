@@ -19,7 +19,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from .codegen import BatchFunction, compiled
+from ..common.codegen import BatchFunction, compiled
 from .parameters import ParameterRegistry
 from .robot import Robot
 from .transforms import pose_from_xyz_rpy, rot_x, rot_y, rot_z, translation

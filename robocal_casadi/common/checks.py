@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .errors import ArgumentError
+from ..errors import ArgumentError
 
 
 def _shown(value: Any) -> str:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .errors import InputError
+from ..errors import InputError
 from .fields import check_keys, cut, mapping, require
 
 LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}

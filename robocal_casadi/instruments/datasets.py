@@ -21,9 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import path_argument
-from .errors import InputError
-from .fields import (
+from ..common.checks import path_argument
+from ..common.fields import (
     check_keys,
     file_kind,
     load_yaml,
@@ -32,9 +31,13 @@ from .fields import (
     referenced_file,
     require,
 )
-from .instruments import Instrument, instrument
-from .instruments.artifact.reader import ArtifactTouches
-from .instruments.dataset import (
+from ..common.table import Table, read_table
+from ..common.units import Units, units_of
+from ..errors import InputError
+from ..model.robot import Robot, load_robot
+from . import Instrument, instrument
+from .artifact.reader import ArtifactTouches
+from .dataset import (
     COMMON_KEYS,
     DatasetBase,
     check_planning,
@@ -45,11 +48,8 @@ from .instruments.dataset import (
     station_name,
     work_cell_of,
 )
-from .instruments.laser.reader import SphereLaser
-from .instruments.tracker.reader import TrackerPoints
-from .robot import Robot, load_robot
-from .table import Table, read_table
-from .units import Units, units_of
+from .laser.reader import SphereLaser
+from .tracker.reader import TrackerPoints
 
 Dataset = DatasetBase  # any kind's record (its reader's class)
 
