@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal_casadi.model.beam import beam_direction, tangent_basis
+from robocal_casadi.instruments import instrument
 
 from .reach import Workspace
 from .setup import PlanSetup
@@ -42,13 +42,13 @@ DEFAULT_NOISE = 10e-6  # [m] reading noise when the dataset file gives none
 def measured_point(setup: PlanSetup) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(offset, t1, t2)``: the flange-frame point whose accuracy is predicted [m] and,
     for a laser, the two beam directions normal to its nominal beam (times the mid-range
-    reading, [m]) that the row model varies; zero vectors otherwise."""
-    if setup.model.reach != "beam":
+    reading, [m]) that the row model varies; zero vectors otherwise. The kind's planner
+    says which (``Planner.measured_point``)."""
+    planner = instrument(setup.kind).planner
+    if planner is None or planner.measured_point is None:
         return np.asarray(setup.offset, float), np.zeros(3), np.zeros(3)
-    n0 = beam_direction(setup.axis)
-    t1, t2 = tangent_basis(n0).T  # the beam's two coordinates (robocal_casadi.model.beam)
-    reach = 0.5 * (setup.laser_range[0] + setup.laser_range[1])
-    return setup.offset + reach * n0, reach * t1, reach * t2
+    offset, t1, t2 = planner.measured_point(setup)
+    return np.asarray(offset, float), np.asarray(t1, float), np.asarray(t2, float)
 
 
 def workspace_samples(setup: PlanSetup, workspace: Workspace, rng: np.random.Generator,

@@ -52,6 +52,7 @@ from scipy.interpolate import BSpline
 
 from robocal_casadi.common.progress import Progress
 from robocal_casadi.errors import ArgumentError, InputError
+from robocal_casadi.instruments import instrument
 from robocal_casadi.instruments.datasets import Dataset
 from robocal_casadi.model.kinematics import Kinematics
 
@@ -222,7 +223,8 @@ def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
     setup = setup_from_dataset(dataset)
-    if setup.model.reach != "beam":
+    planner = instrument(setup.kind).planner
+    if planner is None or not planner.scans:
         raise InputError(f"scans are planned for laser data, not {setup.kind}",
                          file=setup.path, where="kind")
     if count < MIN_SAMPLES:

@@ -89,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         if holds_readings(read_table(data), dataset.kind):
             raise InputError(f"{args.out} is the dataset's own data table and it holds "
                              "readings; write the plan to another file", where="--out")
-    if instrument(dataset.kind).model.reach == "beam":  # laser plans are scan trajectories
+    planner = instrument(dataset.kind).planner
+    if planner is not None and planner.scans:
         return _scan(dataset, args)
     if args.sensor_only:
         raise InputError(f"--sensor-only is for laser scans, not {dataset.kind} data",

@@ -39,12 +39,19 @@ class Planner:
     Jacobian block and the constraints that keep it runnable to the refinement's
     program; ``feasible(setup, workspace, candidate, Q)`` the candidate at refined joints
     ``Q`` as ``(candidate, Q, measured points [m])``, or None when it fails a check.
+    ``scans``: the kind's plans are continuous scan trajectories (``planning.trajectory``)
+    rather than a chosen set of poses (``planning.design``). ``measured_point(setup)`` the
+    flange-frame point whose accuracy is predicted and the two directions [m] the
+    prediction varies it along (``planning.accuracy``); None: the set-up's ``offset`` and
+    no variation.
     """
 
     setup: Callable[[Any, Any], dict]
     candidates: Callable[..., list]
     refine: Callable[..., None]
     feasible: Callable[..., Any]
+    scans: bool = False
+    measured_point: Callable[[Any], tuple[Any, Any, Any]] | None = None
 
 
 @dataclass(frozen=True)
@@ -59,8 +66,10 @@ class Instrument:
     ``corrupt(rows, columns, row, length, rng, dataset)`` moves one row of a simulated
     table by ``length`` [m] (a gross error); ``planner`` what the planner asks
     (``Planner``); ``check(dataset, joints, where)`` refuses data that cannot calibrate
-    (``calibration.degeneracy``). A kind without a simulator or planner is read and
-    calibrated; simulating or planning it is refused.
+    (``calibration.degeneracy``). ``any_configuration``: a reading can be taken at any
+    configuration, in the order the robot moves, so effects that need absolute points
+    along a path (``Effect.tracker_only``) can be simulated for the kind. A kind without a
+    simulator or planner is read and calibrated; simulating or planning it is refused.
     """
 
     kind: str
@@ -71,6 +80,7 @@ class Instrument:
     corrupt: Callable[..., None] | None = None
     planner: Planner | None = None
     check: Callable[[Any, Any, Path], None] = field(default=_no_check)
+    any_configuration: bool = False
 
     def __repr__(self) -> str:
         return f"Instrument({self.kind!r}, model={self.model.__name__})"

@@ -560,7 +560,7 @@ def _true_effects(effects: Mapping | None, nominal: Robot, kind: str):
     cannot show them."""
     true_effects = parse_effects(effects, nominal)
     for effect, _ in true_effects.entries:
-        if effect.tracker_only and instrument(kind).model.reach != "configuration":
+        if effect.tracker_only and not instrument(kind).any_configuration:
             raise InputError(f"{effect.name} is simulated only for data taken at any "
                              f"configuration (absolute points), not for {kind}",
                              where=f"effects.{effect.name}")

@@ -10,6 +10,6 @@ INSTRUMENT = Instrument(
     kind=SphereLaserModel.kind, model=SphereLaserModel, blocks=reader.BLOCKS, read=reader.read,
     simulate=simulator.simulate, corrupt=simulator.corrupt,
     planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
-                    planning.feasible))
+                    planning.feasible, scans=True, measured_point=planning.measured_point))
 
 __all__ = ["INSTRUMENT", "SphereLaserModel", "laser_of"]

@@ -13,6 +13,7 @@ import numpy as np
 
 from ...common.fields import vector
 from ...errors import InputError
+from ...model.beam import beam_direction, tangent_basis
 from ..planning import ANGLE_MARGIN, MARGIN, Candidate, reach_radius, shoulder, unit
 from .reader import SphereLaser
 
@@ -132,3 +133,13 @@ def feasible(setup, workspace, candidate: Candidate, Q: np.ndarray):
     if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
         return None
     return Candidate(Q, distance=np.array([reading])), Q, o[None]
+
+
+def measured_point(setup: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(point, t1, t2)`` [m]: the point the laser reads at mid-range along its nominal
+    beam (flange frame) and the two directions normal to the beam, times that mid-range
+    reading, which the planner's row model varies."""
+    n0 = beam_direction(setup.axis)
+    t1, t2 = tangent_basis(n0).T  # the beam's two coordinates (robocal_casadi.model.beam)
+    stand_off = 0.5 * (setup.laser_range[0] + setup.laser_range[1])
+    return setup.offset + stand_off * n0, stand_off * t1, stand_off * t2

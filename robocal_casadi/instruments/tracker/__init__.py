@@ -10,6 +10,7 @@ INSTRUMENT = Instrument(
     kind=TrackerModel.kind, model=TrackerModel, blocks=reader.BLOCKS, read=reader.read,
     check=reader.check, simulate=simulator.simulate, corrupt=simulator.corrupt,
     planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
-                    planning.feasible))
+                    planning.feasible),
+    any_configuration=True)
 
 __all__ = ["INSTRUMENT", "TrackerModel", "rigid_registration"]
