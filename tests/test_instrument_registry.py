@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -121,3 +122,22 @@ def test_planning_a_kind_without_a_planner_is_refused(gauge, simulated):
     with pytest.raises(InputError, match="no set-up for string_gauge") as caught:
         setup_from_dataset(dataset)
     assert Path(caught.value.file).name == "dataset.yaml" and caught.value.where == "kind"
+
+
+def test_path_effects_are_simulated_where_the_registry_says_readings_are_taken_anywhere(
+        gauge, tmp_path):
+    """Whether an effect needing absolute points along a path (``tracker_only``) can be
+    simulated is the kind's record's say (``any_configuration``), not its model's: the gauge
+    does not declare it and is refused; the same record declaring it is simulated."""
+    record = INSTRUMENTS[gauge.KIND]
+    assert not record.any_configuration and instrument("tracker_points").any_configuration
+    with pytest.raises(InputError, match="any configuration .* not for string_gauge"):
+        simulate(industrial_6r(), gauge.KIND, out_dir=tmp_path / "refused", rows=4,
+                 effects={"hysteresis": {2: 1e-3}}, progress=False)
+    INSTRUMENTS[gauge.KIND] = replace(record, any_configuration=True)
+    try:
+        run = simulate(industrial_6r(), gauge.KIND, out_dir=tmp_path / "taken", rows=4,
+                       effects={"hysteresis": {2: 1e-3}}, progress=False)
+    finally:
+        INSTRUMENTS[gauge.KIND] = record
+    assert run.truth.effects.names == ("hysteresis",)

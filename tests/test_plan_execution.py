@@ -6,6 +6,7 @@ identified on a simulated truth) and controller programs."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +18,8 @@ from planning.order import largest_moves, nearest_turns, open_path
 from planning.ranges import ELBOW_LIMIT, elbows, working_ranges
 from robocal_casadi.cli import main
 from robocal_casadi.common.table import read_table
+from robocal_casadi.errors import InputError
+from robocal_casadi.instruments import instrument
 from robocal_casadi.instruments.datasets import load_dataset
 from robocal_casadi.instruments.laser.sphere_fit import fit_sensor
 from robocal_casadi.model.examples import industrial_6r, panda_7dof, ur_type
@@ -372,3 +375,40 @@ def test_scan_objective_is_the_index_of_the_sampled_readings(files, index):
     s = info.spectrum_of([g], "tool" if index == "tool" else "reference")
     expected = math.log(np.sum(1 / s**2)) if index == "tool" else -2 * np.sum(np.log(s))
     assert problem.objective(C) == pytest.approx(expected, rel=1e-4)  # a 1e-9 ridge
+
+
+def test_scans_are_planned_for_the_kinds_whose_planner_scans(files):
+    """``design_scan`` asks the kind's planner (``Planner.scans``): the laser's scans, the
+    tracker's does not and a scan for it is refused, naming the file and key."""
+    from planning.trajectory import design_scan
+
+    assert instrument("sphere_laser").planner.scans
+    assert not instrument("tracker_points").planner.scans
+    dataset = load_dataset(files["tracker_ur"], require_data=False)
+    with pytest.raises(InputError, match="scans are planned") as caught:
+        design_scan(dataset, 120, quiet=True)
+    assert Path(caught.value.file).name == "tracker_ur.yaml" and caught.value.where == "kind"
+
+
+def test_the_laser_planner_predicts_accuracy_at_its_mid_range_reading(files):
+    """The point whose accuracy a laser plan predicts lies on the nominal beam at the middle
+    of the usable range, and the two directions it varies along are normal to the beam
+    with that reading's length; other kinds predict at their measured point, unvaried."""
+    from planning.accuracy import measured_point
+    from planning.setup import setup_from_dataset
+
+    laser = setup_from_dataset(load_dataset(files["sphere_6r"], require_data=False))
+    point, t1, t2 = measured_point(laser)
+    beam = point - laser.offset
+    mid = 0.5 * (laser.laser_range[0] + laser.laser_range[1])
+    axis = np.asarray(laser.axis, float) / np.linalg.norm(laser.axis)
+    scale = 1e-12 * max(1.0, float(np.linalg.norm(point)))  # rounding of metre-sized sums
+    np.testing.assert_allclose(np.linalg.norm(beam), mid, rtol=0, atol=scale)
+    np.testing.assert_allclose(np.cross(beam, axis), 0.0, rtol=0, atol=scale)
+    np.testing.assert_allclose([np.linalg.norm(t1), np.linalg.norm(t2)], mid, rtol=0,
+                               atol=scale)
+    np.testing.assert_allclose([t1 @ axis, t2 @ axis, t1 @ t2], 0.0, rtol=0, atol=scale)
+    tracker = setup_from_dataset(load_dataset(files["tracker_ur"], require_data=False))
+    point, t1, t2 = measured_point(tracker)
+    np.testing.assert_array_equal(point, tracker.offset)
+    assert not t1.any() and not t2.any()
