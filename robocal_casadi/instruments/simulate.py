@@ -111,9 +111,15 @@ class TrueEffects:
 
     @property
     def sequential(self) -> bool:
-        """Whether an effect depends on the order of the readings (backlash)."""
-        return any(is_direction_column(c) for effect, _ in self.entries
-                   for c in effect.required_columns())
+        """Whether an effect depends on the order of the readings (``order_dependent``)."""
+        return bool(self.order_dependent)
+
+    @property
+    def order_dependent(self) -> tuple[str, ...]:
+        """The names of the effects that depend on the order of the readings: those
+        reading a joint's direction of motion (backlash, for one)."""
+        return tuple(effect.name for effect, _ in self.entries
+                     if any(is_direction_column(c) for c in effect.required_columns()))
 
     def as_dict(self) -> dict:
         """The effect names of ``result.json`` with estimator-style parameter names (SI)."""
@@ -403,8 +409,10 @@ class TrueRobot:
                     break
                 direction = found
             else:
-                raise InputError(f"row {i + 1}: the joint moves less than its backlash, so its "
-                                 "direction of motion has no consistent reading", where="effects")
+                names = ", ".join(self.effects.order_dependent)
+                raise InputError(f"row {i + 1}: the joint moves less than the play of {names}, "
+                                 "so its direction of motion has no consistent reading",
+                                 where="effects")
             out[i], last = q, direction
         return out
 

@@ -77,15 +77,17 @@ class Setup:
 
     def in_order(self, Q_read: list, Q_true: list, payloads: list) -> np.ndarray:
         """The readings of the rows in written order: as found row by row, or, with an
-        effect of the order of motion (backlash), found again in that order from the true
-        joints (the direction of each row follows from its reading and the previous one)."""
-        if not self.world.effects.sequential:
+        effect of the order of motion (``TrueEffects.order_dependent``), found again in
+        that order from the true joints (the direction of each row follows from its reading
+        and the previous one)."""
+        names = self.world.effects.order_dependent
+        if not names:
             return np.array(Q_read)
         out = self.world.readings_in_order(np.array(Q_true), payloads)
         outside = [i for i, q in enumerate(out) if not self.within_limits(q)]
         if outside:
-            raise InputError(f"with backlash, row {outside[0] + 1}'s reading leaves the joint "
-                             "limits; use a smaller backlash", where="effects.backlash")
+            raise InputError(f"with {', '.join(names)}, row {outside[0] + 1}'s reading leaves "
+                             "the joint limits; use smaller values", where=f"effects.{names[0]}")
         return out
 
     def within_limits(self, q: np.ndarray) -> bool:
