@@ -9,6 +9,9 @@ Every part of the section comes from one file ``benchmarks/results/<name>.json``
 * ``"provenance": "transcribed"``: a part not measured again since the section was
   first generated; its ``text`` is the README's earlier wording and ``source`` says
   which run it came from. The part is printed with that note.
+* ``"provenance": "written"``: a part measured again whose printed JSON was not kept;
+  its ``text`` was written from that output, ``measured`` names the date and commit and
+  ``source`` the commands. The part is printed with that note.
 
     python benchmarks/readme_measured.py            # rewrite the section from the JSON
     python benchmarks/readme_measured.py --check    # exit 1 if README.md differs
@@ -248,7 +251,7 @@ def render(records: dict[str, dict]) -> str:
     parts = [INTRO]
     for name in ORDER:
         record = records[name]
-        if record["provenance"] == "transcribed":
+        if record["provenance"] in ("transcribed", "written"):
             parts.append(render_transcribed(record))
         else:
             parts.append(RENDERERS[name](record))

@@ -34,6 +34,10 @@ def test_every_part_says_where_its_figures_come_from(name):
         assert facts["date"] and facts["commit"] and facts["machine"]["cores"]
         assert record["command"].startswith("OPENBLAS_NUM_THREADS=1 python benchmarks/")
         assert isinstance(record["output"], dict) and name in measured.RENDERERS
+    elif record["provenance"] == "written":
+        facts = record["measured"]
+        assert facts["date"] and facts["commit"] and record["text"]
+        assert record["source"].startswith("Written from")
     else:
         assert record["provenance"] == "transcribed"
         assert record["source"].startswith("Not measured again") and record["text"]
