@@ -5,9 +5,6 @@ Read from the source with ``ast``, without importing anything: a function (or me
 decorator or ``def`` to its last line (docstring included), must carry a comment with
 ``long:`` (``# long: one numeric kernel ...``) in the ``ABOVE`` lines before it or
 between its ``def`` and the first statement after its docstring.
-
-Files in ``NOT_DONE_YET`` are still being split; their long functions are listed (with
-``pytest -s``) but do not fail the test.
 """
 
 from __future__ import annotations
@@ -20,17 +17,6 @@ PACKAGES = ("robocal_casadi", "planning")
 LIMIT = 60  # [lines] a function longer than this says why
 ABOVE = 3  # [lines] before the def (or first decorator) where the reason may stand
 MARK = "long:"
-NOT_DONE_YET = (  # a name ending in "/" stands for a whole folder
-    "robocal_casadi/calibration/evaluation.py",
-    "robocal_casadi/calibration/folds.py",
-    "robocal_casadi/calibration/job.py",
-    "robocal_casadi/calibration/outliers.py",
-    "robocal_casadi/calibration/problem.py",
-    "robocal_casadi/calibration/solver.py",
-    "robocal_casadi/delivery/",
-    "robocal_casadi/effects/effect_model.py",
-    "robocal_casadi/fleet/",
-)
 
 
 def long_functions(source: str, limit: int = LIMIT) -> list[tuple[str, int, int]]:
@@ -83,22 +69,9 @@ def test_the_checker_finds_a_long_function_and_accepts_a_reason():
     assert long_functions(short) == []
 
 
-def _not_done_yet(relative: str) -> bool:
-    return any(relative == entry or (entry.endswith("/") and relative.startswith(entry))
-               for entry in NOT_DONE_YET)
-
-
 def test_every_long_function_says_why():
-    offenders, pending = [], []
-    for path in project_files():
-        relative = path.relative_to(ROOT).as_posix()
-        for name, line, length in long_functions(path.read_text(encoding="utf-8")):
-            entry = f"{relative}:{line} {name} ({length} lines)"
-            (pending if _not_done_yet(relative) else offenders).append(entry)
-    print("\nnot done yet (files still being split; their long functions):")
-    print("\n".join(f"  {entry}" for entry in pending) or "  none")
-    gone = [entry for entry in NOT_DONE_YET if not (ROOT / entry).exists()]
-    if gone:
-        print("not done yet, but no longer in the tree (drop them): " + ", ".join(gone))
+    offenders = [f"{path.relative_to(ROOT).as_posix()}:{line} {name} ({length} lines)"
+                 for path in project_files()
+                 for name, line, length in long_functions(path.read_text(encoding="utf-8"))]
     assert not offenders, (f"functions over {LIMIT} lines without a '# {MARK} why' comment:\n"
                            + "\n".join(offenders))
