@@ -121,6 +121,32 @@ def test_calibration_worse_than_doing_nothing_is_refused_loudly(tmp_path, capsys
     assert np.allclose(written.parameter_vector(), nominal.parameter_vector(), atol=1e-12)
 
 
+def _posterior_rms(result, robot, names, point, Q, draws, seed):
+    """Per draw of the robot and instrument-point errors from ``result``'s posterior, the
+    RMS over the poses ``Q`` of the point moved by the numpy reference kinematics, after
+    the best rigid motion (closed form)."""
+    registry = robot.parameters()
+    in_robot = [k for k, n in enumerate(result.covariance_names) if n in registry]
+    in_point = [k for k, n in enumerate(result.covariance_names) if n in names]
+    index = registry.indices([result.covariance_names[k] for k in in_robot])
+    point_index = [names.index(result.covariance_names[k]) for k in in_point]
+    base = robot.parameter_vector()
+
+    def located(geometry, offset):
+        poses = [nominal_pose(geometry, q) for q in Q]
+        return np.array([T[:3, :3] @ offset + T[:3, 3] for T in poses])
+
+    reference = located(robot, point)
+    out = []
+    for delta in np.random.default_rng(seed).multivariate_normal(
+            np.zeros(len(result.covariance_names)), result.covariance, draws):
+        moved, offset = base.copy(), point.copy()
+        moved[index] += delta[in_robot]
+        offset[point_index] += delta[in_point]
+        out.append(_kabsch_rms(located(robot.with_parameters(moved), offset), reference))
+    return np.array(out)
+
+
 def test_predicted_parameter_error_matches_monte_carlo(tmp_path):
     sim = simulate(UR10, "tracker_points", out_dir=tmp_path / "fit", rows=40, noise=1e-4,
                    geometric_errors=ERRORS, seed=7, progress=False)
@@ -136,28 +162,8 @@ def test_predicted_parameter_error_matches_monte_carlo(tmp_path):
     # numpy reference kinematics, remove the best rigid motion (closed form), average.
     low, high = np.array(region_of(result)).T
     Q = np.random.default_rng(SEED).uniform(low, high, size=(SAMPLES, len(low)))[::16]
-    registry = robot.parameters()
-    in_robot = [k for k, n in enumerate(result.covariance_names) if n in registry]
-    in_point = [k for k, n in enumerate(result.covariance_names) if n in names]
-    index = registry.indices([result.covariance_names[k] for k in in_robot])
-    point_index = [names.index(result.covariance_names[k]) for k in in_point]
-    base = robot.parameter_vector()
-
-    def located(geometry, offset):
-        poses = [nominal_pose(geometry, q) for q in Q]
-        return np.array([T[:3, :3] @ offset + T[:3, 3] for T in poses])
-
-    reference = located(robot, point)
-    rng = np.random.default_rng(11)
     draws = 400
-    squares = []
-    for delta in rng.multivariate_normal(np.zeros(len(result.covariance_names)),
-                                         result.covariance, draws):
-        moved, offset = base.copy(), point.copy()
-        moved[index] += delta[in_robot]
-        offset[point_index] += delta[in_point]
-        squares.append(_kabsch_rms(located(robot.with_parameters(moved), offset),
-                                   reference) ** 2)
+    squares = _posterior_rms(result, robot, names, point, Q, draws, seed=11) ** 2
     estimate = np.sqrt(np.mean(squares))
     # A mean of `draws` squared norms of a Gaussian field: relative spread of the mean
     # square at most sqrt(2/draws) (one degree of freedom), 3 sigma on the RMS.
@@ -197,28 +203,9 @@ def test_band_of_one_robots_rms_matches_monte_carlo(tmp_path):
     unexplained = 0.0 if result.unexplained is None else result.unexplained.rms
     Q = np.asarray(result.residuals[0].joints, dtype=float)
     assert prediction.samples == len(Q)
-    registry = robot.parameters()
-    in_robot = [k for k, n in enumerate(result.covariance_names) if n in registry]
-    in_point = [k for k, n in enumerate(result.covariance_names) if n in names]
-    index = registry.indices([result.covariance_names[k] for k in in_robot])
-    point_index = [names.index(result.covariance_names[k]) for k in in_point]
-    base = robot.parameter_vector()
-
-    def located(geometry, offset):
-        poses = [nominal_pose(geometry, q) for q in Q]
-        return np.array([T[:3, :3] @ offset + T[:3, 3] for T in poses])
-
-    reference = located(robot, point)
     draws = 400
-    rms = []
-    for delta in np.random.default_rng(12).multivariate_normal(
-            np.zeros(len(result.covariance_names)), result.covariance, draws):
-        moved, offset = base.copy(), point.copy()
-        moved[index] += delta[in_robot]
-        offset[point_index] += delta[in_point]
-        error = _kabsch_rms(located(robot.with_parameters(moved), offset), reference)
-        rms.append(np.sqrt(error**2 + unexplained**2))
-    rms = np.array(rms)
+    rms = np.sqrt(_posterior_rms(result, robot, names, point, Q, draws, seed=12) ** 2
+                  + unexplained**2)
     low, high = prediction.band
     assert low < prediction.rms < high
     # Each tail holds BAND[0] = 10% of the draws; a share of `draws` Bernoulli trials has
