@@ -30,13 +30,11 @@ from robocal_casadi.instruments.dataset import (
     with_table,
 )
 from robocal_casadi.instruments.simulation import (
-    LIMIT_MARGIN,
     Generated,
     Setup,
     in_units,
     run_extras,
 )
-from robocal_casadi.model.ik import random_joints
 from robocal_casadi.model.parameters import ParameterRegistry
 
 KIND = "string_gauge"
@@ -138,22 +136,17 @@ class StringGaugeModel(MeasurementModel):
 
 def simulate(setup: Setup) -> Generated:
     """Random configurations; the wire from a drum about ``ANCHOR_DISTANCE`` away."""
-    rng, world = setup.rng, setup.world
+    rng = setup.rng
     hook = setup.mounted(DEFAULT_HOOK)
     heading = rng.uniform(-math.pi, math.pi)
     anchor = np.array([ANCHOR_DISTANCE * math.cos(heading), ANCHOR_DISTANCE * math.sin(heading),
                        rng.uniform(0.0, 0.5)])
     guess = anchor + rng.normal(0.0, 0.005, 3)
-    Q_read = random_joints(setup.nominal, setup.rows, rng, margin=LIMIT_MARGIN)
-    payloads = [setup.payload_value() for _ in range(setup.rows)]
-    temperatures = [setup.temperature_at(i / max(setup.rows - 1, 1)) for i in range(setup.rows)]
-    Q_true = world.true_joints(Q_read, np.array(payloads))
-    poses = world.flange_poses(Q_true, None if setup.temperature is None else
-                               np.array(temperatures))
-    hooks = poses[:, :3, :3] @ hook + poses[:, :3, 3]
+    run = setup.random_run()
+    hooks = run.poses[:, :3, :3] @ hook + run.poses[:, :3, 3]
     wire = np.linalg.norm(hooks - anchor, axis=1) + rng.normal(0.0, setup.noise, setup.rows)
     return Generated(
-        Q_read=Q_read, extras=run_extras(payloads, temperatures, setup),
+        Q_read=run.Q_read, extras=run_extras(run.payloads, run.temperatures, setup),
         mounted={"hook": hook}, placement={"anchor": anchor},
         fields=lambda units: {"hook": {"xyz": in_units(units, DEFAULT_HOOK)},
                               "anchor": {"xyz": in_units(units, guess)}},

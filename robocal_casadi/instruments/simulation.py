@@ -19,6 +19,7 @@ import numpy as np
 from ..common.progress import Progress
 from ..common.units import Units
 from ..errors import InputError
+from ..model.ik import random_joints
 from ..model.robot import Robot
 from ..model.transforms import matrix_from_quaternion
 
@@ -26,6 +27,19 @@ if TYPE_CHECKING:
     from .simulate import TrueRobot
 
 LIMIT_MARGIN = 0.03  # fraction of each joint range kept free at both ends for configurations
+
+
+@dataclass(frozen=True)
+class RandomRun:
+    """Readings at random configurations and what the true robot did there: the joint
+    readings ``Q_read`` and true joints ``Q_true`` (rad or m), each row's payload [kg]
+    and temperature [C] (None without a drift), the true flange poses (4x4, world, m)."""
+
+    Q_read: np.ndarray
+    payloads: list[float]
+    temperatures: list[float | None]
+    Q_true: np.ndarray
+    poses: np.ndarray
 
 
 @dataclass
@@ -64,6 +78,18 @@ class Setup:
             return None
         start, end = self.temperature
         return float(start + (end - start) * fraction + self.rng.normal(0.0, 0.05))
+
+    def random_run(self) -> RandomRun:
+        """``rows`` random configurations within the limits (less ``LIMIT_MARGIN``), the
+        payload and temperature of each row, and where the true robot's flange went."""
+        Q_read = random_joints(self.nominal, self.rows, self.rng, margin=LIMIT_MARGIN)
+        payloads = [self.payload_value() for _ in range(self.rows)]
+        temperatures = [self.temperature_at(i / max(self.rows - 1, 1))
+                        for i in range(self.rows)]
+        Q_true = self.world.true_joints(Q_read, np.array(payloads))
+        poses = self.world.flange_poses(Q_true, None if self.temperature is None else
+                                        np.array(temperatures))
+        return RandomRun(Q_read, payloads, temperatures, Q_true, poses)
 
     def mounted(self, nominal) -> np.ndarray:
         return np.asarray(nominal, dtype=float) + self.rng.normal(0.0, self.mounted_error, 3)

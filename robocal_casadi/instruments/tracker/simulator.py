@@ -8,9 +8,8 @@ import math
 import numpy as np
 
 from ...common.units import Units
-from ...model.ik import random_joints
 from ...model.transforms import invert, pose_from_xyz_rpy, rpy_from_matrix
-from ..simulation import LIMIT_MARGIN, Generated, Setup, in_units, run_extras
+from ..simulation import Generated, Setup, in_units, run_extras
 
 DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]
 
@@ -23,18 +22,14 @@ def simulate(setup: Setup) -> Generated:
     T_world_instrument = pose_from_xyz_rpy(
         [2.5 * math.cos(direction), 2.5 * math.sin(direction), rng.uniform(0.0, 0.5)],
         [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), yaw])
-    Q_read = random_joints(setup.nominal, setup.rows, rng, margin=LIMIT_MARGIN)
-    payloads = [setup.payload_value() for _ in range(setup.rows)]
-    temperatures = [setup.temperature_at(i / max(setup.rows - 1, 1)) for i in range(setup.rows)]
-    Q_true = world.true_joints(Q_read, np.array(payloads))
-    poses = world.flange_poses(Q_true, None if setup.temperature is None else
-                               np.array(temperatures))
-    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(Q_true, payloads)
+    run = setup.random_run()
+    poses = run.poses
+    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(run.Q_true, run.payloads)
     T_instrument_world = invert(T_world_instrument)
     measured = p_world @ T_instrument_world[:3, :3].T + T_instrument_world[:3, 3]
     measured = measured + rng.normal(0.0, setup.noise, measured.shape)
     return Generated(
-        Q_read=Q_read, extras=run_extras(payloads, temperatures, setup),
+        Q_read=run.Q_read, extras=run_extras(run.payloads, run.temperatures, setup),
         mounted={"target": target}, placement={"T_world_instrument": T_world_instrument},
         fields=lambda units: {"target": {"xyz": in_units(units, DEFAULT_TARGET)},
                               "instrument": {"xyz": in_units(units, T_world_instrument[:3, 3])}},
