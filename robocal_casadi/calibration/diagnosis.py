@@ -285,6 +285,36 @@ def _pivoted(columns: np.ndarray, threshold: float) -> tuple[list[int], list[flo
     return chosen, norms
 
 
+STACK_BLOCK = 2048  # rows of a Jacobian restacked at once over its own buffer
+
+
+def _stacked(J: np.ndarray, columns: Sequence[int], r: np.ndarray, owned: bool) -> np.ndarray:
+    """``[J[:, columns], r]`` (n x (k + 1)), every value copied unchanged.
+
+    When ``J`` is ``owned`` (nobody else reads it afterwards), C-ordered and at least as
+    wide, the stack is written over ``J``'s own buffer, a block of rows at a time: row
+    ``i`` of the stack starts at ``i (k + 1) <= i m``, so a block only ever overwrites rows
+    already read, and the largest matrix of the diagnosis is not held twice. Otherwise the
+    columns are copied one by one into a new array (no temporary of them all)."""
+    n, m = J.shape
+    width = len(columns) + 1
+    if owned and width <= m and J.flags.c_contiguous and J.flags.writeable:
+        flat = J.reshape(-1)
+        chosen = np.asarray(columns, dtype=int)
+        for start in range(0, n, STACK_BLOCK):
+            stop = min(start + STACK_BLOCK, n)
+            block = np.empty((stop - start, width))
+            block[:, :-1] = J[start:stop, chosen]
+            block[:, -1] = r[start:stop]
+            flat[start * width:stop * width] = block.reshape(-1)
+        return flat[:n * width].reshape(n, width)
+    Z = np.empty((n, width))
+    for k, column in enumerate(columns):
+        Z[:, k] = J[:, column]
+    Z[:, -1] = r
+    return Z
+
+
 class _Screening:
     """Everything one round needs from one residual and Jacobian."""
 
@@ -294,6 +324,7 @@ class _Screening:
         """``J``: the Jacobian, or a list holding it (taken out, so that it is freed once
         its columns are copied). ``free_columns``: ``J`` holds the ``free`` columns only
         (no ``candidates``); it is then scaled in place."""
+        owned = isinstance(J, list)
         if isinstance(J, list):
             J = J.pop()
         release_freed()  # what earlier steps freed, before the stacked columns are formed
@@ -308,12 +339,9 @@ class _Screening:
         # Z = [A, E, r] is the one copy of J's columns: A (the free columns) and E (the
         # candidates') are views of it, each scaled in place.
         a = len(self.free_index)
-        Z = np.empty((self.n, a + len(names) + 1))
         sources = np.arange(a) if free_columns else self.free_index
-        for k, column in enumerate([*sources, *(self.effect_index[n] for n in names)]):
-            Z[:, k] = J[:, column]  # column by column: no temporary of them all
-        Z[:, -1] = r
-        del J  # its columns are copied: freed here unless the caller holds it
+        Z = _stacked(J, [*sources, *(self.effect_index[n] for n in names)], r, owned)
+        del J  # its columns are copied: freed here unless the caller holds it (or Z reuses it)
         A = Z[:, :a]
         norms = np.linalg.norm(A, axis=0)
         norms[norms == 0] = 1.0

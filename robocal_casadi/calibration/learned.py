@@ -41,7 +41,16 @@ from scipy.linalg import cho_factor, cho_solve, eigh
 from ..common.memory import release_freed
 from ..common.units import Units
 from ..delivery.results import EffectFinding
-from ..effects.residual_map import FADE, GAIN, SHIFT, ResidualMap, fade_weight, gaussian
+from ..effects.residual_map import (
+    FADE,
+    GAIN,
+    SHIFT,
+    ResidualMap,
+    fade_weight,
+    gaussian,
+    kernel_of,
+    squared_distances,
+)
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
 from .folds import fold_schemes
 from .problem import Problem
@@ -178,7 +187,10 @@ def fit_map(joints: tuple[int, ...], X: np.ndarray, T: np.ndarray, length_scale:
 def _fold_errors(data: _Rows, train: np.ndarray, held: np.ndarray) -> np.ndarray:
     """Held-out squared error [m^2] of one fold per (length scale, smoothing) of the map
     trained on ``train``, the region and fade those rows give; the error without a map
-    where a variable does not move in them."""
+    where a variable does not move in them.
+
+    The squared distances are formed once for every length scale, and each smoothing's
+    system is the kernel matrix with its diagonal raised in a copy factored in place."""
     before = data.squared(held)
     out = np.full((len(LENGTH_SCALES), len(SMOOTHING)), before)
     train = train[_spread(len(train))]
@@ -192,12 +204,15 @@ def _fold_errors(data: _Rows, train: np.ndarray, held: np.ndarray) -> np.ndarray
     if not inside.any():
         return out
     U, V = (data.X[train] - lower) / span, (data.X[held][inside] - lower) / span
-    identity = np.eye(len(U))
+    inner, outer = squared_distances(U, U), squared_distances(V, U)
+    diagonal = np.arange(len(U))
     for a, length_scale in enumerate(LENGTH_SCALES):
-        K = gaussian(U, U, length_scale)
-        across = gaussian(V, U, length_scale)
+        K = kernel_of(inner, length_scale)
+        across = kernel_of(outer, length_scale)
         for b, smoothing in enumerate(SMOOTHING):
-            alpha = cho_solve(cho_factor(K + smoothing * identity, check_finite=False),
+            system = K.copy()
+            system[diagonal, diagonal] += smoothing
+            alpha = cho_solve(cho_factor(system, overwrite_a=True, check_finite=False),
                               data.T[train], check_finite=False)
             shift = np.zeros((len(held), 3))
             shift[inside] = weight[inside, None] * (across @ alpha)
@@ -205,17 +220,46 @@ def _fold_errors(data: _Rows, train: np.ndarray, held: np.ndarray) -> np.ndarray
     return out
 
 
-def _cross_validated(data: _Rows) -> tuple[np.ndarray, np.ndarray]:
+def _scheme_errors(data: _Rows, fold: np.ndarray) -> tuple[float, np.ndarray]:
+    """Held-out squared error [m^2] of one fold scheme summed over its folds: without a
+    map, and per (length scale, smoothing) (L x M)."""
+    before = 0.0
+    after = np.zeros((len(LENGTH_SCALES), len(SMOOTHING)))
+    for f in range(int(fold.max()) + 1):
+        held, train = np.flatnonzero(fold == f), np.flatnonzero(fold != f)
+        before += data.squared(held)
+        after += _fold_errors(data, train, held)
+    return before, after
+
+
+def _cross_validated(data: _Rows, known: dict[int, tuple[float, np.ndarray]]
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Held-out squared error [m^2] per scheme without a map (S,) and with one per
-    (scheme, length scale, smoothing) (S x L x M)."""
+    (scheme, length scale, smoothing) (S x L x M); ``known``: schemes already summed."""
     before = np.zeros(len(data.folds))
     after = np.zeros((len(data.folds), len(LENGTH_SCALES), len(SMOOTHING)))
     for s, (_, _, _, fold) in enumerate(data.folds):
-        for f in range(int(fold.max()) + 1):
-            held, train = np.flatnonzero(fold == f), np.flatnonzero(fold != f)
-            before[s] += data.squared(held)
-            after[s] += _fold_errors(data, train, held)
+        before[s], after[s] = known[s] if s in known else _scheme_errors(data, fold)
     return before, after
+
+
+def _hopeless(data: _Rows, n_errors: int) -> tuple[LearnedMap | None, dict]:
+    """The first random scheme's errors, and the map's refusal when no length scale and
+    smoothing lowers its held-out RMS by ``MIN_GAIN`` (or there is no random scheme):
+    ``_verdict`` then refuses whichever pair the other schemes would pick, so they need
+    not be computed."""
+    random = [k for k, f in enumerate(data.folds) if not f[1]]
+    if not random:
+        return LearnedMap(None, math.nan, math.nan, math.nan, math.nan, math.nan,
+                          "no fold holds out data at random"), {}
+    without, cv = _scheme_errors(data, data.folds[random[0]][3])
+    before, after = math.sqrt(without / n_errors), np.sqrt(cv / n_errors)
+    if np.any(after <= (1.0 - MIN_GAIN) * before):
+        return None, {random[0]: (without, cv)}
+    a, b = np.unravel_index(int(np.argmin(after)), after.shape)
+    best = float(after[a, b])
+    reason = (f"held-out RMS {best / before - 1:+.2%} at best (needs -{MIN_GAIN:.0%})")
+    return LearnedMap(None, before, best, math.nan, LENGTH_SCALES[a], SMOOTHING[b], reason), {}
 
 
 def _verdict(data: _Rows, sse: np.ndarray, n_errors: int) -> tuple[str, float, float, float]:
@@ -250,10 +294,13 @@ def learn(problem: Problem, x: np.ndarray, variables: Sequence[str]) -> LearnedM
     if data is None or not data.folds:
         return None
     release_freed()  # what the calibration freed, before the folds' kernel matrices
-    without, cv = _cross_validated(data)
+    n_errors = sum(len(e) for e in problem.errors(x))
+    refused, known = _hopeless(data, n_errors)
+    if refused is not None:
+        return refused
+    without, cv = _cross_validated(data, known)
     a, b = np.unravel_index(int(np.argmin(cv.sum(axis=0))), cv.shape[1:])
     sse = np.column_stack([without, cv[:, a, b]])
-    n_errors = sum(len(e) for e in problem.errors(x))
     reason, before, after, ratio = _verdict(data, sse, n_errors)
     effect = None if reason else fit_map(joints, data.X, data.T, LENGTH_SCALES[a],
                                          SMOOTHING[b])

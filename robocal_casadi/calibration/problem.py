@@ -82,7 +82,7 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
 
 
 COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
-JACOBIAN_BLOCK = 4096  # rows of a separable model's Jacobian evaluated at once
+JACOBIAN_BLOCK = 1024  # rows of a separable model's Jacobian evaluated at once
 
 
 def _runs(source: np.ndarray, target: np.ndarray
