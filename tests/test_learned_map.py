@@ -239,3 +239,53 @@ def test_kernel_matrix_against_scipy_distances_across_row_blocks():
     centres = rng.uniform(0.0, 1.0, (50, 3))
     expected = np.exp(-cdist(U, centres, "sqeuclidean") / (2.0 * 0.2**2))
     np.testing.assert_allclose(gaussian(U, centres, 0.2), expected, rtol=1e-13, atol=0)
+
+
+def test_the_geometry_refitted_with_the_map_is_the_maximum_a_posteriori_fit(tmp_path):
+    """With the map in, the geometry is refitted under the prior it was fitted with: the
+    refit ends at the minimum of the same objective (data plus prior rows) that scipy's
+    least_squares reaches from the same start, within the fit's settling slack, and no
+    parameter leaves the prior's reach (3 tolerances from where the prior centres it)."""
+    from scipy.optimize import least_squares
+
+    from robocal_casadi.calibration.diagnosis import embed
+    from robocal_casadi.calibration.identification import _map_geometric
+    from robocal_casadi.calibration.learned import with_map
+    from robocal_casadi.calibration.prior import SETTLED_DECREASE, PriorProblem, copy_weights
+    from robocal_casadi.calibration.solver import solve
+
+    robot = ROBOTS["industrial_6r"]()
+    data = tracker_data(tmp_path, 150, 1, sines, geometry_error=2e-4)
+    problem = Problem(robot, models_for([data]))
+    x0 = refit_placement(problem, problem.initial())
+    start = solve(problem, x0, problem.mask("placement"))
+    _, geometric, prior = _map_geometric(problem, x0, start.x, 1e-5, None, method="lm",
+                                         loss="linear", max_iterations=100)
+    outcome = learn(problem, geometric.x, ("q2", "q3"))
+    assert outcome is not None and outcome.effect is not None, outcome
+    mapped, refit = with_map(problem, geometric, outcome.effect, prior=prior)
+    assert refit.status == "converged", refit
+    placed = type(prior)(prior.names, mapped.unknowns.indices(prior.names), prior.centre,
+                         prior.tolerance, prior.sigma)
+    objective = PriorProblem(mapped, placed, copy_weights(mapped))
+    free = refit.free
+
+    x_start = embed(problem, geometric.x, mapped)
+    x_start[mapped.unknowns.index("map_gain")] = 1.0
+
+    def full(z):
+        x = x_start.copy()
+        x[free] = z
+        return x
+
+    reference = least_squares(lambda z: objective.residual(full(z)), x_start[free],
+                              jac=lambda z: objective.jacobian(full(z), free), method="lm",
+                              xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=2000)
+    ours = 0.5 * float(np.sum(objective.residual(refit.x) ** 2))
+    # The fit settles when a step lowers the cost by under SETTLED_DECREASE sigma^2; ten
+    # such steps at most remain for a linear rate of 0.9.
+    slack = 10 * SETTLED_DECREASE * prior.sigma ** 2
+    assert reference.cost - 1e-12 * reference.cost <= ours <= reference.cost + slack
+    index = placed.index
+    assert np.all(np.abs(refit.x[index] - placed.centre) <= 3 * placed.tolerance
+                  + np.abs(geometric.x[prior.index] - placed.centre))

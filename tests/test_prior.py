@@ -121,11 +121,10 @@ def test_dependencies_of_the_symmetric_drawing_are_not_held(tmp_path):
     from robocal_casadi.calibration import Problem, models_for
     from robocal_casadi.calibration.identification import (
         EXACT_TOLERANCE,
-        SETTLED_DECREASE,
         analyse_identifiability,
         generic_point,
     )
-    from robocal_casadi.calibration.prior import SIGMA_SETTLED
+    from robocal_casadi.calibration.prior import SETTLED_DECREASE, SIGMA_SETTLED
 
     robot = examples.industrial_6r()
     errors = {name: float(value) for name, value in zip(

@@ -58,11 +58,12 @@ from .prior import (
     copy_weights,
     duplicate_rows,
     posterior,
+    settled_decrease,
     tolerance_of,
 )
 from .problem import Problem, StationFrames
 from .selection import Selection, select_by_condition
-from .solver import CONVERGED_DECREASE, METHODS, Loss, Method, Solution, solve
+from .solver import METHODS, Loss, Method, Solution, solve
 from .start_state import settle_start
 
 __all__ = ["Problem", "analyse_identifiability", "calibrate", "solve", "models_for"]
@@ -295,7 +296,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     nominal, rejected, geometric, final = _fits(request, diagnose)
     structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
     if diagnose:
-        final = _learned(final, structure, method=request.method, loss=request.fit_loss)
+        final = _learned(final, structure, geometric.prior, method=request.method,
+                         loss=request.fit_loss)
     return _result(request, nominal, geometric, final, structure, rejected)
 
 
@@ -727,9 +729,12 @@ def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[Da
     return DiagnosedFit(outcome.problem, final, outcome.added, outcome.tested)
 
 
-def _learned(final: DiagnosedFit, structure, *, method: Method, loss: Loss) -> DiagnosedFit:
+def _learned(final: DiagnosedFit, structure, prior: Prior | None, *, method: Method,
+             loss: Loss) -> DiagnosedFit:
     """Stage 4, last: the learned map over the joints the unexplained ``structure``
-    follows, added when the folds confirm it (``learned``); else ``final`` unchanged."""
+    follows, added when the folds confirm it (``learned``); else ``final`` unchanged.
+    The geometry is refitted with the map in under the fit's own ``prior`` (None: plain
+    least squares)."""
     if structure is None:
         return final
     with stage("learned map"):
@@ -737,7 +742,7 @@ def _learned(final: DiagnosedFit, structure, *, method: Method, loss: Loss) -> D
     if outcome is None or outcome.effect is None:
         return final
     problem, solution = learned.with_map(final.problem, final.solution, outcome.effect,
-                                         method=method, loss=loss)
+                                         prior=prior, method=method, loss=loss)
     before, after = final.problem.rms(final.solution.x), problem.rms(solution.x)
     if not after < before:
         return final
@@ -840,15 +845,9 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
                *, method: Method, loss: Loss, max_iterations: int):
     """MAP estimate over ``x[free]``; the noise level re-estimated until it settles.
 
-    The fit ends when a step lowers the cost by less than ``SETTLED_DECREASE`` sigma^2:
-    with the cost near ``0.5 m sigma^2`` (``m`` residual entries) that is a relative
-    decrease of ``2 SETTLED_DECREASE / m``.
+    The fit ends when it has settled (``prior.settled_decrease``).
     """
-    # Along directions the prior mostly decides, Gauss-Newton converges only linearly
-    # (the data's curvature nearly cancels there); past this point a step moves the
-    # estimate by a negligible part of its standard error, and demanding a decrease at
-    # rounding level would only crawl on.
-    decrease = max(CONVERGED_DECREASE, 2.0 * SETTLED_DECREASE / max(problem.size, 1))
+    decrease = settled_decrease(problem)
     for _ in range(SIGMA_ITERATIONS):
         with stage("identification with the tolerance prior"):
             solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
@@ -889,7 +888,6 @@ def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray,
     return identifiability, solution, prior
 
 
-SETTLED_DECREASE = 1e-6  # [sigma^2] a MAP step lowering the cost by less: the fit has settled
 GENERIC_SCALE = 0.1  # generic point: robot and mounted parameters off nominal by this x tolerance
 GENERIC_SEED = 20261122  # fixed, so that a calibration is repeatable
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
@@ -53,6 +53,7 @@ from ..effects.residual_map import (
 )
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
 from .folds import fold_schemes
+from .prior import Prior, PriorProblem, copy_weights, settled_decrease
 from .problem import Problem
 from .solver import Loss, Method, Solution, solve
 
@@ -308,15 +309,28 @@ def learn(problem: Problem, x: np.ndarray, variables: Sequence[str]) -> LearnedM
 
 
 def with_map(problem: Problem, solution: Solution, effect: ResidualMap, *,
-             method: Method = "lm", loss: Loss = "linear") -> tuple[Problem, Solution]:
-    """``problem`` with the map added (gain held at 1) and the geometry refitted with it."""
+             prior: Prior | None = None, method: Method = "lm",
+             loss: Loss = "linear") -> tuple[Problem, Solution]:
+    """``problem`` with the map added (gain held at 1) and the geometry refitted with it.
+
+    With ``prior`` (the tolerance prior the geometry was fitted under), the refit keeps
+    it: the parameters the data barely see stay where the prior held them, instead of
+    drifting along the directions the map leaves flat, and the fit ends as the maximum a
+    posteriori fit does (``settled_decrease``)."""
     mapped = sibling_problem(problem, tuple(problem.effects) + (effect,))
     x = embed(problem, solution.x, mapped)
     x[mapped.unknowns.index(GAIN)] = 1.0
     free = np.zeros(len(mapped.unknowns), dtype=bool)
     names = [problem.unknowns.names[i] for i in np.flatnonzero(solution.free)]
     free[mapped.unknowns.indices(names)] = True
-    return mapped, solve(mapped, x, free, method=method, loss=loss)
+    if prior is None:
+        return mapped, solve(mapped, x, free, method=method, loss=loss)
+    placed = Prior(prior.names, mapped.unknowns.indices(prior.names), prior.centre,
+                   prior.tolerance, prior.sigma)
+    fit = solve(PriorProblem(mapped, placed, copy_weights(mapped)), x, free, method=method,
+                loss=loss, decrease=settled_decrease(mapped))
+    r = mapped.residual(fit.x)
+    return mapped, replace(fit, residual=r, cost=0.5 * float(r @ r))
 
 
 def finding(learned: LearnedMap, fit_rms: tuple[float, float], units: Units) -> EffectFinding:

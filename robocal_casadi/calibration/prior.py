@@ -30,6 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .solver import CONVERGED_DECREASE
+
 DEGREE = math.pi / 180.0
 DEFAULT_TOLERANCE = {
     "dh_length": 1e-3,           # [m] d, a of a joint
@@ -41,6 +43,19 @@ DEFAULT_TOLERANCE = {
 }
 SIGMA_ITERATIONS = 6  # fixed-point rounds for the noise estimate
 SIGMA_SETTLED = 0.02  # relative change of sigma that ends the rounds
+SETTLED_DECREASE = 1e-6  # [sigma^2] a MAP step lowering the cost by less: the fit has settled
+
+
+def settled_decrease(problem) -> float:
+    """The relative cost decrease of a step below which a maximum a posteriori fit of
+    ``problem`` has settled: ``SETTLED_DECREASE`` sigma^2 against a cost near
+    ``0.5 m sigma^2`` (``m`` residual entries), that is ``2 SETTLED_DECREASE / m``.
+
+    Along directions the prior mostly decides, Gauss-Newton converges only linearly (the
+    data's curvature nearly cancels there); past this point a step moves the estimate by a
+    negligible part of its standard error, and demanding a decrease at rounding level
+    would only crawl on."""
+    return max(CONVERGED_DECREASE, 2.0 * SETTLED_DECREASE / max(problem.size, 1))
 
 
 def kind_of(name: str, quantity: str) -> str | None:
