@@ -82,6 +82,12 @@ def _row_function(kinematics: Kinematics, effects: Sequence[Effect], columns: Se
 
 
 COMPILE_ROWS = 1000  # from this many rows on, the per-row derivatives are compiled to C
+# Rows a batch function evaluates at once; a shorter last chunk is padded. Compiled
+# functions take long chunks (each call crosses into C once); interpreted ones, used below
+# COMPILE_ROWS, short ones, so that a model of a few dozen rows (one artifact placement)
+# does not evaluate hundreds of padding rows.
+COMPILED_CHUNK = 256
+INTERPRETED_CHUNK = 32
 JACOBIAN_BLOCK = 1024  # rows of a separable model's Jacobian evaluated at once
 
 
@@ -216,6 +222,13 @@ class StationFrames:
     def __repr__(self) -> str:
         return f"StationFrames(stations={sorted(self.leaders)}, values={len(self.values)})"
 
+
+
+def _batch(function: ca.Function, per_row: tuple[str, ...], compile: bool) -> BatchFunction:
+    """``function`` over rows: compiled in chunks of ``COMPILED_CHUNK`` rows, or
+    interpreted in chunks of ``INTERPRETED_CHUNK``."""
+    return BatchFunction(function, per_row=per_row, compile=compile,
+                         chunk=COMPILED_CHUNK if compile else INTERPRETED_CHUNK)
 
 class Problem:
     """Residuals of ``models`` for ``robot`` with ``effects``; see the module docstring.
@@ -414,13 +427,12 @@ class Problem:
 
     @cached_property
     def _point_batch(self):
-        return BatchFunction(self._row[0], per_row=("q", "extras", "offset"), chunk=256)
+        return _batch(self._row[0], ("q", "extras", "offset"), True)
 
     @cached_property
     def _row_batch(self):
         rows = max((m.dataset.rows for m in self.models), default=0)
-        return BatchFunction(self._row[1], per_row=("q", "extras", "offset"), chunk=256,
-                             compile=rows >= COMPILE_ROWS)
+        return _batch(self._row[1], ("q", "extras", "offset"), rows >= COMPILE_ROWS)
 
     def _separable(self, model: MeasurementModel) -> SeparableResidual | None:
         """Compiled row-by-row residual and Jacobian of a separable model, or None."""
@@ -455,8 +467,8 @@ class Problem:
                                   np.arange(self.slices["effects"].start,
                                             self.slices["effects"].stop),
                                   self.mounted_indices(model), self.placement_indices(model)])
-        return SeparableResidual(BatchFunction(residual, per_row, compile=compile),
-                                 BatchFunction(jacobian, per_row, compile=compile), columns)
+        return SeparableResidual(_batch(residual, per_row, compile),
+                                 _batch(jacobian, per_row, compile), columns)
 
     def _separable_arguments(self, model: MeasurementModel, x: np.ndarray) -> tuple:
         """The inputs of a separable model's row functions at ``x``."""
