@@ -10,10 +10,12 @@ geometric calibration fitted,
 
 for the tool frame's origin and the points ``LEVER`` [m] along its three axes, so that
 position and orientation both count, in lengths. Gauss-Newton from the geometric fit;
-CasADi gives the exact Jacobian.
+CasADi gives the exact Jacobian (one row's, mapped over the rows).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
@@ -42,10 +44,9 @@ def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot 
     Q, T_target = targets
     free = np.array(registry.indices(fitted), dtype=int)
     p = np.array(kinematics.nominal, dtype=float)
-    residual, jacobian = _functions(kinematics, Q, T_target, free)
+    evaluate = _functions(kinematics, Q, T_target, free)
     for _ in range(ITERATIONS):
-        r = np.asarray(residual(p)).ravel()
-        J = np.asarray(jacobian(p))
+        r, J = evaluate(p)
         step = np.linalg.lstsq(J, -r, rcond=1e-12)[0]
         p[free] += step
         if np.max(np.abs(step)) < STEP_TOLERANCE:
@@ -85,23 +86,27 @@ def model_targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] |
     return Q_all[keep], T_all[keep]
 
 
-def _functions(kinematics: Kinematics, Q: np.ndarray, T_target: np.ndarray,
-               free: np.ndarray) -> tuple[ca.Function, ca.Function]:
-    """``p -> residual`` and ``p -> d residual / d p[free]`` over the rows of ``Q``."""
-    p = ca.MX.sym("p", len(kinematics.nominal))
-    count = len(Q)
-    poses = kinematics.tool_pose.map(count)(ca.DM(Q.T), ca.repmat(p, 1, count))  # 4 x 4N
+def _functions(kinematics: Kinematics, Q: np.ndarray, T_target: np.ndarray, free: np.ndarray
+               ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """``p -> (residual, d residual / d p[free])`` over the rows of ``Q``.
+
+    One row's lever points and their derivatives are an SX function of ``(q, p)``,
+    mapped over the rows; the rows' residuals are stacked in order, each the four points'
+    coordinates one point after the other."""
+    q, p, _, frames = kinematics._symbols
     points = np.array([[0, 0, 0, 1], [LEVER, 0, 0, 1], [0, LEVER, 0, 1], [0, 0, LEVER, 1]],
                       dtype=float).T  # 4 x 4, one point a column
-    pieces = []
-    for k in range(count):
-        T = poses[:, 4 * k:4 * k + 4]
-        target = T_target[k] @ points
-        pieces.append(ca.vec((T @ ca.DM(points))[:3, :] - ca.DM(target[:3, :])))
-    r = ca.vertcat(*pieces)
-    selector = ca.DM.zeros(len(kinematics.nominal), len(free))
-    for column, index in enumerate(free):
-        selector[int(index), column] = 1.0
-    J = ca.mtimes(ca.jacobian(r, p), selector)
-    return ca.Function("projection_residual", [p], [r]), ca.Function("projection_jacobian",
-                                                                     [p], [J])
+    world = ca.vec((frames[-1] @ ca.DM(points))[:3, :])  # 12: point by point
+    fitted = ca.vertcat(*[p[int(i)] for i in free])
+    row = ca.Function("lever_points", [q, p], [world, ca.jacobian(world, fitted)])
+    count = len(Q)
+    rows = kinematics.mapped(row, count)
+    target = np.stack([(T @ points)[:3, :].T.ravel() for T in T_target])  # N x 12
+    columns = len(free)
+
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        P, J = (np.asarray(out) for out in rows(Q.T, x))  # 12 x N, 12 x (N k) row by row
+        J = J.reshape(12, count, columns).transpose(1, 0, 2).reshape(12 * count, columns)
+        return (P.T - target).ravel(), J
+
+    return evaluate
