@@ -17,6 +17,9 @@ Every part of the section comes from one file ``benchmarks/results/<name>.json``
     python benchmarks/readme_measured.py --check    # exit 1 if README.md differs
     python benchmarks/readme_measured.py --run calibration --run jobs   # measure, save, rewrite
 
+``--run fleet_memory`` calibrates a thousand small robots: about half an hour on a quiet
+2-core machine.
+
 ``--run`` runs the script with its recorded arguments in a fresh process
 (``OPENBLAS_NUM_THREADS=1``, this copy of the package first on the path); the jobs case
 takes about ten minutes on a loaded 2-core machine.
@@ -43,10 +46,11 @@ END = "<!-- End of the generated section. -->"
 # The parts of the section, in order.
 ORDER = ("setup", "real_data", "identification", "kinematics", "calibration", "jobs",
          "sphere_laser", "diagnosis", "planning", "design_bound", "scan", "tracking", "ik",
-         "robust", "fleet", "table_memory", "delivered")
+         "robust", "fleet", "fleet_memory", "table_memory", "delivered")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
 RUNS = {"calibration": ("calibration.py", "--rows", "1000,5000", "--no-growth", "--no-loop"),
-        "jobs": ("jobs.py", "--series-a", "--demo")}
+        "jobs": ("jobs.py", "--series-a", "--demo"),
+        "fleet_memory": ("fleet_memory.py", "--robots", "1000")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
@@ -242,8 +246,33 @@ def _against_targets(cases: list[dict]) -> str:
             f"{'; '.join(over) or 'none'}.")
 
 
+def render_fleet_memory(record: dict) -> str:
+    """Fleet workers' memory over many robots, from ``fleet_memory.py``'s JSON."""
+    out = record["output"]
+    points = sorted(out["checkpoints"].items(), key=lambda item: int(item[0]))
+    lead = (f"**Fleet workers' memory** (`robocal fleet --no-report` on {out['robots']} "
+            f"simulated robots, tracker data of the example 6R, {out['rows']} rows a robot, "
+            f"{out['workers']} worker processes, restarted between batches of robots; each "
+            f"robot's record carries the resident size of the process that ran it). "
+            f"{_run_line(record)} The fleet took {_seconds(out['fleet_wall_s'])} of wall "
+            f"time ({out['task_cpu_s']:.0f} s of task CPU); {len(out['failed'])} robots "
+            f"failed; exit status {out['exit_status']}.")
+    rows = ["| robots finished | largest peak of a worker process | resident, per live "
+            "worker |", "| --- | --- | --- |"]
+    for count, figures in points:
+        resident = ", ".join(f"{v:.0f}" for v in figures["resident_mib_per_worker"].values())
+        rows.append(f"| {int(count):,} | {figures['largest_peak_mib']:.0f} MiB | "
+                    f"{resident} MiB |")
+    ratio = out["largest_peak_last_over_first"]
+    verdict = "within" if ratio <= out["target_ratio"] else "over"
+    tail = (f"The largest peak after the last robot is {ratio:.2f}x that after the first "
+            f"{points[0][0]} ({verdict} the target of {out['target_ratio']:.1f}x).")
+    return "\n\n".join([lead, "\n".join(rows), tail]) + _notes(record)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
-                                               "jobs": render_jobs}
+                                               "jobs": render_jobs,
+                                               "fleet_memory": render_fleet_memory}
 
 
 def render(records: dict[str, dict]) -> str:

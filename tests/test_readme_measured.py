@@ -68,6 +68,16 @@ def test_the_jobs_table_is_read_from_the_run():
     assert "| 98.7 |" in text and "1000 MiB (1049 MB)" in text
 
 
+def test_the_fleet_memory_table_is_read_from_the_run():
+    record = copy.deepcopy(_run_record("fleet_memory"))
+    output = record["output"]
+    last = max(output["checkpoints"], key=int)
+    output["checkpoints"][last]["largest_peak_mib"] = 654.0
+    output["largest_peak_last_over_first"] = 3.21
+    text = measured.render_fleet_memory(record)
+    assert "| 654 MiB |" in text and "3.21x" in text and "over the target" in text
+
+
 def test_the_last_json_object_is_taken_from_mixed_output():
     printed = 'progress\n{"a": 1}\nmore\n' + json.dumps({"b": [1, 2]}, indent=2) + "\n"
     assert measured.last_json(printed) == {"b": [1, 2]}

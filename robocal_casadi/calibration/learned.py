@@ -26,7 +26,8 @@ position is corrected by a smooth function of the joint readings the structure f
    (the numbers diagnosis judges physical effects by).
 
 Linear in the targets: the geometry stays as the final fit left it while the map is
-learned, then is refitted once with the map in (the map's gain held at 1).
+learned, then is refitted once with the map in (the map's gain held at 1), under the tolerance
+prior the geometry was fitted with.
 """
 
 from __future__ import annotations
