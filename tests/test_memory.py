@@ -39,3 +39,30 @@ def test_freed_heap_pages_are_returned():
 def test_release_is_harmless_without_anything_freed():
     memory.release_freed()
     memory.release_freed()
+
+
+@pytest.mark.parametrize("rows", [1, 2047, 2048, 5001])
+def test_the_screening_stack_over_the_jacobian_s_own_buffer_holds_the_same_values(rows):
+    """The diagnosis stacks ``[J[:, columns], r]`` over ``J``'s own memory when it owns
+    ``J``: every value is the one a fresh copy holds, in blocks that end anywhere, and the
+    stack lives in ``J``'s buffer (no second matrix of that size)."""
+    import numpy as np
+
+    from robocal_casadi.calibration.diagnosis import _stacked
+
+    rng = np.random.default_rng(rows)
+    J = rng.normal(size=(rows, 9))
+    r = rng.normal(size=rows)
+    columns = [7, 0, 3, 8]
+    expected = np.column_stack([J[:, columns], r])
+    copied = _stacked(J.copy(), columns, r, owned=False)
+    buffer = J.copy()
+    stacked = _stacked(buffer, columns, r, owned=True)
+    np.testing.assert_array_equal(copied, expected)
+    np.testing.assert_array_equal(stacked, expected)
+    assert np.shares_memory(stacked, buffer)
+    # Wider than the Jacobian (every column and more): a copy, the Jacobian untouched.
+    narrow = J[:, :2].copy()
+    wide = _stacked(narrow, [0, 1, 0], r, owned=True)
+    assert not np.shares_memory(wide, narrow)
+    np.testing.assert_array_equal(narrow, J[:, :2])
