@@ -250,19 +250,19 @@ def render_fleet_memory(record: dict) -> str:
     """Fleet workers' memory over many robots, from ``fleet_memory.py``'s JSON."""
     out = record["output"]
     points = sorted(out["checkpoints"].items(), key=lambda item: int(item[0]))
-    lead = (f"**Fleet workers' memory** (`robocal fleet --no-report` on {out['robots']} "
+    lead = (f"**Fleet workers' memory** (`robocal fleet --no-report` on {out['robots']:,} "
             f"simulated robots, tracker data of the example 6R, {out['rows']} rows a robot, "
             f"{out['workers']} worker processes, restarted between batches of robots; each "
             f"robot's record carries the resident size of the process that ran it). "
             f"{_run_line(record)} The fleet took {_seconds(out['fleet_wall_s'])} of wall "
             f"time ({out['task_cpu_s']:.0f} s of task CPU); {len(out['failed'])} robots "
             f"failed; exit status {out['exit_status']}.")
-    rows = ["| robots finished | largest peak of a worker process | resident, per live "
-            "worker |", "| --- | --- | --- |"]
+    rows = ["| robots finished | worker processes so far | largest peak of one | resident "
+            "after its last robot, smallest / largest |", "| --- | --- | --- | --- |"]
     for count, figures in points:
-        resident = ", ".join(f"{v:.0f}" for v in figures["resident_mib_per_worker"].values())
-        rows.append(f"| {int(count):,} | {figures['largest_peak_mib']:.0f} MiB | "
-                    f"{resident} MiB |")
+        resident = figures["resident_mib_per_worker"].values()
+        rows.append(f"| {int(count):,} | {len(resident)} | {figures['largest_peak_mib']:.0f} "
+                    f"MiB | {min(resident):.0f} / {max(resident):.0f} MiB |")
     ratio = out["largest_peak_last_over_first"]
     verdict = "within" if ratio <= out["target_ratio"] else "over"
     tail = (f"The largest peak after the last robot is {ratio:.2f}x that after the first "
