@@ -372,6 +372,13 @@ class _Screening:
         coefficients = np.linalg.solve(self.gram_A, self.A.T @ columns)
         return columns - self.A @ coefficients
 
+    def release_columns(self) -> None:
+        """Drop the stacked columns (``A``, ``E``) once every candidate is screened: what
+        is judged and refitted after that reads the fold Grams, ``r_perp`` and the
+        screens' own columns, and the stack (the size of the Jacobian) is freed before
+        the refits form Jacobians of their own."""
+        self.A = self.E = np.zeros((0, 0))
+
     def held_out(self, columns) -> tuple[float, ...]:
         """Held-out SSE [m^2] of every fold scheme after fitting ``columns``."""
         return tuple(g.held_out_sse(list(columns)) for g in self.grams)
@@ -665,6 +672,7 @@ def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list
         for k, candidate in enumerate(search.remaining):
             note(f"{k + 1}/{len(search.remaining)} {_label(candidate)}")
             screens.append(_unless_supported(screening.screen(candidate), bic_threshold))
+        screening.release_columns()
     return screening, screens
 
 

@@ -45,6 +45,7 @@ from ..delivery.results import EffectFinding
 from ..effects.residual_map import (
     FADE,
     GAIN,
+    KERNEL_BLOCK,
     SHIFT,
     ResidualMap,
     fade_weight,
@@ -210,15 +211,30 @@ def _fold_errors(data: _Rows, train: np.ndarray, held: np.ndarray) -> np.ndarray
     diagonal = np.arange(len(U))
     for a, length_scale in enumerate(LENGTH_SCALES):
         K = kernel_of(inner, length_scale)
-        across = kernel_of(outer, length_scale)
-        for b, smoothing in enumerate(SMOOTHING):
+        alphas = []
+        for smoothing in SMOOTHING:
             system = K.copy()
             system[diagonal, diagonal] += smoothing
-            alpha = cho_solve(cho_factor(system, overwrite_a=True, check_finite=False),
-                              data.T[train], check_finite=False)
+            alphas.append(cho_solve(cho_factor(system, overwrite_a=True, check_finite=False),
+                                    data.T[train], check_finite=False))
+        for b, predicted in enumerate(_predicted(outer, length_scale, alphas)):
             shift = np.zeros((len(held), 3))
-            shift[inside] = weight[inside, None] * (across @ alpha)
+            shift[inside] = weight[inside, None] * predicted
             out[a, b] = data.squared(held, shift)
+    return out
+
+
+def _predicted(squared: np.ndarray, length_scale: float,
+               alphas: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """``K @ alpha`` (rows x 3) [m] for each of ``alphas``, ``K`` the Gaussian kernel of
+    the ``squared`` distances (rows x centres), formed a block of rows at a time: the
+    held-out rows of a fold that holds out half the data would otherwise make a kernel
+    matrix as large as the distances beside them."""
+    out = [np.empty((len(squared), 3)) for _ in alphas]
+    for start in range(0, len(squared), KERNEL_BLOCK):
+        block = kernel_of(squared[start:start + KERNEL_BLOCK], length_scale)
+        for predicted, alpha in zip(out, alphas):
+            predicted[start:start + KERNEL_BLOCK] = block @ alpha
     return out
 
 
