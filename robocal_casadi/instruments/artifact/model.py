@@ -105,23 +105,35 @@ class ArtifactModel(MeasurementModel):
         return values
 
     def consistent_dataset(self, kinematics, p, mounted, placement):
-        """The dataset with every repeated touch moved onto its socket (joint-space Newton)."""
+        """The dataset with every repeated touch moved onto its socket (joint-space Newton).
+
+        Each touch (a row belongs to one socket) takes up to 8 Newton steps of its own,
+        stopping once within 1e-12 m; all touches are evaluated together, one mapped
+        call a step, each step's solve its own."""
         if not any(s.unknown_index is not None for s in self.sockets):
             return None
         joints = np.array(self.dataset.joints, dtype=float)
-        for socket in self.sockets:
-            if socket.unknown_index is None:
-                continue
-            target = placement[socket.unknown_index:socket.unknown_index + 3]
-            for row in socket.rows:
-                q = joints[row]
-                for _ in range(8):
-                    point, _, J_q, _ = kinematics.point_jacobians(q, p, mounted)
-                    error = target - np.asarray(point).ravel()
-                    if np.linalg.norm(error) < 1e-12:
-                        break
-                    q = q + np.linalg.lstsq(np.asarray(J_q), error, rcond=None)[0]
-                joints[row] = q
+        rows = [row for s in self.sockets if s.unknown_index is not None for row in s.rows]
+        targets = np.array([placement[s.unknown_index:s.unknown_index + 3]
+                            for s in self.sockets if s.unknown_index is not None
+                            for _ in s.rows]).reshape(-1, 3)
+        Q = joints[rows]
+        moving = np.ones(len(rows), dtype=bool)
+        function = kinematics.mapped(kinematics.point_jacobians, len(rows))
+        dof = Q.shape[1]
+        for _ in range(8):
+            if not moving.any():
+                break
+            points, _, J_q, _ = function(Q.T, p, mounted)
+            points = np.asarray(points).reshape(3, len(rows))
+            J_q = np.asarray(J_q).reshape(3, len(rows), dof)
+            for k in np.flatnonzero(moving):
+                error = targets[k] - points[:, k]
+                if np.linalg.norm(error) < 1e-12:
+                    moving[k] = False
+                    continue
+                Q[k] = Q[k] + np.linalg.lstsq(J_q[:, k, :], error, rcond=None)[0]
+        joints[rows] = Q
         return replace(self.dataset, joints=joints)
 
     # ------------------------------------------------------------------ residuals
