@@ -69,6 +69,21 @@ def new_figure(height: float, width: float = WIDTH) -> Figure:
     return figure
 
 
+LOG_MINOR = (2.0, 5.0)  # minor ticks of a log axis, per decade
+
+
+def log_scale(axes, which: str) -> None:
+    """A log ``which`` axis ("x" or "y") with minor ticks at 2 and 5 of each decade only:
+    enough to read values between the decades (and labelled where an axis spans less
+    than one), at a quarter of the tick objects a full 2..9 set costs to lay out and draw."""
+    if which == "x":
+        axes.set_xscale("log")
+        axes.xaxis.set_minor_locator(ticker.LogLocator(10.0, subs=LOG_MINOR))
+    else:
+        axes.set_yscale("log")
+        axes.yaxis.set_minor_locator(ticker.LogLocator(10.0, subs=LOG_MINOR))
+
+
 def png_bytes(figure: Figure) -> bytes:
     """The figure as PNG bytes, at the figure's own resolution.
 
@@ -156,7 +171,8 @@ def singular_values(identifiability: Identifiability) -> Figure:
         index = np.arange(1, values.size + 1)
         floor = _positive_floor(values) * 1e-3
         shown = np.where(values > 0, values, floor)
-        axes.semilogy(index, shown, color=COLOURS["final"], marker="o", markersize=4)
+        axes.plot(index, shown, color=COLOURS["final"], marker="o", markersize=4)
+        log_scale(axes, "y")
         kept = len(identifiability.identifiable)
         if 0 < kept < values.size:
             axes.axvline(kept + 0.5, color=COLOURS["geometric"], linestyle="--", linewidth=1.0,
@@ -188,7 +204,7 @@ def error_distribution(groups: Sequence[tuple[str, tuple[DatasetResiduals, ...]]
                 _ecdf(axes, errors, scale, model)
             pooled = np.concatenate(everything) / scale
             if (pooled > 0).any():
-                axes.set_xscale("log")
+                log_scale(axes, "x")
                 axes.set_xlim(left=max(_positive_floor(pooled), pooled.max() * 1e-5))
             axes.set_xlabel(f"|error| [{units.length}]")
             axes.set_ylabel("fraction of measurements [-]")
@@ -273,7 +289,7 @@ def error_over_rows(residuals: tuple[DatasetResiduals, ...], units: Units, title
                 panels[0].axvline(start - 0.5, color="#555555", linewidth=0.6, alpha=0.6)
         panels[0].set_xlabel("data row, datasets in turn (measurement order)")
         panels[0].set_ylabel(f"|error| [{units.length}]")
-        panels[0].set_yscale("log")
+        log_scale(panels[0], "y")
         panels[0].set_ylim(bottom=floor)
         panels[0].legend(loc="best", markerscale=3)
         if with_temperature:

@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 from ..common.units import Units
 from ..delivery.results import DatasetResiduals
 from ..model.robot import Robot
-from .figures import COLOURS, WIDTH, _binned_rms, _thin, new_figure, report_style
+from .figures import COLOURS, WIDTH, _binned_rms, _thin, log_scale, new_figure, report_style
 from .numbers import errors_of, format_at_resolution, joint_reading_unit, resolution_of
 
 BEFORE, AFTER = "nominal", "final"
@@ -107,7 +107,7 @@ def magnitude_histogram(groups: Sequence[tuple[str, Sequence[DatasetResiduals]]]
             for model in (BEFORE, AFTER):
                 axes.hist(np.maximum(values[model], edges[0]), bins=edges, color=COLOURS[model],
                           alpha=0.7, label=f"{TITLES[model]} (RMS {_rms(values[model]):.3g})")
-            axes.set_xscale("log")
+            log_scale(axes, "x")
             axes.set_xlabel(f"|error| [{units.length}]")
             axes.set_ylabel("count")
             axes.set_title(title)
@@ -146,7 +146,7 @@ def magnitude_against_joints(residuals: Sequence[DatasetResiduals], robot: Robot
                 centres, values = _binned_rms(reading, errors[model])
                 axes.plot(centres, values, color=COLOURS[model], marker="o", markersize=3,
                           label=f"{TITLES[model]}, RMS per bin")
-            axes.set_yscale("log")
+            log_scale(axes, "y")
             axes.set_xlabel(f"q{j + 1} [{unit}]")
             if j % columns == 0:
                 axes.set_ylabel(f"|error| [{units.length}]")

@@ -13,7 +13,7 @@ from ..common.units import Units
 from ..delivery.results import CalibrationResult, RejectedReading
 from ..model.kinematics import Kinematics
 from .content import Paragraph, Plot, Section, Table
-from .figures import new_figure
+from .figures import log_scale, new_figure
 from .numbers import display_units
 
 
@@ -57,7 +57,7 @@ def rejected_figure(result: CalibrationResult, units: Units) -> Figure:
     rows = np.array([min(e.rows) if e.rows else -1 for e in entries])
     time.scatter(rows, ratio, marker="x", color="tab:red")
     time.axhline(1.0, color="grey", linestyle="--", linewidth=0.8)
-    time.set_yscale("log")
+    log_scale(time, "y")
     time.set_xlabel("row of the table (order taken)")
     time.set_ylabel("error / threshold")
     s = units.length_scale
