@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import qr, solve_triangular
 from scipy.spatial import cKDTree
-from scipy.stats import chi2, norm
+from scipy.special import gammaincinv, ndtri  # chi2.ppf, norm.ppf without scipy.stats' import
 
 from ..delivery.results import RejectedReading
 from ..errors import InputError
@@ -58,7 +58,7 @@ MAX_SHARE = 0.2  # more of a dataset's readings than this set aside: the data ar
 ROUNDS = 6  # rounds of fit-and-test at most
 RESOLUTION = 1e-8  # [m] noise floor: errors this small are rounding, never gross
 SCALE_QUANTILE = 0.8  # the noise is read off this quantile of the absolute residuals ...
-QUANTILE_SCALE = float(norm.ppf(0.5 + SCALE_QUANTILE / 2))  # ... which is this many sigma
+QUANTILE_SCALE = float(ndtri(0.5 + SCALE_QUANTILE / 2))  # ... which is this many sigma
 MIN_ENTRIES = 12  # fewer residual entries of one kind: its noise is pooled with the dataset's
 RANK_TOLERANCE = 1e-10  # relative size of a QR pivot below which a direction has no data
 NEIGHBOURS = 3  # readings nearest in joint space that show whether an error repeats
@@ -308,7 +308,7 @@ def _dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 @functools.cache
 def _quantile(entries: int) -> float:
     """The ``1 - FALSE_ALARM`` quantile of chi^2 with ``entries`` degrees of freedom."""
-    return float(chi2.ppf(1.0 - FALSE_ALARM, entries))
+    return float(2.0 * gammaincinv(entries / 2, 1.0 - FALSE_ALARM))
 
 
 def _hat_factor(J: np.ndarray, kept: np.ndarray) -> np.ndarray:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ...errors import InputError
 from ...model.transforms import rot_x, rot_z
@@ -56,6 +55,9 @@ def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray
             out.append(np.dot(X[index[c]] - X[index[a]], X[index[d]] - X[index[b]]) / scale)
         out += list(X[:, 2] * 1e-3)  # prefer a flat artifact
         return np.array(out)
+
+    # Imported here: scipy.optimize takes half a second to import, and only this layout needs it.
+    from scipy.optimize import least_squares
 
     rng = np.random.default_rng(0)
     fits = []
