@@ -532,6 +532,11 @@ class Problem:
 
     def _point_residual(self, compiled: PointResidual, x: np.ndarray) -> np.ndarray:
         """Residual of a non-separable model that reads world points, at ``x``."""
+        P_flat = self._points(compiled, x).ravel()
+        return np.asarray(compiled.residual(P_flat, x)).ravel()
+
+    def _points(self, compiled: PointResidual, x: np.ndarray) -> np.ndarray:
+        """World points (rows x 3) [m] of a non-separable point model's rows at ``x``."""
         model = compiled.model
         rows = model.dataset.rows
         offsets = np.asarray(compiled.offsets(x)[0])
@@ -542,19 +547,26 @@ class Problem:
                 else offsets.T
             (P,) = self._point_batch(Q.T, extras.T, p, theta, per_row_offsets, payload_com,
                                      self._effect_constants())
-            P_flat = P.ravel()
-        else:
-            P_flat = np.asarray(self._mapped(0, rows)(
-                Q, extras, p, theta, offsets, payload_com,
-                self._effect_constants())).T.ravel()
-        return np.asarray(compiled.residual(P_flat, x)).ravel()
+            return P
+        return np.asarray(self._mapped(0, rows)(
+            Q, extras, p, theta, offsets, payload_com, self._effect_constants())).T
 
-    def _chain_rule(self, compiled: PointResidual, x: np.ndarray,
-                    columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residual and Jacobian ``columns`` of a non-separable point model, by the chain rule."""
+    def _point_motion(self, compiled: PointResidual, x: np.ndarray, columns: np.ndarray,
+                      position: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """World points (rows x 3) [m] and ``M = dP/dx`` for the requested ``columns``
+        (3 rows x k; ``position``: each unknown's place among them, -1 if not asked for).
+
+        ``M`` is None when no requested unknown moves a point (only the model's own, its
+        frame or its sockets): then the points alone are evaluated, not their derivatives
+        with respect to every robot and effect parameter."""
         model = compiled.model
         rows = model.dataset.rows
         offsets, d_offsets = compiled.offsets(x)
+        d_offsets = np.asarray(d_offsets.full())[:, columns]
+        moved = [key for key in ("robot", "effects")
+                 if (position[self.slices[key].start:self.slices[key].stop] >= 0).any()]
+        if not moved and not d_offsets.any():
+            return self._points(compiled, x), None
         offsets = np.asarray(offsets)
         Q, extras, payload_com = self._data(model)
         p, theta = x[self.slices["robot"]], x[self.slices["effects"]]
@@ -562,9 +574,6 @@ class Problem:
             else offsets.T
         P, J_p, J_theta, J_offset = self._row_batch(Q.T, extras.T, p, theta, per_row_offsets,
                                                     payload_com, self._effect_constants())
-        # M = dP/dx for the requested columns only (rows x 3 x k).
-        position = np.full(len(self.unknowns), -1)
-        position[columns] = np.arange(len(columns))
         M = np.zeros((rows, 3, len(columns)))
         for key, block in (("robot", J_p), ("effects", J_theta)):
             block = block.reshape(rows, 3, -1)  # a one-column block comes back as rows x 3
@@ -572,12 +581,18 @@ class Problem:
             keep = position[index] >= 0
             if keep.any():
                 M[:, :, position[index[keep]]] = block[:, :, keep]
-        d_offsets = np.asarray(d_offsets.full())[:, columns]
         if d_offsets.shape[0] == 3:  # one offset for every row
             M += np.einsum("nij,jk->nik", J_offset, d_offsets)
         else:
             M += np.einsum("nij,njk->nik", J_offset, d_offsets.reshape(rows, 3, len(columns)))
-        M = M.reshape(3 * rows, len(columns))
+        return P, M.reshape(3 * rows, len(columns))
+
+    def _chain_rule(self, compiled: PointResidual, x: np.ndarray,
+                    columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residual and Jacobian ``columns`` of a non-separable point model, by the chain rule."""
+        position = np.full(len(self.unknowns), -1)
+        position[columns] = np.arange(len(columns))
+        P, M = self._point_motion(compiled, x, columns, position)
         P_flat = P.ravel()
         r = np.asarray(compiled.residual(P_flat, x)).ravel()
         g_P, g_x = (np.array(v.nonzeros()) for v in compiled.derivatives(P_flat, x))
@@ -585,7 +600,7 @@ class Problem:
         rows_x, cols_x = compiled.g_x_rows, compiled.g_x_columns
         wanted = position[cols_x] >= 0
         np.add.at(J, (rows_x[wanted], position[cols_x[wanted]]), g_x[wanted])
-        if len(g_P):
+        if len(g_P) and M is not None:
             order = compiled.g_P_order
             sorted_rows = compiled.g_P_rows[order]
             starts = np.flatnonzero(np.r_[True, sorted_rows[1:] != sorted_rows[:-1]])
