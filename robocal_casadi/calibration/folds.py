@@ -218,7 +218,7 @@ class _BaseFold:
     ``solved`` = ``Gt[shared, shared]^-1 Gt[shared, :]`` (None when ill-conditioned);
     ``own_inverse``: pseudo-inverse of the held-out Gram of the ``own`` columns;
     ``held_shared`` = ``Gf[shared, shared]``, ``held_own`` = ``Gf[own, shared]`` (copies
-    read by every fit).
+    read by every fit); ``train`` = ``total - Gf``.
     """
 
     shared: np.ndarray
@@ -227,6 +227,7 @@ class _BaseFold:
     own_inverse: np.ndarray
     held_shared: np.ndarray
     held_own: np.ndarray
+    train: np.ndarray  # the training Gram ``total - Gf``, read row by row for added columns
 
 
 class FoldGrams:
@@ -289,13 +290,16 @@ class FoldGrams:
                 own_inverse = np.linalg.pinv(Gf[np.ix_(own, own)], rcond=LSTSQ_RCOND) \
                     if own.size else np.zeros((0, 0))
                 out.append(_BaseFold(shared, own, solved, own_inverse,
-                                     Gf[np.ix_(shared, shared)], Gf[np.ix_(own, shared)]))
+                                     Gf[np.ix_(shared, shared)], Gf[np.ix_(own, shared)], Gt))
             self._base_folds = out
         return self._base_folds
 
     def _bordered_sse(self, Gf: np.ndarray, fit: _BaseFold, extra: np.ndarray) -> float | None:
         """Held-out squared residual of one fold after fitting ``base`` + ``extra``, from
-        the base's factored fit; None when the full solve must decide."""
+        the base's factored fit; None when the full solve must decide.
+
+        The added columns' rows of the training and held-out Grams are taken once and
+        sliced (every fit of every candidate passes here: it is the screening's loop)."""
         if fit.solved is None:
             return None
         r = self.r
@@ -303,11 +307,10 @@ class FoldGrams:
             return None
         delta_base = fit.solved[:, r]
         delta_extra = np.zeros(0)
+        held = Gf[extra]  # the added columns' rows of the held-out Gram
         if extra.size:
-            # Training Gram entries of the added columns only: total minus held out.
-            train_extra = self.total[np.ix_(extra, extra)] - Gf[np.ix_(extra, extra)]
-            train_cross = self.total[np.ix_(extra, fit.shared)] - Gf[np.ix_(extra, fit.shared)]
-            train_r = self.total[extra, r] - Gf[extra, r]
+            train = fit.train[extra]  # ... and of the training Gram
+            train_extra, train_cross, train_r = train[:, extra], train[:, fit.shared], train[:, r]
             coupled = fit.solved[:, extra]  # Gt[shared, shared]^-1 Gt[shared, extra]
             schur = train_extra - train_cross @ coupled
             schur = 0.5 * (schur + schur.T)
@@ -317,11 +320,11 @@ class FoldGrams:
             delta_extra = np.linalg.solve(schur, train_r - train_cross @ delta_base)
             delta_base = delta_base - coupled @ delta_extra
         # |r_f - Z_f delta|^2 on the held-out rows, by blocks (base, extra).
-        held_cross = Gf[np.ix_(extra, fit.shared)]
+        held_cross = held[:, fit.shared]
         sse = (Gf[r, r] - 2 * (delta_base @ Gf[fit.shared, r] + delta_extra @ Gf[extra, r])
                + delta_base @ fit.held_shared @ delta_base
                + 2 * delta_extra @ held_cross @ delta_base
-               + delta_extra @ Gf[np.ix_(extra, extra)] @ delta_extra)
+               + delta_extra @ held[:, extra] @ delta_extra)
         if fit.own.size:
             v = Gf[fit.own, r] - fit.held_own @ delta_base - Gf[np.ix_(fit.own, extra)] \
                 @ delta_extra
