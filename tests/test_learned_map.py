@@ -265,8 +265,7 @@ def test_the_geometry_refitted_with_the_map_is_the_maximum_a_posteriori_fit(tmp_
     assert outcome is not None and outcome.effect is not None, outcome
     mapped, refit = with_map(problem, geometric, outcome.effect, prior=prior)
     assert refit.status == "converged", refit
-    placed = type(prior)(prior.names, mapped.unknowns.indices(prior.names), prior.centre,
-                         prior.tolerance, prior.sigma)
+    placed = prior.placed_in(mapped)
     objective = PriorProblem(mapped, placed, copy_weights(mapped))
     free = refit.free
 

@@ -760,7 +760,7 @@ def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,
     problem, solution = final.problem, final.solution
     free = solution.free.copy()
     free[problem.unknowns.indices(sorted(geometric.dominated))] = True
-    prior = _prior_in(problem, geometric.prior)
+    prior = None if geometric.prior is None else geometric.prior.placed_in(problem)
     distinct, _, _ = duplicate_rows(problem)
     statistics = posterior(problem.jacobian(solution.x, free), problem.residual(solution.x),
                            np.flatnonzero(free), prior, rows=distinct,
@@ -799,14 +799,6 @@ def _prior_of(problem: Problem, free: np.ndarray, sigma: float) -> Prior:
     index = np.array(weighed, dtype=int)
     return Prior(tuple(problem.unknowns.names[i] for i in index), index, start[index],
                  np.array(tolerance, float), sigma)
-
-
-def _prior_in(problem: Problem, prior: Prior | None) -> Prior | None:
-    """``prior`` in the layout of ``problem`` (same names; effects may shift the indices)."""
-    if prior is None:
-        return None
-    return Prior(prior.names, problem.unknowns.indices(prior.names), prior.centre,
-                 prior.tolerance, prior.sigma)
 
 
 def _dominated(problem: Problem, solution: Solution, prior: Prior | None, distinct) -> set[str]:

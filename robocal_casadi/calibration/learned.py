@@ -342,10 +342,8 @@ def with_map(problem: Problem, solution: Solution, effect: ResidualMap, *,
     free[mapped.unknowns.indices(names)] = True
     if prior is None:
         return mapped, solve(mapped, x, free, method=method, loss=loss)
-    placed = Prior(prior.names, mapped.unknowns.indices(prior.names), prior.centre,
-                   prior.tolerance, prior.sigma)
-    fit = solve(PriorProblem(mapped, placed, copy_weights(mapped)), x, free, method=method,
-                loss=loss, decrease=settled_decrease(mapped))
+    fit = solve(PriorProblem(mapped, prior.placed_in(mapped), copy_weights(mapped)), x, free,
+                method=method, loss=loss, decrease=settled_decrease(mapped))
     r = mapped.residual(fit.x)
     return mapped, replace(fit, residual=r, cost=0.5 * float(r @ r))
 

@@ -102,6 +102,11 @@ class Prior:
     def with_sigma(self, sigma: float) -> Prior:
         return Prior(self.names, self.index, self.centre, self.tolerance, float(sigma))
 
+    def placed_in(self, problem) -> Prior:
+        """The prior in ``problem``'s layout (same names; effects may shift the indices)."""
+        return Prior(self.names, problem.unknowns.indices(self.names), self.centre,
+                     self.tolerance, self.sigma)
+
     def __repr__(self) -> str:
         return f"Prior({len(self.index)} parameters, sigma={self.sigma:.3g} m)"
 

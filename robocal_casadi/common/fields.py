@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import errno
 import math
-import os
 import re
 import reprlib
 import stat
@@ -18,6 +17,7 @@ from typing import IO, Any, Literal, overload
 import yaml
 
 from ..errors import InputError
+from .output import resolved_path
 
 _FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
@@ -287,7 +287,7 @@ def file_name(value: Any, *, file: str | Path | None, where: str) -> str:
 
 def resolved(path: Path) -> Path:
     """``path`` with links followed; a loop of links leaves the name as written."""
-    return _resolved(path)
+    return resolved_path(path)
 
 
 @overload
@@ -307,20 +307,13 @@ def referenced_file(content: dict, key: str, *, file: Path, allow_outside: bool 
     name = file_name(require(content, key, file=file), file=file, where=key)
     target = file.parent / name
     if not allow_outside:
-        folder = _resolved(file.parent)
-        resolved = _resolved(target)
+        folder = resolved_path(file.parent)
+        resolved = resolved_path(target)
         if resolved != folder and folder not in resolved.parents:
             raise InputError(f"{cut(name)} lies outside the folder of {file.name}; a {key} "
                              "table must be in that folder or below it (give "
                              "--allow-outside-data to read it anyway)", file=file, where=key)
     return target
-
-
-def _resolved(path: Path) -> Path:
-    try:
-        return path.resolve()
-    except (OSError, RuntimeError):  # a symlink loop: judge the name as written
-        return Path(os.path.abspath(path))
 
 
 def number(value: Any, *, file: str | Path | None, where: str) -> float:

@@ -93,10 +93,11 @@ def _functions(kinematics: Kinematics, Q: np.ndarray, T_target: np.ndarray, free
     One row's lever points and their derivatives are an SX function of ``(q, p)``,
     mapped over the rows; the rows' residuals are stacked in order, each the four points'
     coordinates one point after the other."""
-    q, p, _, frames = kinematics._symbols
+    q = ca.SX.sym("q", kinematics.dof)
+    p = ca.SX.sym("p", len(kinematics.nominal))
     points = np.array([[0, 0, 0, 1], [LEVER, 0, 0, 1], [0, LEVER, 0, 1], [0, 0, LEVER, 1]],
                       dtype=float).T  # 4 x 4, one point a column
-    world = ca.vec((frames[-1] @ ca.DM(points))[:3, :])  # 12: point by point
+    world = ca.vec((kinematics.tool_pose(q, p) @ ca.DM(points))[:3, :])  # 12: point by point
     fitted = ca.vertcat(*[p[int(i)] for i in free])
     row = ca.Function("lever_points", [q, p], [world, ca.jacobian(world, fitted)])
     count = len(Q)
