@@ -324,7 +324,7 @@ class _Screening:
         """``J``: the Jacobian, or a list holding it (taken out, so that it is freed once
         its columns are copied). ``free_columns``: ``J`` holds the ``free`` columns only
         (no ``candidates``); it is then scaled in place."""
-        owned = isinstance(J, list)
+        owned = isinstance(J, list)  # a list hands J over: no one else reads it afterwards
         if isinstance(J, list):
             J = J.pop()
         release_freed()  # what earlier steps freed, before the stacked columns are formed

@@ -117,6 +117,8 @@ class ArtifactModel(MeasurementModel):
         targets = np.array([placement[s.unknown_index:s.unknown_index + 3]
                             for s in self.sockets if s.unknown_index is not None
                             for _ in s.rows]).reshape(-1, 3)
+        if not rows:
+            return replace(self.dataset, joints=joints)
         Q = joints[rows]
         moving = np.ones(len(rows), dtype=bool)
         function = kinematics.mapped(kinematics.point_jacobians, len(rows))
