@@ -21,6 +21,10 @@ is held for that step.
 
 Termination is reported as a status code with one message each (``STATUS``), in the
 manner of ``scipy.optimize.least_squares``; codes above 0 are convergence.
+
+``reproducible=True`` forms and solves the normal equations with ``common.exact`` instead
+of BLAS / LAPACK: the same iterates to the last bit on every processor, for small problems
+whose results are written or decide something (inverse kinematics in the simulator).
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+
+from . import exact
 
 StatusWord = Literal["converged", "max_iterations", "stalled", "held"]
 
@@ -117,6 +123,78 @@ class LeastSquaresResult:
         return self.status > 0
 
 
+class _Blas:
+    """The normal equations' algebra on NumPy's BLAS / LAPACK (fast; last bits per kernel)."""
+
+    @staticmethod
+    def normal(Js: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return Js.T @ Js, -(Js.T @ r)
+
+    @staticmethod
+    def project(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return J.T @ r
+
+    @staticmethod
+    def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return A @ x
+
+    @staticmethod
+    def dot(a: np.ndarray, b: np.ndarray) -> float:
+        return float(a @ b)
+
+    @staticmethod
+    def norm(x: np.ndarray) -> float:
+        return float(np.linalg.norm(x))
+
+    @staticmethod
+    def solve(A: np.ndarray, g: np.ndarray, Js: np.ndarray, r: np.ndarray,
+              mu: float) -> np.ndarray:
+        n = Js.shape[1]
+        try:
+            if mu > 0.0:
+                return np.linalg.solve(A, g)
+            L = np.linalg.cholesky(A)
+            return np.linalg.solve(L.T, np.linalg.solve(L, g))
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(np.vstack([Js, np.sqrt(mu) * np.eye(n)]),
+                                   np.concatenate([-r, np.zeros(n)]), rcond=None)[0]
+
+
+class _Exact(_Blas):
+    """The same on ``common.exact``: identical bits on every processor and kernel."""
+
+    @staticmethod
+    def normal(Js: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return exact.gram(Js), -exact.transpose_times(Js, r)
+
+    @staticmethod
+    def project(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return exact.transpose_times(J, r)
+
+    @staticmethod
+    def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+        return exact.matmul(A, x)
+
+    @staticmethod
+    def dot(a: np.ndarray, b: np.ndarray) -> float:
+        return exact.dot(a, b)
+
+    @staticmethod
+    def norm(x: np.ndarray) -> float:
+        return exact.norm(x)
+
+    @staticmethod
+    def solve(A: np.ndarray, g: np.ndarray, Js: np.ndarray, r: np.ndarray,
+              mu: float) -> np.ndarray:
+        try:
+            return exact.solve(A, g)
+        except exact.SingularMatrix:
+            # the undamped system is singular: the smallest damping that makes it regular
+            n = len(g)
+            return exact.solve(A + max(mu, 1e-12) * max(1.0, float(np.max(np.abs(A))))
+                               * np.eye(n), g)
+
+
 def damped_step(Js: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray:
     """Minimiser ``s`` of ``|Js s + r|^2 + mu |s|^2`` for unit-scaled columns ``Js``.
 
@@ -130,24 +208,16 @@ def damped_step(Js: np.ndarray, r: np.ndarray, mu: float) -> np.ndarray:
 def normal_equations(Js: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(Js^T Js, -Js^T r)``: what every damped step from one state shares, formed once
     per state however many damping values are tried."""
-    return Js.T @ Js, -(Js.T @ r)
+    return _Blas.normal(Js, r)
 
 
 def _damped_solve(normal: tuple[np.ndarray, np.ndarray], Js: np.ndarray, r: np.ndarray,
-                  mu: float) -> np.ndarray:
+                  mu: float, algebra: type[_Blas] = _Blas) -> np.ndarray:
     """``damped_step`` from the shared normal equations (``normal_equations(Js, r)``)."""
     n = Js.shape[1]
     A = normal[0].copy()
     A.flat[::n + 1] += mu
-    g = normal[1]
-    try:
-        if mu > 0.0:
-            return np.linalg.solve(A, g)
-        L = np.linalg.cholesky(A)
-        return np.linalg.solve(L.T, np.linalg.solve(L, g))
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(np.vstack([Js, np.sqrt(mu) * np.eye(n)]),
-                               np.concatenate([-r, np.zeros(n)]), rcond=None)[0]
+    return algebra.solve(A, normal[1], Js, r, mu)
 
 
 def column_scale(J: np.ndarray) -> np.ndarray:
@@ -185,43 +255,44 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
                         bounds: tuple[np.ndarray, np.ndarray] | None = None,
                         reweight: Callable[[np.ndarray], np.ndarray] | None = None,
                         coordinates: Callable[[Any], np.ndarray] = np.asarray,
-                        ) -> LeastSquaresResult:
+                        reproducible: bool = False) -> LeastSquaresResult:
     """Minimise ``0.5 |w r(x)|^2`` from ``x0``; see the module docstring.
 
     ``evaluate(x, jacobian)`` returns ``(r, J)``, ``J`` may be None unless ``jacobian``.
     ``damping=None`` takes undamped Gauss-Newton steps, each accepted whatever it does to
     the cost. ``bounds = (lower, upper)`` for a vector state. ``reweight(r)`` gives
     per-entry weights ``w**2`` (iteratively reweighted least squares), renewed after every
-    accepted step.
+    accepted step. ``reproducible``: the algebra of ``common.exact`` (small problems).
     """
+    algebra = _Exact if reproducible else _Blas
     if bounds is not None:
         x0 = np.clip(np.asarray(x0, dtype=float), *bounds)
     r, J = evaluate(x0, False)
     weights = reweight(r) if reweight is not None else None
-    state = _State(x0, r, J, _cost(r, weights))
+    state = _State(x0, r, J, _cost(r, weights, algebra))
     mu = damping.initial if damping is not None else 0.0
     history = [state.cost]
     for iteration in range(max_iterations):
         if state.J is None:
             state.J = _jacobian(evaluate, state.x)
         J, r = _weighted(state.J, state.r, weights)
-        stop = _stop_before_step(J, r, state.cost, tolerances, history)
+        stop = _stop_before_step(J, r, state.cost, tolerances, history, algebra)
         if stop is not None:
             return _result(state, iteration, stop)
-        free = _free_unknowns(state.x, J, r, bounds)
+        free = _free_unknowns(state.x, J, r, bounds, algebra)
         if not free.any():
             return _result(state, iteration, -2)
         scale = column_scale(J[:, free]) if damping is None or damping.scaling == "marquardt" \
             else np.ones(int(free.sum()))
         Js = J[:, free] / scale
-        normal = normal_equations(Js, r)
+        normal = algebra.normal(Js, r)
         while True:
-            scaled_step = _damped_solve(normal, Js, r, mu)
+            scaled_step = _damped_solve(normal, Js, r, mu, algebra)
             step = np.zeros(J.shape[1])
             step[free] = scaled_step / scale
             x_trial, step, clipped = _moved(state.x, step, retract, bounds)
             r_trial, J_trial = evaluate(x_trial, False)
-            cost_trial = _cost(r_trial, weights)
+            cost_trial = _cost(r_trial, weights, algebra)
             # A step the bounds cut short must lower the cost, or a shorter one is tried.
             if damping is None or cost_trial < state.cost or (
                     cost_trial == state.cost and not clipped):
@@ -229,8 +300,8 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
             # A refused step below xtol whose predicted gain is rounding: the state is
             # where the steps end. (At the minimum more damping would only shrink the step
             # further, each trial evaluated in turn and refused.)
-            if _rounding_only(normal, scaled_step, state.cost) and _below_xtol(
-                    scaled_step, coordinates(state.x)[free] * scale, tolerances):
+            if _rounding_only(normal, scaled_step, state.cost, algebra) and _below_xtol(
+                    scaled_step, coordinates(state.x)[free] * scale, tolerances, algebra):
                 return _result(state, iteration, 3)
             mu = max(mu * damping.increase, damping.floor)
             if mu > damping.ceiling:
@@ -239,29 +310,30 @@ def levenberg_marquardt(evaluate: Evaluate, x0: Any, *, max_iterations: int,
         state = _State(x_trial, r_trial, J_trial, cost_trial)
         if reweight is not None:
             weights = reweight(r_trial)
-            state.cost = _cost(r_trial, weights)
+            state.cost = _cost(r_trial, weights, algebra)
         history.append(state.cost)
         if damping is not None:
             mu = max(mu / damping.decrease, damping.floor)
         stop = _stop_after_step(step[free] * scale, coordinates(state.x)[free] * scale,
-                                state.cost, decrease, tolerances)
+                                state.cost, decrease, tolerances, algebra)
         if stop is not None:
             return _result(state, iteration + 1, stop)
     return _result(state, max_iterations, 0)
 
 
-def _cost(r: np.ndarray, weights: np.ndarray | None) -> float:
+def _cost(r: np.ndarray, weights: np.ndarray | None, algebra: type[_Blas] = _Blas) -> float:
     """``0.5 |w r|^2``; a non-finite value counts as infinite."""
-    cost = 0.5 * float(r @ r if weights is None else np.sum(weights * r**2))
+    cost = 0.5 * float(algebra.dot(r, r) if weights is None else np.sum(weights * r**2))
     return cost if np.isfinite(cost) else np.inf
 
 
 def _free_unknowns(x, J: np.ndarray, r: np.ndarray,
-                   bounds: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+                   bounds: tuple[np.ndarray, np.ndarray] | None,
+                   algebra: type[_Blas] = _Blas) -> np.ndarray:
     """All unknowns but those at a bound whose descent direction points outwards."""
     if bounds is None:
         return np.ones(J.shape[1], dtype=bool)
-    gradient = J.T @ r
+    gradient = algebra.project(J, r)
     return ~(((x <= bounds[0]) & (gradient > 0)) | ((x >= bounds[1]) & (gradient < 0)))
 
 
@@ -284,12 +356,12 @@ def _weighted(J: np.ndarray, r: np.ndarray, weights: np.ndarray | None):
 
 
 def _stop_before_step(J: np.ndarray, r: np.ndarray, cost: float, tolerances: Tolerances,
-                      history: list[float]) -> int | None:
+                      history: list[float], algebra: type[_Blas] = _Blas) -> int | None:
     norm = np.sqrt(2.0 * cost)
     if norm <= tolerances.residual_floor:
         return 4
     if tolerances.gtol and J.shape[1]:
-        cosine = np.abs(J.T @ r) / column_scale(J)
+        cosine = np.abs(algebra.project(J, r)) / column_scale(J)
         if np.max(cosine) <= tolerances.gtol * norm:
             return 1
     if tolerances.stall is not None:
@@ -300,26 +372,29 @@ def _stop_before_step(J: np.ndarray, r: np.ndarray, cost: float, tolerances: Tol
 
 
 def _stop_after_step(scaled_step: np.ndarray, scaled_x: np.ndarray, cost: float,
-                     decrease: float, tolerances: Tolerances) -> int | None:
+                     decrease: float, tolerances: Tolerances,
+                     algebra: type[_Blas] = _Blas) -> int | None:
     if abs(decrease) <= tolerances.ftol * cost:
         return 2
-    if _below_xtol(scaled_step, scaled_x, tolerances):
+    if _below_xtol(scaled_step, scaled_x, tolerances, algebra):
         return 3
     return None
 
 
 def _rounding_only(normal: tuple[np.ndarray, np.ndarray], scaled_step: np.ndarray,
-                   cost: float) -> bool:
+                   cost: float, algebra: type[_Blas] = _Blas) -> bool:
     """The linear model's decrease for ``scaled_step`` (``g.s - |Js s|^2 / 2`` from the
     normal equations) is within rounding of ``cost``."""
     A, g = normal
-    predicted = float(g @ scaled_step - 0.5 * scaled_step @ (A @ scaled_step))
+    predicted = algebra.dot(g, scaled_step) - 0.5 * algebra.dot(
+        scaled_step, algebra.matvec(A, scaled_step))
     return bool(predicted <= np.finfo(float).eps * cost)
 
 
-def _below_xtol(scaled_step: np.ndarray, scaled_x: np.ndarray, tolerances: Tolerances) -> bool:
+def _below_xtol(scaled_step: np.ndarray, scaled_x: np.ndarray, tolerances: Tolerances,
+                algebra: type[_Blas] = _Blas) -> bool:
     """The scaled step at or below ``xtol`` of the scaled state."""
-    return bool(np.linalg.norm(scaled_step) <= tolerances.xtol * (1.0 + np.linalg.norm(scaled_x)))
+    return bool(algebra.norm(scaled_step) <= tolerances.xtol * (1.0 + algebra.norm(scaled_x)))
 
 
 def _result(state: _State, iterations: int, status: int) -> LeastSquaresResult:

@@ -50,6 +50,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common import exact
 from ..common.units import Units
 from ..errors import InputError
 from ..model.robot import Robot
@@ -126,8 +127,8 @@ def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
     remaining = rows.copy()
     norms = np.linalg.norm(rows, axis=0)
     # a unit first moment (1 kg m) gives torques of order |g|: below that, roundoff
-    scale = max(float(norms.max()), float(np.linalg.norm(robot.gravity)) * np.sqrt(samples))
-    remaining -= np.outer(span[0], span[0] @ remaining)
+    scale = max(float(norms.max()), exact.norm(robot.gravity) * np.sqrt(samples))
+    remaining -= np.outer(span[0], exact.matmul(span[0], remaining))
     candidates = [k for k in range(rows.shape[1]) if norms[k] > INDEPENDENCE * scale]
     while candidates:
         left = np.linalg.norm(remaining[:, candidates], axis=0)
@@ -137,7 +138,7 @@ def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
             break
         k = candidates.pop(best)
         u = remaining[:, k] / left[best]
-        remaining -= np.outer(u, u @ remaining)
+        remaining -= np.outer(u, exact.matmul(u, remaining))
         kept.append(k)
     return tuple(kept)
 

@@ -56,6 +56,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common import exact
 from ..common.units import Units
 from ..errors import InputError
 from ..model.kinematics import Kinematics, symbolic_frames
@@ -89,7 +90,7 @@ def link_lengths(robot: Robot) -> list[float]:
     """Each link's length [m] (nominal geometry; it does not depend on the readings)."""
     frames = Kinematics(robot).joint_frames(np.zeros(robot.dof), robot.parameter_vector())
     ends = link_ends(robot, [np.asarray(T) for T in frames])
-    return [float(np.linalg.norm(end - root)) for root, end in ends]
+    return [exact.norm(end - root) for root, end in ends]
 
 
 class LinkDeflection(Effect):
@@ -233,17 +234,17 @@ class LinkDeflection(Effect):
         kinematics = Kinematics(world.robot)
         payload = np.asarray(extras.get("payload", np.zeros(len(Q))), dtype=float)
         g = np.asarray(world.robot.gravity, dtype=float)
-        size = np.linalg.norm(g)
+        size = exact.norm(g)
         out = np.zeros((len(Q), 3))
         for r, q in enumerate(Q):
             frames = [np.asarray(T) for T in kinematics.joint_frames(q, kinematics.nominal)]
             ends = link_ends(world.robot, frames)
             for i in self.joints:
                 root, end = ends[i - 1]
-                length = np.linalg.norm(end - root)
+                length = exact.norm(end - root)
                 u = (end - root) / length
-                across = g - (g @ u) * u
-                sag = np.hypot(np.linalg.norm(across), SMOOTH * size) * g / size
+                across = g - exact.dot(g, u) * u
+                sag = np.hypot(exact.norm(across), SMOOTH * size) * g / size
                 bend = values.get(f"f{i}", 0.0) * payload[r] + values[f"f{i}_m"]
                 drop = values.get(f"v{i}", 0.0) * payload[r] + values[f"v{i}_m"]
                 out[r] += length * (bend * across + drop * sag)

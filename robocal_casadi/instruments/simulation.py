@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..common import exact
 from ..common.progress import Progress
 from ..common.units import Units
 from ..errors import InputError
@@ -189,16 +190,16 @@ def run_extras(payloads: list[float], temperatures: list, setup: Setup) -> dict[
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A uniformly random 3x3 rotation (from a random unit quaternion)."""
     q = rng.normal(size=4)
-    return matrix_from_quaternion(q / np.linalg.norm(q))
+    return matrix_from_quaternion(q / exact.norm(q))
 
 
 def tilt(rng: np.random.Generator, max_angle: float) -> np.ndarray:
     """A rotation by up to ``max_angle`` [rad] about a random axis (3x3)."""
     axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
+    axis /= exact.norm(axis)
     angle = rng.uniform(0.0, max_angle)
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * exact.matmul(K, K)
 
 
 def progress_of(setup: Setup):

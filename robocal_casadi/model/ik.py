@@ -23,6 +23,10 @@ every reachable target to 1e-10 m, and LM takes 1.4 to 15 times less time per ta
 (IPOPT's interior-point machinery costs more than a few damped Gauss-Newton steps on a
 6- or 7-unknown problem), so LM is the default.
 
+The iterations run on ``common.exact``'s algebra, not BLAS: a solve gives the same joint
+values to the last bit on every processor, so simulated readings and the branch kept do not
+depend on the machine.
+
 Every solve is honest: ``IKResult.success`` is True only when the reached errors are
 within the tolerances; an unreachable target returns the best joint values found with
 ``success=False`` and the remaining errors. ``p`` (geometric parameters, registry order,
@@ -40,6 +44,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ..common import exact
 from ..common.checks import array, choice, count, positive
 from ..common.least_squares import Damping, Tolerances, levenberg_marquardt
 from ..errors import InputError
@@ -105,7 +110,7 @@ class IKBatchResult:
 
 def orientation_angle(R: np.ndarray, R_target: np.ndarray) -> float:
     """Angle [rad] of ``R_target^T R``, accurate near zero (from the chordal distance)."""
-    chord = np.linalg.norm(np.asarray(R) - np.asarray(R_target)) / (2.0 * math.sqrt(2.0))
+    chord = exact.norm(np.asarray(R) - np.asarray(R_target)) / (2.0 * math.sqrt(2.0))
     return 2.0 * math.asin(min(1.0, float(chord)))
 
 
@@ -324,10 +329,10 @@ class InverseKinematics:
         return q
 
     def _errors(self, r: np.ndarray, weight: float) -> tuple[float, float]:
-        position_error = float(np.linalg.norm(r[:3]))
+        position_error = exact.norm(r[:3])
         if weight == 0.0:
             return position_error, math.nan
-        chord = np.linalg.norm(r[3:]) / weight / 2.0  # = sin(angle / 2)
+        chord = exact.norm(r[3:]) / weight / 2.0  # = sin(angle / 2)
         return position_error, 2.0 * math.asin(min(1.0, float(chord)))
 
     def _solve_once(self, seed, p, position, rotation, offset, weight, soft, lower, upper,
@@ -361,7 +366,7 @@ class InverseKinematics:
             q = self._wrap(q, lower, upper)
             r_free = evaluate(q, 0.0)[0][:3] if weight == 0.0 or soft else evaluate(q, weight)[0]
             inside = bool(np.all((q >= lower) & (q <= upper)))
-            if not (inside and np.linalg.norm(r_free) <= 1e-12):
+            if not (inside and exact.norm(r_free) <= 1e-12):
                 q, more, message = run(seed, lower, upper)
                 iterations += more
         r, _ = self._residual(q, self._pack(p, position, rotation, offset,
@@ -413,7 +418,7 @@ def _levenberg_marquardt(evaluate, q0, lower, upper, max_iterations: int,
                             stall=(STALL_WINDOW, STALL_DECREASE))
     fit = levenberg_marquardt(lambda q, jacobian: evaluate(q), q0, bounds=(lower, upper),
                               max_iterations=max_iterations, tolerances=tolerances,
-                              damping=JOINT_DAMPING)
+                              damping=JOINT_DAMPING, reproducible=True)
     reason = fit.word if fit.status == 4 else f"{fit.word}: {fit.message}"
     return fit.x, fit.iterations, reason
 

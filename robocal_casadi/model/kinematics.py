@@ -22,7 +22,7 @@ import numpy as np
 from ..common.codegen import BatchFunction, compiled
 from .parameters import ParameterRegistry
 from .robot import Robot
-from .transforms import pose_from_xyz_rpy, rot_x, rot_y, rot_z, translation
+from .transforms import pose_from_xyz_rpy, product, rot_x, rot_y, rot_z, translation
 
 SERIAL_ROWS = 1000  # from this many rows on, a mapped function runs in series
 
@@ -38,9 +38,10 @@ def dh_transform(convention: str, revolute: bool, reading, theta, d, a, alpha, b
     else:
         d = d + reading
     if convention == "dh":
-        return (rot_z(theta) @ translation(0, 0, d) @ translation(a, 0, 0) @ rot_x(alpha)
-                @ rot_y(beta))
-    return rot_x(alpha) @ translation(a, 0, 0) @ rot_z(theta) @ translation(0, 0, d) @ rot_y(beta)
+        return product(rot_z(theta), translation(0, 0, d), translation(a, 0, 0), rot_x(alpha),
+                       rot_y(beta))
+    return product(rot_x(alpha), translation(a, 0, 0), rot_z(theta), translation(0, 0, d),
+                   rot_y(beta))
 
 
 def axis_motion(revolute: bool, axis, reading):
@@ -64,7 +65,7 @@ def axis_motion(revolute: bool, axis, reading):
 def urdf_transform(revolute: bool, axis, reading, xyz, rpy):
     """One URDF link transform ``T(i-1,i) = Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)
     Motion(axis, reading)`` (lengths [m], angles [rad]); floats or CasADi symbols."""
-    return pose_from_xyz_rpy(xyz, rpy) @ axis_motion(revolute, axis, reading)
+    return product(pose_from_xyz_rpy(xyz, rpy), axis_motion(revolute, axis, reading))
 
 
 def _fixed(registry: ParameterRegistry, p, frame: str):
@@ -272,11 +273,11 @@ def nominal_pose(robot: Robot, q: np.ndarray) -> np.ndarray:
     T = robot.base.matrix()
     for joint, reading in zip(robot.joints, q):
         if robot.convention == "urdf":
-            T = T @ urdf_transform(joint.revolute, joint.axis, float(reading),
-                                   joint.origin.xyz, joint.origin.rpy)
+            T = product(T, urdf_transform(joint.revolute, joint.axis, float(reading),
+                                          joint.origin.xyz, joint.origin.rpy))
         else:
-            T = T @ dh_transform(robot.convention, joint.revolute, float(reading), joint.theta,
-                                 joint.d, joint.a, joint.alpha, joint.beta)
+            T = product(T, dh_transform(robot.convention, joint.revolute, float(reading),
+                                        joint.theta, joint.d, joint.a, joint.alpha, joint.beta))
     if robot.convention == "urdf":
-        T = T @ robot.flange.matrix()
-    return T @ robot.tool.matrix()
+        T = product(T, robot.flange.matrix())
+    return product(T, robot.tool.matrix())

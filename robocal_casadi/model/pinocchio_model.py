@@ -33,9 +33,10 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import pinocchio as pin
 
+from ..common import exact
 from ..common.output import atomic_file
 from .robot import Robot
-from .transforms import rot_x, rot_y, rot_z, rpy_from_matrix, translation
+from .transforms import product, rot_x, rot_y, rot_z, rpy_from_matrix, translation
 
 LIMITLESS = 1.0e3  # [rad] or [m]: URDF limits written for a joint the robot file leaves unlimited
 
@@ -47,30 +48,30 @@ def link_parts(robot: Robot) -> list[tuple[np.ndarray, np.ndarray]]:
         for i, joint in enumerate(robot.joints, start=1):
             R = np.eye(4)
             R[:3, :3] = z_onto(joint.axis)
-            B = R.T @ (robot.flange.matrix() if i == robot.dof else np.eye(4))
-            parts.append((joint.origin.matrix() @ R, B))
+            B = product(R.T, robot.flange.matrix() if i == robot.dof else np.eye(4))
+            parts.append((product(joint.origin.matrix(), R), B))
         return parts
     for joint in robot.joints:
         if robot.convention == "dh":
             A = np.eye(4)
-            B = (rot_z(joint.theta) @ translation(0, 0, joint.d) @ translation(joint.a, 0, 0)
-                 @ rot_x(joint.alpha) @ rot_y(joint.beta))
+            B = product(rot_z(joint.theta), translation(0, 0, joint.d),
+                        translation(joint.a, 0, 0), rot_x(joint.alpha), rot_y(joint.beta))
         else:
-            A = rot_x(joint.alpha) @ translation(joint.a, 0, 0)
-            B = rot_z(joint.theta) @ translation(0, 0, joint.d) @ rot_y(joint.beta)
+            A = product(rot_x(joint.alpha), translation(joint.a, 0, 0))
+            B = product(rot_z(joint.theta), translation(0, 0, joint.d), rot_y(joint.beta))
         parts.append((A, B))
     return parts
 
 
 def z_onto(axis) -> np.ndarray:
     """A rotation (3x3) that takes the z axis onto the unit vector ``axis``."""
-    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    v = np.cross([0.0, 0.0, 1.0], a)
+    a = np.asarray(axis, dtype=float) / exact.norm(axis)
+    v = exact.cross([0.0, 0.0, 1.0], a)
     c = float(a[2])
-    if np.linalg.norm(v) < 1e-12:
+    if exact.norm(v) < 1e-12:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
     K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + K + K @ K / (1 + c)
+    return np.eye(3) + K + exact.matmul(K, K) / (1 + c)
 
 
 def _se3(T: np.ndarray) -> pin.SE3:
@@ -99,19 +100,19 @@ def pinocchio_model(robot: Robot, *, with_links: bool = True) -> pin.Model:
         lower = joint.limits[0] if joint.limits else -LIMITLESS
         upper = joint.limits[1] if joint.limits else LIMITLESS
         joint_id = model.addJoint(
-            parent, motion, _se3(previous_B @ A), f"joint_{i}",
+            parent, motion, _se3(product(previous_B, A)), f"joint_{i}",
             np.array([1e6]), np.array([1e6]), np.array([lower]), np.array([upper]),
         )
         inertia = pin.Inertia.Zero()
         if with_links and joint.mass is not None:
             com = np.zeros(3) if joint.com is None else np.asarray(joint.com, dtype=float)
-            inertia = _point_mass(joint.mass, B[:3, :3] @ com + B[:3, 3])
+            inertia = _point_mass(joint.mass, exact.matmul(B[:3, :3], com) + B[:3, 3])
         model.appendBodyToJoint(joint_id, inertia, pin.SE3.Identity())
         model.addFrame(pin.Frame(f"frame_{i}", joint_id, 0, _se3(B), pin.FrameType.OP_FRAME))
         parent = joint_id
         previous_B = B
     model.addFrame(pin.Frame("flange", parent, 0, _se3(previous_B), pin.FrameType.OP_FRAME))
-    model.addFrame(pin.Frame("tool", parent, 0, _se3(previous_B @ robot.tool.matrix()),
+    model.addFrame(pin.Frame("tool", parent, 0, _se3(product(previous_B, robot.tool.matrix())),
                              pin.FrameType.OP_FRAME))
     return model
 
@@ -172,7 +173,7 @@ def gravity_torques(robot: Robot, Q, payload_mass=0.0, payload_com=None) -> np.n
         unit = pinocchio_model(robot, with_links=False)
         B = link_parts(robot)[-1][1]
         offset = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
-        unit.inertias[robot.dof] = _point_mass(1.0, B[:3, :3] @ offset + B[:3, 3])
+        unit.inertias[robot.dof] = _point_mass(1.0, exact.matmul(B[:3, :3], offset) + B[:3, 3])
         unit_data = unit.createData()
         for k, q in enumerate(Q):
             if masses[k] != 0.0:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..common import exact
 from ..common.checks import path_argument
 from ..common.fields import (
     MAX_LENGTH,
@@ -196,14 +197,14 @@ class Robot:
         """An upper bound [m] on how far the flange can be from the joint-1 frame: the sum
         over links of their length (``sqrt(a^2 + d^2)`` in DH, ``|xyz|`` in URDF), a
         prismatic joint at its farthest reading, plus the flange and tool offsets."""
-        total = float(np.linalg.norm(self.tool.xyz)) + float(np.linalg.norm(self.flange.xyz))
+        total = float(exact.norm(self.tool.xyz)) + float(exact.norm(self.flange.xyz))
         for joint in self.joints:
             travel = 0.0
             if not joint.revolute:
                 lo, hi = joint.limits if joint.limits else (-MAX_LENGTH, MAX_LENGTH)
                 travel = max(abs(lo), abs(hi))
             if isinstance(joint, UrdfJoint):
-                total += float(np.linalg.norm(joint.origin.xyz)) + travel
+                total += float(exact.norm(joint.origin.xyz)) + travel
             else:
                 d = joint.d if joint.revolute else max(abs(joint.d + lo), abs(joint.d + hi))
                 total += float(np.hypot(joint.a, d))
@@ -495,11 +496,11 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
         origin = _frame_from_dict({k: raw[k] for k in ("xyz", "rpy") if k in raw}, units,
                                   file=file, where=where)
         axis = np.array(vector(raw.get("axis", [0, 0, 1]), 3, file=file, where=f"{where}.axis"))
-        if not np.linalg.norm(axis) > 1e-9:
+        if not exact.norm(axis) > 1e-9:
             raise InputError("the axis has no direction", file=file, where=f"{where}.axis")
         joints.append(UrdfJoint(
             type=dh_like.type, origin=origin,
-            axis=tuple(float(v) for v in axis / np.linalg.norm(axis)),  # type: ignore[arg-type]
+            axis=tuple(float(v) for v in axis / exact.norm(axis)),  # type: ignore[arg-type]
             limits=dh_like.limits, mass=dh_like.mass, com=dh_like.com, drive=dh_like.drive,
             name=str(raw.get("name", f"joint_{i + 1}")), child=str(raw.get("child", ""))))
     source = None

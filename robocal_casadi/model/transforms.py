@@ -10,6 +10,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..common import exact
+
 
 def _backend(*values):
     return ca if any(isinstance(v, (ca.SX, ca.MX, ca.DM)) for v in values) else np
@@ -19,6 +21,17 @@ def _matrix(rows, lib):
     if lib is np:
         return np.array(rows, dtype=float)
     return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+
+
+def product(*matrices):
+    """``matrices[0] @ matrices[1] @ ...``: CasADi's product on symbols, ``exact.chain`` on
+    numbers (the same bits on every processor; see ``common.exact``)."""
+    if _backend(*matrices) is np:
+        return exact.chain(*matrices)
+    out = matrices[0]
+    for m in matrices[1:]:
+        out = out @ m
+    return out
 
 
 def rot_x(angle):
@@ -50,7 +63,8 @@ def translation(x, y, z):
 
 def pose_from_xyz_rpy(xyz, rpy):
     """``T = Trans(xyz) Rz(y) Ry(p) Rx(r)`` with ``xyz`` [m], ``rpy`` [rad]."""
-    return translation(xyz[0], xyz[1], xyz[2]) @ rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
+    return product(translation(xyz[0], xyz[1], xyz[2]), rot_z(rpy[2]), rot_y(rpy[1]),
+                   rot_x(rpy[0]))
 
 
 def rpy_from_matrix(R: np.ndarray) -> np.ndarray:
@@ -79,7 +93,7 @@ def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
         s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
         q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
     quaternion = np.array(q)
-    quaternion /= np.linalg.norm(quaternion)
+    quaternion /= exact.norm(quaternion)
     return quaternion if quaternion[0] >= 0 else -quaternion
 
 
@@ -100,5 +114,5 @@ def invert(T: np.ndarray) -> np.ndarray:
     R, p = T[:3, :3], T[:3, 3]
     out = np.eye(4)
     out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ p
+    out[:3, 3] = -exact.matmul(R.T, p)
     return out

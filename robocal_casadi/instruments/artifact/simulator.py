@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ...common import exact
 from ...common.units import Units
 from ...errors import InputError
 from ...model.ik import inverse_kinematics, random_joints
@@ -29,7 +30,7 @@ def _socket_layout(setup: Setup, cross: bool) -> tuple[list[str], np.ndarray, li
     names = [f"hole_{k}" for k in range(count)]
     local = np.array([[(k - (count - 1) / 2) * setup.socket_distance, 0.0, 0.0]
                       for k in range(count)])
-    distances = [[names[i], names[j], float(np.linalg.norm(local[i] - local[j]))]
+    distances = [[names[i], names[j], exact.norm(local[i] - local[j])]
                  for i in range(count) for j in range(i + 1, count)]
     return names, local, distances, []
 
@@ -98,17 +99,17 @@ def _placement(setup: Setup, ik, bounds: tuple[np.ndarray, np.ndarray], probe: n
     p_row = world.parameters(temperature)
     q0 = random_joints(setup.nominal, 1, rng, margin=0.15)[0]
     T0 = world.kinematics.flange_poses(q0, p_row)[0]
-    centre = T0[:3, :3] @ probe + T0[:3, 3]
+    centre = exact.matmul(T0[:3, :3], probe) + T0[:3, 3]
     if cross:
         R_artifact = random_rotation(rng)
     else:  # a plate on a table: level, turned about the vertical, slightly tilted
-        R_artifact = rot_z(rng.uniform(-math.pi, math.pi))[:3, :3] @ tilt(rng, 0.1)
-    positions = centre + local @ R_artifact.T
+        R_artifact = exact.matmul(rot_z(rng.uniform(-math.pi, math.pi))[:3, :3], tilt(rng, 0.1))
+    positions = centre + exact.matmul(local, R_artifact.T)
     placed: list = []
     for name, position in zip(names, positions):
         for touch in range(per_socket):
             preferred = T0[:3, :3] if cross or touch == 0 else (
-                tilt(rng, 0.5) @ T0[:3, :3])
+                exact.matmul(tilt(rng, 0.5), T0[:3, :3]))
             seat = position + rng.normal(0.0, setup.noise, 3)
             payload = setup.payload_value()
             result = ik.solve(seat, seed=q0, p=p_row, offset=probe, orientation=preferred,

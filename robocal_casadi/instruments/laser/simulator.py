@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from ...common import exact
 from ...common.units import Units
 from ...errors import InputError
 from ...model.ik import inverse_kinematics, random_joints
@@ -25,8 +26,8 @@ def ray_sphere_distance(origin, direction, centre, radius: float) -> float:
     sphere (``centre`` [m], ``radius`` [m]); NaN when the ray misses or starts inside."""
     origin, direction, centre = (np.asarray(v, dtype=float) for v in (origin, direction, centre))
     m = origin - centre
-    b = float(m @ direction)
-    c = float(m @ m) - radius * radius
+    b = exact.dot(m, direction)
+    c = exact.dot(m, m) - radius * radius
     discriminant = b * b - c
     if c <= 0.0 or discriminant < 0.0:
         return math.nan
@@ -36,16 +37,16 @@ def ray_sphere_distance(origin, direction, centre, radius: float) -> float:
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest rotation taking unit vector ``a`` onto unit vector ``b`` (3x3)."""
-    v = np.cross(a, b)
-    c = float(a @ b)
-    if np.linalg.norm(v) < 1e-12:
+    v = exact.cross(a, b)
+    c = exact.dot(a, b)
+    if exact.norm(v) < 1e-12:
         if c > 0:
             return np.eye(3)
-        axis = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        axis /= np.linalg.norm(axis)
+        axis = exact.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        axis /= exact.norm(axis)
         return 2.0 * np.outer(axis, axis) - np.eye(3)
     K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
+    return np.eye(3) + K + exact.matmul(K, K) / (1.0 + c)
 
 
 def simulate(setup: Setup) -> Generated:
@@ -53,13 +54,13 @@ def simulate(setup: Setup) -> Generated:
     rng, world, robot = setup.rng, setup.world, setup.nominal
     radius = float(setup.sphere_radius)
     origin = setup.mounted(DEFAULT_LASER_ORIGIN)
-    direction = np.asarray(DEFAULT_LASER_DIRECTION) @ tilt(rng, 2 * setup.angle_std).T
-    direction = direction / np.linalg.norm(direction)
+    direction = exact.matmul(np.asarray(DEFAULT_LASER_DIRECTION), tilt(rng, 2 * setup.angle_std).T)
+    direction = direction / exact.norm(direction)
     ik = inverse_kinematics(world.kinematics, "flange_pose")
     bounds = setup.bounds()
     standoff = (0.08, 0.2)  # [m] laser distances
     q0, T0, beam0 = _comfortable_beam(setup, direction)
-    centre = T0[:3, :3] @ origin + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
+    centre = exact.matmul(T0[:3, :3], origin) + T0[:3, 3] + (np.mean(standoff) + radius) * beam0
     Q_read: list[np.ndarray] = []
     Q_true: list[np.ndarray] = []
     payloads: list[float] = []
@@ -85,8 +86,8 @@ def simulate(setup: Setup) -> Generated:
             if not setup.within_limits(q_read):
                 continue
             F = world.kinematics.flange_poses(result.q, p_row)[0]
-            distance = ray_sphere_distance(F[:3, :3] @ origin + F[:3, 3], F[:3, :3] @ direction,
-                                           centre, radius)
+            distance = ray_sphere_distance(exact.matmul(F[:3, :3], origin) + F[:3, 3],
+                                           exact.matmul(F[:3, :3], direction), centre, radius)
             if not np.isfinite(distance):
                 continue
             Q_read.append(q_read)
@@ -127,7 +128,7 @@ def _comfortable_beam(setup: Setup, direction: np.ndarray
     for _ in range(200):
         q0 = random_joints(setup.nominal, 1, setup.rng, margin=0.2)[0]
         T0 = world.kinematics.flange_poses(q0, world.parameters(setup.temperature_at(0.0)))[0]
-        beam0 = T0[:3, :3] @ direction
+        beam0 = exact.matmul(T0[:3, :3], direction)
         if beam0[2] < -0.3:  # pointing down at something on a table
             break
     return q0, T0, beam0
@@ -139,10 +140,10 @@ def _aimed_pose(rng: np.random.Generator, T0: np.ndarray, beam0: np.ndarray,
     """A random flange pose (4x4, world frame) [m] whose beam, tilted from ``beam0`` by up
     to about 30 degrees, hits the sphere from a distance within ``standoff`` [m]; None
     when the drawn beam misses it."""
-    beam = tilt(rng, 0.5) @ beam0  # tilted up to about 30 degrees
+    beam = exact.matmul(tilt(rng, 0.5), beam0)  # tilted up to about 30 degrees
     lateral = rng.normal(size=3)
-    lateral -= (lateral @ beam) * beam
-    lateral *= rng.uniform(0.0, 0.7 * radius) / np.linalg.norm(lateral)
+    lateral -= exact.dot(lateral, beam) * beam
+    lateral *= rng.uniform(0.0, 0.7 * radius) / exact.norm(lateral)
     aim = centre + lateral
     hit_from = aim - 2 * radius * beam
     to_surface = ray_sphere_distance(hit_from, beam, centre, radius)
@@ -150,12 +151,12 @@ def _aimed_pose(rng: np.random.Generator, T0: np.ndarray, beam0: np.ndarray,
         return None
     hit = hit_from + to_surface * beam
     laser_origin = hit - rng.uniform(*standoff) * beam
-    R = _rotation_between(T0[:3, :3] @ direction, beam) @ T0[:3, :3]
+    R = exact.matmul(_rotation_between(exact.matmul(T0[:3, :3], direction), beam), T0[:3, :3])
     roll = rng.uniform(-0.5, 0.5)
-    R = _axis_rotation(beam, roll) @ R
+    R = exact.matmul(_axis_rotation(beam, roll), R)
     T = np.eye(4)
     T[:3, :3] = R
-    T[:3, 3] = laser_origin - R @ origin
+    T[:3, 3] = laser_origin - exact.matmul(R, origin)
     return T
 
 
@@ -169,7 +170,7 @@ def _pendant_poses(robot: Robot, Q_read: np.ndarray) -> np.ndarray:
 
 def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * exact.matmul(K, K)
 
 
 def corrupt(rows: list[list], columns: list[str], row: int, length: float,

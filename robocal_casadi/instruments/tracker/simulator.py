@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from ...common import exact
 from ...common.units import Units
 from ...model.transforms import invert, pose_from_xyz_rpy, rpy_from_matrix
 from ..simulation import Generated, Setup, in_units, run_extras
@@ -24,9 +25,10 @@ def simulate(setup: Setup) -> Generated:
         [rng.normal(0.0, 0.05), rng.normal(0.0, 0.05), yaw])
     run = setup.random_run()
     poses = run.poses
-    p_world = poses[:, :3, :3] @ target + poses[:, :3, 3] + world.shift(run.Q_true, run.payloads)
+    p_world = (exact.matmul(poses[:, :3, :3], target) + poses[:, :3, 3]
+               + world.shift(run.Q_true, run.payloads))
     T_instrument_world = invert(T_world_instrument)
-    measured = p_world @ T_instrument_world[:3, :3].T + T_instrument_world[:3, 3]
+    measured = exact.matmul(p_world, T_instrument_world[:3, :3].T) + T_instrument_world[:3, 3]
     measured = measured + rng.normal(0.0, setup.noise, measured.shape)
     return Generated(
         Q_read=run.Q_read, extras=run_extras(run.payloads, run.temperatures, setup),
@@ -52,7 +54,7 @@ def corrupt(rows: list[list], columns: list[str], row: int, length: float,
     """Move the measured point of ``row`` by ``length`` [m] in a random direction."""
     units = dataset.units
     step = rng.normal(size=3)
-    step *= length / np.linalg.norm(step)
+    step *= length / exact.norm(step)
     for axis, value in zip("xyz", step):
         k = columns.index(axis)
         rows[row][k] = float(rows[row][k]) + value / units.length_scale

@@ -1,0 +1,148 @@
+"""The same input gives the same answer on every processor.
+
+NumPy's BLAS (OpenBLAS) chooses its kernels by processor; ``OPENBLAS_CORETYPE`` forces
+one, so two kernels on this machine stand in for two users' machines. A seeded
+``simulate`` must write the same bytes under both (everything that decides or is written
+runs on ``common.exact``), and a calibration of those files must agree to 1e-6 relative.
+
+The small algebra of ``common.exact`` is checked against NumPy within the floating-point
+bound of the operation (a sum of k products is off by at most about k units in the last
+place of the sum of magnitudes).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal_casadi.common import exact
+
+EPS = np.finfo(float).eps
+
+
+def test_products_agree_with_numpy_within_rounding():
+    rng = np.random.default_rng(7)
+    for shape_a, shape_b in [((3, 3), (3, 3)), ((3, 3), (3,)), ((5, 3, 3), (3,)),
+                             ((4, 3), (3, 3)), ((3,), (3, 4)), ((2, 4, 4), (2, 4, 4))]:
+        a, b = rng.normal(size=shape_a), rng.normal(size=shape_b)
+        k = shape_a[-1]
+        bound = k * EPS * (np.abs(a) @ np.abs(b))
+        assert np.all(np.abs(exact.matmul(a, b) - a @ b) <= 2 * bound + 1e-300)
+    J, r = rng.normal(size=(12, 6)), rng.normal(size=12)
+    assert np.allclose(exact.gram(J), J.T @ J, rtol=0, atol=24 * EPS * np.max(np.abs(J)) ** 2)
+    assert np.allclose(exact.transpose_times(J, r), J.T @ r, rtol=0,
+                       atol=24 * EPS * np.max(np.abs(J)) * np.max(np.abs(r)))
+    assert exact.norm([3.0, 4.0]) == 5.0
+    assert np.array_equal(exact.cross([1.0, 0, 0], [0, 1.0, 0]), [0, 0, 1.0])
+
+
+def test_solve_meets_the_backward_error_bound():
+    rng = np.random.default_rng(3)
+    for n in (1, 3, 6, 7):
+        A = rng.normal(size=(n, n)) + n * np.eye(n)
+        b = rng.normal(size=n)
+        x = exact.solve(A, b)
+        # Gaussian elimination with partial pivoting is backward stable: the residual is
+        # of the order of n eps |A| |x|
+        assert np.all(np.abs(A @ x - b) <= 10 * n * EPS * (np.abs(A) @ np.abs(x) + np.abs(b)))
+    with pytest.raises(exact.SingularMatrix):
+        exact.solve(np.zeros((2, 2)), np.ones(2))
+
+
+def test_pose_inverse_is_exact_on_a_rotation_about_z():
+    T = np.eye(4)
+    T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = [1.0, 2.0, 3.0]
+    assert np.array_equal(exact.matmul(exact.inverse_pose(T), T), np.eye(4))
+
+
+# ------------------------------------------------------------------ two BLAS kernels
+
+KERNELS = ("Haswell", "Sandybridge", "Nehalem", "Prescott")
+SIMULATIONS = {
+    "bar": ["--example", "industrial_6r", "--kind", "cross_bar", "--rows", "12",
+            "--noise", "0.01", "--errors", "0.5,0.05", "--seed", "1"],
+    "artifact": ["--example", "industrial_6r", "--kind", "artifact_touches", "--rows", "3",
+                 "--noise", "0.01", "--errors", "0.5,0.05", "--effect", "joint_compliance:2,3",
+                 "--payload", "2,8", "--seed", "2"],
+    "tracker": ["--example", "industrial_6r", "--kind", "tracker_points", "--rows", "60",
+                "--noise", "0.01", "--errors", "0.5,0.05", "--effect", "backlash:2",
+                "--effect", "joint_cyclic:3", "--seed", "3"],
+    "laser": ["--example", "industrial_6r", "--kind", "sphere_laser", "--rows", "40",
+              "--noise", "0.005", "--errors", "0.5,0.05", "--effect", "joint_scale:2",
+              "--seed", "4"],
+}
+
+
+def _environment(kernel: str) -> dict[str, str]:
+    env = dict(os.environ, OPENBLAS_CORETYPE=kernel)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).resolve().parents[1]),
+                                         env.get("PYTHONPATH", "")])
+    return env
+
+
+def _runs(kernel: str) -> bool:
+    """Whether this processor runs the kernel (an unsupported one dies of an illegal
+    instruction)."""
+    probe = subprocess.run([sys.executable, "-c", "import numpy as n; a = n.ones((9, 9)); "
+                            "print((a @ a).sum())"], env=_environment(kernel),
+                           capture_output=True, text=True, timeout=120)
+    return probe.returncode == 0
+
+
+@pytest.fixture(scope="module")
+def kernels() -> tuple[str, str]:
+    usable = [k for k in KERNELS if _runs(k)]
+    if len(usable) < 2:
+        pytest.skip(f"fewer than two OpenBLAS kernels run here (usable: {usable})")
+    return usable[0], usable[1]
+
+
+def _robocal(kernel: str, *args: str) -> None:
+    subprocess.run([sys.executable, "-m", "robocal_casadi.cli", *args, "--quiet"],
+                   env=_environment(kernel), check=True, capture_output=True, timeout=600)
+
+
+def test_seeded_simulation_is_byte_identical_under_two_kernels(kernels, tmp_path):
+    for kernel in kernels:
+        for name, args in SIMULATIONS.items():
+            _robocal(kernel, "simulate", *args, "--out", str(tmp_path / kernel / name))
+    first, second = (tmp_path / k for k in kernels)
+    files = sorted(p.relative_to(first) for p in first.rglob("*") if p.is_file())
+    assert len(files) >= 4 * len(SIMULATIONS)  # robot, dataset, table, truth at least
+    for relative in files:
+        assert (first / relative).read_bytes() == (second / relative).read_bytes(), relative
+
+
+def _numbers_agree(a, b, path="result") -> list[str]:
+    """Paths where two result.json trees differ beyond 1e-6 relative (timings and
+    iteration counts aside)."""
+    if isinstance(a, dict):
+        if set(a) != set(b):
+            return [f"{path}: keys {sorted(set(a) ^ set(b))}"]
+        return [d for k in a if k not in ("seconds", "iterations")
+                for d in _numbers_agree(a[k], b[k], f"{path}.{k}")]
+    if isinstance(a, list):
+        if len(a) != len(b):
+            return [f"{path}: {len(a)} vs {len(b)} entries"]
+        return [d for i, (x, y) in enumerate(zip(a, b))
+                for d in _numbers_agree(x, y, f"{path}[{i}]")]
+    if isinstance(a, float) and isinstance(b, float):
+        return [] if abs(a - b) <= 1e-6 * max(abs(a), abs(b)) else [f"{path}: {a} vs {b}"]
+    return [] if a == b else [f"{path}: {a!r} vs {b!r}"]
+
+
+def test_calibration_agrees_under_two_kernels(kernels, tmp_path):
+    data = tmp_path / "data"
+    _robocal(kernels[0], "simulate", *SIMULATIONS["tracker"], "--out", str(data))
+    results = {}
+    for kernel in kernels:
+        _robocal(kernel, "calibrate", str(data / "dataset.yaml"), "--out", str(tmp_path / kernel))
+        results[kernel] = json.loads((tmp_path / kernel / "result.json").read_text())
+    assert _numbers_agree(*results.values()) == []
