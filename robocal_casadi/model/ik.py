@@ -335,6 +335,19 @@ class InverseKinematics:
         chord = exact.norm(r[3:]) / weight / 2.0  # = sin(angle / 2)
         return position_error, 2.0 * math.asin(min(1.0, float(chord)))
 
+    def _closer(self, q_a, q_b, p, position, rotation, offset, weight) -> bool:
+        """Whether ``q_a`` reaches the target better than ``q_b`` (position first, then
+        the orientation, as ``_better`` orders results)."""
+        w = 1.0 if weight else 0.0
+        packed = self._pack(p, position, rotation, offset, w)
+        a = self._errors(np.asarray(self._residual(q_a, packed)[0]).ravel(), w)
+        b = self._errors(np.asarray(self._residual(q_b, packed)[0]).ravel(), w)
+        tolerance = POSITION_TOLERANCE
+        if (a[0] <= tolerance) != (b[0] <= tolerance):
+            return a[0] <= tolerance
+        return (a[0] if a[0] > tolerance else 0.0, np.nan_to_num(a[1])) < (
+            b[0] if b[0] > tolerance else 0.0, np.nan_to_num(b[1]))
+
     def _solve_once(self, seed, p, position, rotation, offset, weight, soft, lower, upper,
                     position_tolerance, orientation_tolerance, max_iterations) -> IKResult:
         if self.method == "ipopt":
@@ -367,8 +380,14 @@ class InverseKinematics:
             r_free = evaluate(q, 0.0)[0][:3] if weight == 0.0 or soft else evaluate(q, weight)[0]
             inside = bool(np.all((q >= lower) & (q <= upper)))
             if not (inside and exact.norm(r_free) <= 1e-12):
+                # bounded search from where the free one ended (clipped), which keeps the
+                # branch it found; from the seed if that does not reach the target
+                q_clipped, more, message_clipped = run(np.clip(q, lower, upper), lower, upper)
+                iterations += more
                 q, more, message = run(seed, lower, upper)
                 iterations += more
+                if self._closer(q_clipped, q, p, position, rotation, offset, weight):
+                    q, message = q_clipped, message_clipped
         r, _ = self._residual(q, self._pack(p, position, rotation, offset,
                                             1.0 if weight else 0.0))
         position_error, orientation_error = self._errors(np.asarray(r).ravel(),
