@@ -48,7 +48,8 @@ ORDER = ("setup", "real_data", "identification", "kinematics", "calibration", "j
          "sphere_laser", "diagnosis", "planning", "design_bound", "scan", "tracking", "ik",
          "robust", "fleet", "fleet_memory", "table_memory", "delivered")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
-RUNS = {"calibration": ("calibration.py", "--rows", "1000,5000", "--no-growth", "--no-loop"),
+RUNS = {"setup": ("setup.py", "--tests"),
+        "calibration": ("calibration.py", "--rows", "1000,5000", "--no-growth", "--no-loop"),
         "jobs": ("jobs.py", "--series-a", "--demo"),
         "fleet_memory": ("fleet_memory.py", "--robots", "1000")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "

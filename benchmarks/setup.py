@@ -1,0 +1,98 @@
+"""What a newcomer waits for: the README's two first commands, timed in fresh processes.
+
+* ``robocal demo --no-screenshot`` (two calibrations with diagnosis and their reports on
+  the shipped UR10 series D and Panda data), written into a temporary folder;
+* with ``--tests``, the README's test command ``python -m pytest -q``, run in the
+  repository (tens of minutes on a loaded 2-core machine; slow tests are kept out of it
+  by the project's pytest settings).
+
+Each command runs in its own subprocess. Its CPU seconds are those of the finished
+subprocess and everything it waited for (``resource.getrusage(RUSAGE_CHILDREN)``: user
+plus system time, the C compiler and test subprocesses included), which other work on a
+shared machine moves less than wall time; its wall seconds are given beside them. The
+load average is recorded before and after each command, and the process's niceness (a
+niced run waits longer for the processor, so its wall time says more about the machine's
+other work than about the command). Prints JSON.
+
+    python benchmarks/setup.py [--tests] [--demo-runs 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _children_cpu() -> float:
+    """CPU seconds [s] of this process's finished children, user plus system."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _load() -> list[float]:
+    return [round(v, 2) for v in os.getloadavg()]
+
+
+def timed(command: list[str], cwd: Path) -> dict:
+    """Run ``command`` once; its exit status, CPU and wall seconds, load before and after,
+    and the last line it printed (a summary for pytest)."""
+    before, cpu, wall = _load(), _children_cpu(), time.perf_counter()
+    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, check=False)
+    wall, cpu = time.perf_counter() - wall, _children_cpu() - cpu
+    lines = [line for line in done.stdout.splitlines() if line.strip()]
+    return {"exit_status": done.returncode, "cpu_seconds": round(cpu, 1),
+            "wall_seconds": round(wall, 1), "load_average_before": before,
+            "load_average_after": _load(), "last_line": lines[-1] if lines else ""}
+
+
+def robocal() -> list[str]:
+    """The ``robocal`` command of this environment (the script pip installs beside the
+    interpreter), or the one on the path."""
+    beside = Path(sys.executable).with_name("robocal")
+    found = str(beside) if beside.is_file() else shutil.which("robocal")
+    if found is None:
+        raise SystemExit("setup.py: no robocal command beside the interpreter or on the path")
+    return [found]
+
+
+def test_counts(summary: str) -> dict[str, int]:
+    """pytest's closing counts (``1218 passed, 6 failed, 3 skipped in ...``)."""
+    return {word: int(number) for number, word in
+            re.findall(r"(\d+) (passed|failed|skipped|errors?|deselected|xfailed|xpassed)",
+                       summary)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tests", action="store_true",
+                        help="also time the README's test command (python -m pytest -q)")
+    parser.add_argument("--demo-runs", type=int, default=1,
+                        help="times to run the demo (the first may compile C code)")
+    args = parser.parse_args()
+    out: dict = {"benchmark": "setup", "cores": os.cpu_count(), "niceness": os.nice(0),
+                 "demo": []}
+    for _ in range(args.demo_runs):
+        with tempfile.TemporaryDirectory(prefix="robocal-setup-") as folder:
+            out["demo"].append(timed(robocal() + ["demo", "--no-screenshot", "--quiet",
+                                                  "--out", str(Path(folder) / "demo")], ROOT))
+    if args.tests:
+        tests = timed([sys.executable, "-m", "pytest", "-q"], ROOT)
+        tests["counts"] = test_counts(tests["last_line"])
+        out["tests"] = tests
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
