@@ -49,9 +49,23 @@ ORDER = ("setup", "real_data", "identification", "kinematics", "calibration", "j
          "robust", "fleet", "fleet_memory", "table_memory", "delivered")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
 RUNS = {"setup": ("setup.py", "--tests"),
+        "real_data": ("real_data.py",),
+        "identification": ("identification.py", "--quick"),
+        "kinematics": ("kinematics.py",),
         "calibration": ("calibration.py", "--rows", "1000,5000", "--no-growth", "--no-loop"),
         "jobs": ("jobs.py", "--series-a", "--demo"),
-        "fleet_memory": ("fleet_memory.py", "--robots", "1000")}
+        "sphere_laser": ("sphere_laser.py",),
+        "diagnosis": ("diagnosis.py", "--quick"),
+        "planning": ("planning.py", "--quick"),
+        "design_bound": ("design_bound.py", "--quick"),
+        "scan": ("scan.py",),
+        "tracking": ("tracking.py",),
+        "ik": ("ik.py",),
+        "robust": ("robust.py", "--quick"),
+        "fleet": ("fleet.py", "--robots", "20", "--rows", "200"),
+        "fleet_memory": ("fleet_memory.py", "--robots", "1000"),
+        "table_memory": ("table_memory.py",),
+        "delivered": ("delivered.py", "--seeds", "2")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
