@@ -89,13 +89,15 @@ def machine() -> dict:
 
 
 def commit() -> str:
-    """The checked-out commit, with ``+changes`` when the working tree differs from it."""
+    """The checked-out commit, with ``+changes`` when the working tree differs from it
+    (outside ``benchmarks/results``, which saved runs change)."""
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
                               check=False).stdout.strip()
 
     head = git("rev-parse", "--short=12", "HEAD") or "unknown"
-    changed = git("status", "--porcelain", "--untracked-files=no")
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                  ":(exclude)benchmarks/results")
     return head + ("+changes" if changed else "")
 
 
@@ -681,6 +683,62 @@ def render_delivered(record: dict) -> str:
     return "\n\n".join([lead, "\n".join(rows), tail]) + _notes(record)
 
 
+PLANNING_SETUPS = {("industrial_6r", "tracker_points"): "6R tracker",
+                   ("industrial_6r", "cross_bar"): "6R cross bar",
+                   ("panda_7dof", "tracker_points"): "7-DOF tracker",
+                   ("panda_7dof", "cross_bar"): "7-DOF cross bar"}
+
+
+def render_planning(record: dict) -> str:
+    """Designed against random feasible plans, from ``planning.py``'s JSON."""
+    cases = record["output"]["cases"]
+    rows = ["| set-up | poses | model error, designed / random [mm] | ratio: model error | "
+            "predicted | bound from the pool | cond (designed by `cond` / random) |",
+            "| --- | --- | --- | --- | --- | --- | --- |"]
+    for c in cases:
+        label = PLANNING_SETUPS.get((c["robot"], c["kind"]), f"{c['robot']} {c['kind']}")
+        for size in c["sizes"]:
+            tool, random = size["designed_tool"], size["random_median"]
+            rows.append(f"| {label} | {size['count']} | {tool['model_error_mm']:.4f} / "
+                        f"{random['model_error_mm']:.4f} | "
+                        f"{1 - size['model_error_margin']['tool']:.2f} | "
+                        f"{1 - size['predicted_margin']:.2f} | "
+                        f"{1 - size['attainable_margin']:.2f} | "
+                        f"{size['condition_ratio']:.2f} |")
+    first = cases[0]
+    lead = (f"**Experiment design** (simulated truth, {first['noise_mm']:.2g} mm noise; every "
+            f"plan runnable: joint ranges, capsules, line of sight, random plans drawn under "
+            f"the same checks; {first['random_plans_per_size']} random plans and "
+            f"{first['noise_realisations_per_design']} noise realisations per size, medians; "
+            f"model error = calibrated against true measured point over 500 configurations "
+            f"after the best rigid motion; the ratios are designed (`tool`, the default) over "
+            f"random: simulated, as the planner predicts it, and the least any choice from "
+            f"the candidate pool could reach). {_run_line(record)}")
+    return "\n\n".join([lead, "\n".join(rows)]) + _notes(record)
+
+
+def render_fleet(record: dict) -> str:
+    """A small fleet through ``robocal fleet``, from ``fleet.py``'s JSON."""
+    out = record["output"]
+    two, one = out["run_2_workers"], out["run_1_workers"]
+    single = out["single_calibrate_largest_relative_difference"]
+    lead = (f"**Fleet** (`robocal fleet --no-report` on {out['robots']} simulated robots, "
+            f"tracker data of the example 6R, {out['rows']} rows a robot, two broken robot "
+            f"files among them; wall time, which on a loaded machine says little about the "
+            f"speed-up two workers give on free cores). {_run_line(record)}")
+    body = (f"Two workers took {_seconds(two['wall_s'])} and one {_seconds(one['wall_s'])} "
+            f"({out['speedup_two_vs_one']:.2f}x). {out['good_robots']} robots were "
+            f"calibrated; their parameters differ between the one- and two-worker runs by "
+            f"{out['one_vs_two_workers_largest_relative_difference']:.1e} relative at most, "
+            f"and from single `robocal calibrate` runs of {len(single)} of them by "
+            f"{max(single.values(), default=0.0):.1e}. The broken robots were named "
+            f"{'as simulated' if out['broken_as_simulated'] else 'otherwise than simulated'} "
+            f"({'; '.join(f'{k}: {v}' for k, v in out['broken_named'].items())}); flagged as "
+            f"standing out: {', '.join(out['flagged']) or 'none'} (simulated with an "
+            f"outlying compliance: {', '.join(out['outlying_simulated']) or 'none'}).")
+    return "\n\n".join([lead, body]) + _notes(record)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
                                                "jobs": render_jobs,
                                                "fleet_memory": render_fleet_memory,
@@ -695,7 +753,9 @@ RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration
                                                "identification": render_identification,
                                                "robust": render_robust,
                                                "design_bound": render_design_bound,
-                                               "delivered": render_delivered}
+                                               "delivered": render_delivered,
+                                               "planning": render_planning,
+                                               "fleet": render_fleet}
 
 
 def render(records: dict[str, dict]) -> str:

@@ -66,7 +66,7 @@ def robocal() -> list[str]:
     return [found]
 
 
-def test_counts(summary: str) -> dict[str, int]:
+def pytest_counts(summary: str) -> dict[str, int]:
     """pytest's closing counts (``1218 passed, 6 failed, 3 skipped in ...``)."""
     return {word: int(number) for number, word in
             re.findall(r"(\d+) (passed|failed|skipped|errors?|deselected|xfailed|xpassed)",
@@ -89,7 +89,7 @@ def main() -> None:
                                                   "--out", str(Path(folder) / "demo")], ROOT))
     if args.tests:
         tests = timed([sys.executable, "-m", "pytest", "-q"], ROOT)
-        tests["counts"] = test_counts(tests["last_line"])
+        tests["counts"] = pytest_counts(tests["last_line"])
         out["tests"] = tests
     print(json.dumps(out, indent=2))
 
