@@ -399,7 +399,7 @@ def render_sphere_laser(record: dict) -> str:
     lead = (f"**Sphere and laser** (the published example, {sensor['readings']} readings, "
             f"R = {sensor['radius_mm']:.0f} mm, {sensor['noise_mm']:.2g} mm noise, tilting "
             f"scan; median wall times of repeated solves). {_run_line(record)}")
-    body = (f"Sensor alone: every value within {lm['max_abs_error_in_std']:.2g} standard "
+    body = (f"Sensor alone: every value within {lm['max_abs_error_in_std']:.1f} standard "
             f"errors of the truth (x0 = {lm['estimate']['x0']:.4f} +- {lm['std']['x0']:.4f} "
             f"mm for {truth['x0']:.4f}); residual RMS {lm['residual_rms_mm']:.5f} mm against "
             f"a noise floor of {sensor['noise_floor_rms_mm']:.5f} mm. The whole fit without "
@@ -409,8 +409,8 @@ def render_sphere_laser(record: dict) -> str:
             f"({scipy['evaluations']} evaluations). Robot plus laser, {robot['readings']} "
             f"readings of the 6R: {ours['rms_nominal_mm']:.2f} mm nominal to "
             f"{ours['rms_geometric_mm']:.4f} mm (floor {ours['noise_floor_rms_mm']:.4f} mm), "
-            f"robot parameters within {ours['max_abs_error_in_std_robot']:.2g} and the laser "
-            f"within {ours['max_abs_error_in_std_laser']:.2g} standard errors of the truth; "
+            f"robot parameters within {ours['max_abs_error_in_std_robot']:.1f} and the laser "
+            f"within {ours['max_abs_error_in_std_laser']:.1f} standard errors of the truth; "
             f"the geometric solve on {geometric['free_unknowns']} unknowns "
             f"{_ms(geometric['ours_lm_seconds'])} against scipy's "
             f"{_ms(geometric['scipy_2point_seconds'])}, the two within "
@@ -482,9 +482,9 @@ def render_setup(record: dict) -> str:
         lines.append(
             f"The test command (`python -m pytest -q`, slow checks left out) took "
             f"{_minutes(tests['cpu_seconds'])} of CPU and {_minutes(tests['wall_seconds'])} "
-            f"of wall time with the load average {load}: {counts}. On a machine with no "
-            f"other work the wall time comes near the CPU time; with other work on the "
-            f"cores it grows with the load.")
+            f"of wall time with the load average {load}: {counts}. The CPU time is what "
+            f"the command costs; the wall time adds the waiting for a core that the "
+            f"machine's other work caused.")
     return "\n\n".join(lines) + _notes(record)
 
 
@@ -492,7 +492,11 @@ REAL_SETS = {"series_D": "UR10, tracker, series D", "series_A": "UR10, tracker, 
 
 
 def _effects(effects: list[dict]) -> str:
-    return "; ".join(e["summary"] for e in effects) or "none"
+    """Effect names with their joints (the full sentences are in each run's result.json)."""
+    return "; ".join(f"{e['name'].replace('_', ' ')}"
+                     + (f", joint{'s' * (len(e['joints']) > 1)} "
+                        f"{', '.join(str(j) for j in e['joints'])}" if e["joints"] else "")
+                     for e in effects) or "none"
 
 
 def render_real_data(record: dict) -> str:
@@ -556,9 +560,8 @@ def render_diagnosis(record: dict) -> str:
         held = c["held_out_mm"]
         parts.append(f"On real data ({c['case']}, {c['fit_rows']} / {c['held_out_rows']} "
                      f"rows) the held-out RMS went from {held['geometric']:.4f} mm "
-                     f"(geometric) to {held['final']:.4f} mm with what diagnosis added "
-                     f"({'; '.join(c['effects']) or 'nothing'}); recommended: "
-                     f"{c['recommended']}.")
+                     f"(geometric) to {held['final']:.4f} mm with the {len(c['effects'])} "
+                     f"effect(s) diagnosis added; recommended: {c['recommended']}.")
     return "\n\n".join(parts) + _notes(record)
 
 
