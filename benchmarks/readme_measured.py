@@ -42,7 +42,7 @@ ORDER = ("setup", "real_data", "identification", "kinematics", "calibration", "j
          "sphere_laser", "diagnosis", "planning", "design_bound", "scan", "tracking", "ik",
          "robust", "fleet", "fleet_memory", "table_memory", "delivered")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
-RUNS = {"setup": ("setup.py", "--tests"),
+RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "real_data": ("real_data.py",),
         "identification": ("identification.py", "--quick"),
         "kinematics": ("kinematics.py",),

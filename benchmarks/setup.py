@@ -14,7 +14,7 @@ load average is recorded before and after each command, and the process's nicene
 niced run waits longer for the processor, so its wall time says more about the machine's
 other work than about the command). Prints JSON.
 
-    python benchmarks/setup.py [--tests] [--demo-runs 1]
+    python benchmarks/setup.py [--tests] [--tests-timeout SECONDS] [--demo-runs 1]
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import os
 import re
 import resource
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -44,16 +45,37 @@ def _load() -> list[float]:
     return [round(v, 2) for v in os.getloadavg()]
 
 
-def timed(command: list[str], cwd: Path) -> dict:
+def timed(command: list[str], cwd: Path, timeout: float | None = None) -> dict:
     """Run ``command`` once; its exit status, CPU and wall seconds, load before and after,
-    and the last line it printed (a summary for pytest)."""
+    and the last line it printed (a summary for pytest). Past ``timeout`` seconds of wall
+    time the command and everything it started are stopped (``finished`` false, exit
+    status None), and the figures are those up to then."""
     before, cpu, wall = _load(), _children_cpu(), time.perf_counter()
-    done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, check=False)
-    wall, cpu = time.perf_counter() - wall, _children_cpu() - cpu
-    lines = [line for line in done.stdout.splitlines() if line.strip()]
-    return {"exit_status": done.returncode, "cpu_seconds": round(cpu, 1),
-            "wall_seconds": round(wall, 1), "load_average_before": before,
-            "load_average_after": _load(), "last_line": lines[-1] if lines else ""}
+    with tempfile.TemporaryFile("w+") as printed:
+        process = subprocess.Popen(command, cwd=cwd, stdout=printed,
+                                   stderr=subprocess.STDOUT, text=True,
+                                   start_new_session=True)
+        try:
+            status: int | None = process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)  # its own session: it and its children
+            process.wait()
+            status = None
+        wall, cpu = time.perf_counter() - wall, _children_cpu() - cpu
+        printed.seek(0)
+        text = printed.read()
+    lines = [line for line in text.splitlines() if line.strip()]
+    return {"exit_status": status, "finished": status is not None,
+            "cpu_seconds": round(cpu, 1), "wall_seconds": round(wall, 1),
+            "load_average_before": before, "load_average_after": _load(),
+            "last_line": lines[-1] if lines else "", "progress_percent": progress(text)}
+
+
+def progress(printed: str) -> int | None:
+    """The last progress figure pytest printed (``[ 42%]`` at the end of a line of dots),
+    so that a stopped run says how far it came."""
+    found = re.findall(r"\[\s*(\d+)%\]", printed)
+    return int(found[-1]) if found else None
 
 
 def robocal() -> list[str]:
@@ -78,6 +100,9 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--tests", action="store_true",
                         help="also time the README's test command (python -m pytest -q)")
+    parser.add_argument("--tests-timeout", type=float, default=None, metavar="SECONDS",
+                        help="stop the test command after this much wall time and report "
+                             "how far it came")
     parser.add_argument("--demo-runs", type=int, default=1,
                         help="times to run the demo (the first may compile C code)")
     args = parser.parse_args()
@@ -88,7 +113,7 @@ def main() -> None:
             out["demo"].append(timed(robocal() + ["demo", "--no-screenshot", "--quiet",
                                                   "--out", str(Path(folder) / "demo")], ROOT))
     if args.tests:
-        tests = timed([sys.executable, "-m", "pytest", "-q"], ROOT)
+        tests = timed([sys.executable, "-m", "pytest", "-q"], ROOT, args.tests_timeout)
         tests["counts"] = pytest_counts(tests["last_line"])
         out["tests"] = tests
     print(json.dumps(out, indent=2))
