@@ -476,15 +476,31 @@ def render_setup(record: dict) -> str:
              f"{', '.join(str(d['exit_status']) for d in demo)}."]
     tests = out.get("tests")
     if tests:
-        counts = ", ".join(f"{n:,} {word}" for word, n in tests["counts"].items())
         load = (f"{tests['load_average_before'][0]:.1f} at the start and "
                 f"{tests['load_average_after'][0]:.1f} at the end")
-        lines.append(
-            f"The test command (`python -m pytest -q`, slow checks left out) took "
-            f"{_minutes(tests['cpu_seconds'])} of CPU and {_minutes(tests['wall_seconds'])} "
-            f"of wall time with the load average {load}: {counts}. The CPU time is what "
-            f"the command costs; the wall time adds the waiting for a core that the "
-            f"machine's other work caused.")
+        if tests.get("finished", True):
+            counts = ", ".join(f"{n:,} {word}" for word, n in tests["counts"].items())
+            lines.append(
+                f"The test command (`python -m pytest -q`, slow checks left out) took "
+                f"{_minutes(tests['cpu_seconds'])} of CPU and "
+                f"{_minutes(tests['wall_seconds'])} of wall time with the load average "
+                f"{load}: {counts}.")
+        else:
+            share = tests["progress_percent"]
+            whole = (f"; at that rate the whole command needs about "
+                     f"{_minutes(tests['cpu_seconds'] * 100 / share)} of CPU (an "
+                     f"extrapolation, not a measurement)" if share else "")
+            lines.append(
+                f"The test command (`python -m pytest -q`, slow checks left out) did not "
+                f"finish within the run's limit: it was stopped after "
+                f"{_minutes(tests['wall_seconds'])} of wall time with the load average "
+                f"{load}, having used {_minutes(tests['cpu_seconds'])} of CPU and come "
+                f"through {share if share is not None else 'an unknown share'}% of the "
+                f"tests by pytest's own progress figure{whole}.")
+        lines.append("The CPU time is what a command costs; the wall time adds the waiting "
+                     "for a core that the machine's other work caused.")
+    lines.append("`pip install -e \".[test]\"` was not timed: it depends on the network and "
+                 "on what pip has cached.")
     return "\n\n".join(lines) + _notes(record)
 
 
@@ -666,8 +682,8 @@ def render_delivered(record: dict) -> str:
         summary = out["summary"][kind]
         ratios = " ".join("(refused)" if "refused" in c else f"{c['predicted_over_true']:.2f}"
                           for c in cases)
-        errors = " ".join("-" if "refused" in c else
-                          f"{c['true_error_delivered_mm']:.3f}/{c['true_error_nominal_mm']:.2f}"
+        errors = ", ".join("-" if "refused" in c else
+                          f"{c['true_error_delivered_mm']:.3f} / {c['true_error_nominal_mm']:.3f}"
                           for c in cases)
         worse = summary["seeds"] - summary["refused"] - summary["never_worse_without_exit_3"]
         rows.append(f"| {DELIVERED_KINDS.get(kind, kind)} | {ratios} | {errors} | "

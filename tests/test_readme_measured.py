@@ -93,13 +93,18 @@ def test_the_setup_paragraph_is_read_from_the_run():
     record = copy.deepcopy(_run_record("setup"))
     output = record["output"]
     output["demo"][0]["cpu_seconds"] = 61.0
-    output["tests"].update(cpu_seconds=1234.0, wall_seconds=4321.0,
+    output["tests"].update(cpu_seconds=1234.0, wall_seconds=4321.0, finished=True,
                            counts={"passed": 1111, "failed": 2})
     output["tests"]["load_average_before"][0] = 9.25
     text = measured.render_setup(record)
     assert "took 61 s of CPU" in text and "21 min of CPU and 72 min of wall time" in text
     assert "load average 9.2 at the start" in text or "load average 9.3 at the start" in text
     assert "1,111 passed, 2 failed" in text
+    # A run stopped at its limit says how far it came, and marks the whole as extrapolated.
+    output["tests"].update(finished=False, progress_percent=50, counts={})
+    text = measured.render_setup(record)
+    assert "did not finish" in text and "through 50% of the tests" in text
+    assert "about 41 min of CPU (an extrapolation" in text
 
 
 def test_the_kinematics_table_is_read_from_the_run():
