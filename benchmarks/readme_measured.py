@@ -701,6 +701,15 @@ def render_delivered(record: dict) -> str:
     return "\n\n".join([lead, "\n".join(rows), tail]) + _notes(record)
 
 
+def _relative(value: float) -> str:
+    return "0" if value == 0 else f"{value:.1e}"
+
+
+def _error_text(message: str) -> str:
+    """A robot's one-line error without its temporary file path and list of allowed keys."""
+    return message.split(": ", 1)[-1].split("; allowed")[0]
+
+
 def render_fleet(record: dict) -> str:
     """A small fleet through ``robocal fleet``, from ``fleet.py``'s JSON."""
     out = record["output"]
@@ -713,11 +722,12 @@ def render_fleet(record: dict) -> str:
     body = (f"Two workers took {_seconds(two['wall_s'])} and one {_seconds(one['wall_s'])} "
             f"({out['speedup_two_vs_one']:.2f}x). {out['good_robots']} robots were "
             f"calibrated; their parameters differ between the one- and two-worker runs by "
-            f"{out['one_vs_two_workers_largest_relative_difference']:.1e} relative at most, "
-            f"and from single `robocal calibrate` runs of {len(single)} of them by "
-            f"{max(single.values(), default=0.0):.1e}. The broken robots were named "
+            f"{_relative(out['one_vs_two_workers_largest_relative_difference'])} relative at "
+            f"most, and from single `robocal calibrate` runs of {len(single)} of them by "
+            f"{_relative(max(single.values(), default=0.0))}. The broken robots were named "
             f"{'as simulated' if out['broken_as_simulated'] else 'otherwise than simulated'} "
-            f"({'; '.join(f'{k}: {v}' for k, v in out['broken_named'].items())}); flagged as "
+            f"({'; '.join(f'{k}: {_error_text(v)}' for k, v in out['broken_named'].items())}"
+            f"); flagged as "
             f"standing out: {', '.join(out['flagged']) or 'none'} (simulated with an "
             f"outlying compliance: {', '.join(out['outlying_simulated']) or 'none'}).")
     return "\n\n".join([lead, body]) + _notes(record)
