@@ -125,6 +125,17 @@ def test_the_delivered_table_is_read_from_the_run():
     assert " 7.77" in text
 
 
+def test_the_fleet_paragraph_is_read_from_the_run():
+    record = copy.deepcopy(_run_record("fleet"))
+    output = record["output"]
+    output["run_2_workers"]["wall_s"], output["run_1_workers"]["wall_s"] = 50.0, 95.0
+    output["speedup_two_vs_one"] = 1.9
+    output["flagged"] = ["r099"]
+    text = measured.render_fleet(record)
+    assert "Two workers took 50 s and one 95 s (1.90x)" in text
+    assert "standing out: r099" in text
+
+
 def test_the_setup_benchmark_reads_pytest_counts():
     spec = importlib.util.spec_from_file_location("setup_benchmark",
                                                   ROOT / "benchmarks" / "setup.py")
