@@ -242,7 +242,8 @@ def render_jobs(record: dict) -> str:
 
 def _against_targets(cases: list[dict]) -> str:
     """Which jobs stayed within their targets in this run, and which did not."""
-    within, over = [], []
+    within: list[str] = []
+    over: list[str] = []
     for case in cases:
         memory = case.get("target_peak_mb")
         ok = case["cpu_seconds"] <= case["target_cpu_seconds"] and (
