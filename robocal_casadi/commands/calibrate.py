@@ -18,14 +18,14 @@ from pathlib import Path
 
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
-from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..calibration.outliers import rejected_lines
-from ..delivery.profiles import PROFILES, ProfileCost
-from ..delivery.results import CalibrationResult, Decision, mean_square_shares
 from ..effects import is_learned
 from ..effects.effect_model import delivered_lines
 from ..errors import InputError
 from ..instruments.datasets import load_dataset
+from ..job.profiles import PROFILES, ProfileCost
+from ..job.run import JobOptions, ReportOptions, run_job
+from ..results import CalibrationResult, Decision, mean_square_shares
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 

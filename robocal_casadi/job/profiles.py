@@ -24,7 +24,7 @@ from __future__ import annotations
 from ..errors import InputError
 from ..model.parameters import FRAME_PARAMETERS
 from ..model.robot import Robot
-from .results import ProfileCost  # noqa: F401 (the record, re-exported)
+from ..results import ProfileCost  # noqa: F401 (the record, re-exported)
 
 PROFILES = ("dh-only", "ur", "kuka")
 
