@@ -178,6 +178,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors", "common"),  # the root exception class; units, fields, tables, output
     ("model",),  # robot file, parameters, forward kinematics, inverse kinematics
     ("urdf",),  # URDF chains to and from the model
+    ("formats",),  # what a calibration or a plan is written as for a controller
     ("results",),  # the typed records a calibration fills in, and result.json
     ("effects",),  # what the geometric model lacks
     ("instruments", "tracking"),  # each kind's reader, model and simulator; tracking

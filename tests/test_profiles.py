@@ -12,8 +12,8 @@ import yaml
 from urdf_robots import ur10_urdf, write
 
 from robocal_casadi.cli import main
+from robocal_casadi.formats import profile_parameters
 from robocal_casadi.instruments.simulate import simulate
-from robocal_casadi.job.profiles import profile_parameters
 from robocal_casadi.model.robot import load_robot
 
 UR10_DH = (Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa"

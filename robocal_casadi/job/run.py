@@ -43,13 +43,13 @@ from ..common.output import json_safe as _clean
 from ..common.progress import reports_stages, stage
 from ..effects.effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..errors import ArgumentError
+from ..formats import profile_parameters
 from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from ..results import CalibrationResult, CandidateFigures, Delivered
+from ..results import CalibrationResult, CandidateFigures, Delivered, ProfileCost
 from .accuracy import predict, work_cell
 from .choice import choose
-from .profiles import ProfileCost, profile_parameters
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -282,7 +282,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
 
 def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
     """The calibration restricted to ``options.profile``'s parameters, carrying what the
-    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    unrestricted calibration of the same data reaches (``results.ProfileCost``)."""
     profile = str(options.profile)
     allowed = profile_parameters(profile, datasets[0].robot)
     free = _calibrate(datasets, validation, **options.calibrate_options())
