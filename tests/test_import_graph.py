@@ -186,7 +186,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("report", "planning"),  # the customer report; experiment design
     ("job",),  # the whole job: calibrate, choose what is delivered, write; compensation
     ("fleet",),  # many jobs on a cluster
-    ("commands", "measurement"),  # one module per verb; old import paths
+    ("commands", "measurement"),  # one module per verb; old import paths (may go)
     ("cli", "robocal_casadi"),  # the command line; the public API
 )
 
@@ -224,7 +224,7 @@ def test_every_package_has_a_layer():
     packages = {package_of(module) for module in import_graph()}
     listed = [package for layer in LAYERS for package in layer]
     assert len(listed) == len(set(listed))
-    assert packages == set(listed), f"unplaced: {sorted(packages - set(listed))}"
+    assert packages <= set(listed), f"unplaced: {sorted(packages - set(listed))}"
 
 
 def test_no_import_climbs_a_layer():
