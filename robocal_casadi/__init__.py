@@ -7,8 +7,8 @@ The public API is re-exported here; see the README for a worked example.
 from .common import workers  # noqa: F401, I001
 from .calibration import calibrate
 from .common.units import Units
-from .delivery.compensation import compensate
-from .delivery.results import CalibrationResult
+from .job.compensation import compensate
+from .results import CalibrationResult
 from .errors import InputError, RobocalError, SolverError
 from .instruments.datasets import ArtifactTouches, SphereLaser, TrackerPoints, load_dataset
 from .instruments.simulate import simulate

@@ -39,9 +39,9 @@ import numpy as np
 from ..common.fields import MAX_LENGTH, check_magnitude
 from ..common.output import atomic_file
 from ..common.table import read_table, write_table
-from ..delivery.compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
 from ..errors import InputError
 from ..instruments.datasets import check_unit_quaternions
+from ..job.compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
 from ..model.robot import Robot, load_robot
 from .arguments import output_file, seed
 from .console import summarise

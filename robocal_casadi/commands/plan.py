@@ -16,6 +16,7 @@ from pathlib import Path
 
 from ..common.table import Table, read_table
 from ..errors import InputError
+from ..formats import option_name, program_formats
 from ..instruments import instrument
 from ..instruments.datasets import load_dataset
 from .arguments import add_allow_outside_data, output_file, seed
@@ -45,10 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="laser: plan the scan for the laser and sphere alone (the "
                              "robot taken as exact; PLAN.csv gets pendant pose columns); the "
                              "default when the dataset's table holds pendant poses")
-    parser.add_argument("--urscript", metavar="OUT.script",
-                        help="also write the plan as a URScript program (6 revolute joints)")
-    parser.add_argument("--krl", metavar="OUT.src",
-                        help="also write the plan as a KUKA KRL program (6 axes)")
+    for fmt in program_formats():
+        parser.add_argument(fmt.flag, metavar=fmt.metavar, dest=option_name(fmt),
+                            help=fmt.help)
     add_allow_outside_data(parser)
 
 
@@ -77,9 +77,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
                          "plan in parts", where="--count")
     output_file(args.out, inputs=[args.dataset])
-    for option, path in (("--urscript", args.urscript), ("--krl", args.krl)):
+    for fmt in program_formats():
+        path = getattr(args, option_name(fmt))
         if path is not None:
-            output_file(path, option, inputs=[args.dataset])
+            output_file(path, fmt.flag, inputs=[args.dataset])
     dataset = load_dataset(args.dataset, require_data=False,
                            allow_outside_data=args.allow_outside_data)
     output_file(args.out, inputs=[dataset.robot_path])
@@ -136,14 +137,8 @@ def _scan(dataset, args) -> int:
 def _programs(robot, joints, times, args) -> list[tuple[str, str]]:
     """The controller programs asked for, as (text, path); made before anything is written
     so that a refusal (e.g. not 6 axes) leaves no file behind."""
-    from planning.export import krl, urscript
-
-    out = []
-    if args.urscript is not None:
-        out.append((urscript(robot, joints, times), args.urscript))
-    if args.krl is not None:
-        out.append((krl(robot, joints, times), args.krl))
-    return out
+    return [(fmt.write(robot, joints, times), path) for fmt in program_formats()
+            if (path := getattr(args, option_name(fmt))) is not None]
 
 
 def _write_programs(programs) -> None:

@@ -5,7 +5,7 @@ this one job, so their results are the same, key by key:
 
 1. ``calibrate`` (geometry, then the effects diagnosis adds), restricted to a
    controller's parameter set when a ``profile`` is given;
-2. ``delivery.choose``: the best geometry-only model for ``robot_calibrated.yaml``, or
+2. ``job.choice.choose``: the best geometry-only model for ``robot_calibrated.yaml``, or
    doing nothing when the calibration is not better (``recommended`` ``nominal`` or
    ``instrument_only``, exit status 3);
 3. ``write``: the files staged in a new folder; every accuracy figure stated about a
@@ -34,22 +34,22 @@ from typing import ParamSpec, TypeVar
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..calibration.evaluation import evaluate, held_out
+from ..calibration.identification import calibrate as _calibrate
+from ..calibration.outliers import kept_datasets
 from ..common.memory import release_freed
 from ..common.output import atomic_directory
 from ..common.output import json_safe as _clean
 from ..common.progress import reports_stages, stage
-from ..delivery.accuracy import predict, work_cell
-from ..delivery.choice import choose
-from ..delivery.profiles import ProfileCost, profile_parameters
-from ..delivery.results import CalibrationResult, CandidateFigures, Delivered
 from ..effects.effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..errors import ArgumentError
+from ..formats import profile_parameters
 from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from .evaluation import evaluate, held_out
-from .identification import calibrate as _calibrate
-from .outliers import kept_datasets
+from ..results import CalibrationResult, CandidateFigures, Delivered, ProfileCost
+from .accuracy import predict, work_cell
+from .choice import choose
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -240,8 +240,8 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     fit readings, when effects are recommended but a controller runs geometry alone."""
     if result.recommended != "final" or not result.effects:
         return 0.0
-    from ..delivery.projection import model_targets
     from ..model.kinematics import Kinematics
+    from .projection import model_targets
 
     final_robot = result.robot_nominal.with_parameters(
         np.array([p.estimate for p in result.parameters], dtype=float))
@@ -282,7 +282,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
 
 def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
     """The calibration restricted to ``options.profile``'s parameters, carrying what the
-    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    unrestricted calibration of the same data reaches (``results.ProfileCost``)."""
     profile = str(options.profile)
     allowed = profile_parameters(profile, datasets[0].robot)
     free = _calibrate(datasets, validation, **options.calibrate_options())
