@@ -85,8 +85,8 @@ def fk(robot: Robot | str | Path, joints, *, calibrated: str | Path | None = Non
     number, or one per row) where they need them. Backlash reads the direction of motion
     from the order of the rows.
 
-    >>> fk("robocal_casadi/data/ur10-ipa/robot.yaml", [[0, -90, 90, 0, 90, 0]]).round(3)
-    array([[664.5  , 163.941, 623.6  ,   0.5  ,   0.5  ,   0.5  ,   0.5  ]])
+    >>> fk("robocal_casadi/data/ur10-ipa/robot.yaml", [[0, -90, 90, 0, 90, 0]]).round(3).tolist()
+    [[664.5, 163.941, 623.6, 0.5, 0.5, 0.5, 0.5]]
     >>> fk("robot.yaml", q, calibrated="result", with_effects=True, payload=5.0)  # kg
     """
     nominal = _robot(robot)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import doctest
 import io
 import json
 import pydoc
@@ -190,3 +191,15 @@ def test_track_solves_what_robocal_track_solves(tmp_path):
     assert tracked.status == ("ok",) * 12
     assert np.array_equal(tracked.joints, written[:, 1:7])
     assert np.array_equal(tracked.time, written[:, 0])
+
+
+@pytest.mark.parametrize("name", ["load_robot", "load_dataset", "fk"])
+def test_the_docstring_examples_on_the_shipped_data_run(name, monkeypatch):
+    """The examples that use the data shipped with the package print what they show (the
+    others name the user's own files)."""
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    test = doctest.DocTestFinder().find(getattr(rc, name), name, globs=vars(rc).copy())[0]
+    test.examples = [e for e in test.examples  # a user's own file cannot be run here
+                     if ".yaml" not in e.source or "robocal_casadi/data/" in e.source]
+    runner = doctest.DocTestRunner(optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert test.examples and runner.run(test, out=lambda text: None).failed == 0
