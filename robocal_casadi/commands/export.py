@@ -20,14 +20,13 @@ Only the geometry is exported: effects listed in DIR/result.json are not part of
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from ..common.fields import read_text
 from ..common.output import atomic_file
 from ..errors import InputError
 from ..formats import ExportSource, model_formats, option_name
-from ..model.robot import Robot, load_robot
+from ..model.calibrated import nominal_of
+from ..model.robot import load_robot
 from .arguments import output_file
 from .console import summarise
 
@@ -44,24 +43,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the URDF to write over (default: the one the calibration read)")
     parser.add_argument("--base-link", metavar="NAME", help="first link of the --like chain")
     parser.add_argument("--tip-link", metavar="NAME", help="last link of the --like chain")
-
-
-def nominal_of(calibrated: Robot, folder: Path) -> Robot:
-    """The robot the calibration started from: ``calibrated`` with every parameter at the
-    ``nominal`` value result.json lists (robot file units)."""
-    path = folder / RESULT
-    try:
-        content = json.loads(read_text(path, what="result file"))
-        rows = {row["name"]: float(row["nominal"]) for row in content["parameters"]}
-    except (ValueError, KeyError, TypeError):
-        raise InputError("not a result.json of robocal calibrate (no parameters with "
-                         "nominal values)", file=path, where="parameters") from None
-    registry = calibrated.parameters()
-    values = calibrated.parameter_vector()
-    for i, name in enumerate(registry.names):
-        if name in rows:
-            values[i] = rows[name] * calibrated.units.scale(registry.quantity(name))
-    return calibrated.with_parameters(values)
 
 
 def run(args: argparse.Namespace) -> int:

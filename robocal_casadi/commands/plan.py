@@ -14,7 +14,8 @@ import argparse
 import os
 from pathlib import Path
 
-from ..common.table import Table, read_table
+from ..common.output import atomic_file
+from ..common.table import Table, read_table, write_table
 from ..errors import InputError
 from ..formats import option_name, program_formats
 from ..instruments import instrument
@@ -68,8 +69,8 @@ def holds_readings(table: Table, kind: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from planning.design import design_plan
-    from planning.plan_table import write_plan
+    from planning.designed import design, scans, table
+    from planning.trajectory import Scan
 
     if args.count < 1:
         raise InputError(f"expected a positive count, got {args.count}", where="--count")
@@ -90,20 +91,20 @@ def run(args: argparse.Namespace) -> int:
         if holds_readings(read_table(data), dataset.kind):
             raise InputError(f"{args.out} is the dataset's own data table and it holds "
                              "readings; write the plan to another file", where="--out")
-    planner = instrument(dataset.kind).planner
-    if planner is not None and planner.scans:
-        return _scan(dataset, args)
-    if args.sensor_only:
+    if args.sensor_only and not scans(dataset):
         raise InputError(f"--sensor-only is for laser scans, not {dataset.kind} data",
                          where="--sensor-only")
-    plan = design_plan(dataset, args.count, args.index, seed=args.seed,
-                       refine=not args.no_refine)
-    programs = _programs(plan.setup.robot, plan.joints, None, args)
-    write_plan(plan, args.out)
+    designed = design(dataset, args.count, args.index, seed=args.seed,
+                      refine=not args.no_refine, sensor_only=args.sensor_only)
+    times = designed.times if isinstance(designed, Scan) else None
+    programs = _programs(designed.setup.robot, designed.joints, times, args)
+    columns, rows = table(designed)
+    with atomic_file(args.out) as staging:
+        write_table(staging, columns, rows)
     _write_programs(programs)
-    print(plan.summary())
+    print(designed.summary())
     print(f"wrote {args.out}")
-    _summarise(args, plan, programs)
+    _summarise(args, designed, programs)
     return 0
 
 
@@ -116,22 +117,6 @@ def _summarise(args: argparse.Namespace, plan, programs) -> None:
               programs=[path for _, path in programs],
               **{name: getattr(plan, key) for key, name in figures.items()
                  if hasattr(plan, key)})
-
-
-def _scan(dataset, args) -> int:
-    """A laser plan: a scan trajectory sampled at the laser's rate."""
-    from planning.export import write_scan
-    from planning.trajectory import design_scan
-
-    scan = design_scan(dataset, args.count, args.index, seed=args.seed,
-                       sensor_only=True if args.sensor_only else None)
-    programs = _programs(scan.setup.robot, scan.joints, scan.times, args)
-    write_scan(scan, args.out)
-    _write_programs(programs)
-    print(scan.summary())
-    print(f"wrote {args.out}")
-    _summarise(args, scan, programs)
-    return 0
 
 
 def _programs(robot, joints, times, args) -> list[tuple[str, str]]:

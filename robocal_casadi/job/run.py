@@ -60,7 +60,9 @@ REFUSED = 3  # exit status: the calibration is not better than doing nothing
 @dataclass(frozen=True)
 class JobOptions:
     """How to calibrate (the options of ``calibration.calibrate``) and, with
-    ``profile``, the controller whose parameter set alone is fitted."""
+    ``profile``, the controller whose parameter set alone is fitted; ``effects`` declared
+    from the start and ``parameters`` (the robot parameters that may be fitted; None: all)
+    as ``calibration.calibrate`` takes them."""
 
     diagnose: bool = True
     method: str = "lm"
@@ -70,11 +72,13 @@ class JobOptions:
     rule: str = "prior"
     profile: str | None = None
     progress: bool = False
+    effects: Sequence = ()
+    parameters: Sequence[str] | str | None = None
 
     def calibrate_options(self) -> dict:
         return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
                     select_growth=self.select_growth, max_iterations=self.max_iterations,
-                    rule=self.rule, progress=self.progress)
+                    rule=self.rule, progress=self.progress, effects=self.effects)
 
 
 @dataclass(frozen=True)
@@ -125,7 +129,8 @@ def calibrate_job(datasets: Sequence, validation: Sequence = (),
     """Steps 1 and 2: the calibration with its delivery chosen (nothing written)."""
     datasets, validation = list(datasets), list(validation)
     if options.profile is None:
-        result = _calibrate(datasets, validation, **options.calibrate_options())
+        result = _calibrate(datasets, validation, parameters=options.parameters,
+                            **options.calibrate_options())
     else:
         result = _profiled(datasets, validation, options)
     return deliver(result, datasets, validation)
@@ -284,6 +289,9 @@ def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
     """The calibration restricted to ``options.profile``'s parameters, carrying what the
     unrestricted calibration of the same data reaches (``results.ProfileCost``)."""
     profile = str(options.profile)
+    if options.parameters is not None:
+        raise ArgumentError(f"a profile ({profile!r}) chooses the parameters itself; give "
+                            "one of profile and parameters", argument="parameters")
     allowed = profile_parameters(profile, datasets[0].robot)
     free = _calibrate(datasets, validation, **options.calibrate_options())
     restricted = _calibrate(datasets, validation, parameters=allowed,
