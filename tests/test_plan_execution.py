@@ -300,7 +300,9 @@ def test_sensor_only_scan_is_runnable_and_identifies_the_laser(files, tmp_path):
     assert fit.residual_rms < 1.5 * noise
     predicted = scan.laser_errors[:3]
     assert np.all(np.abs(fit.origin - origin) < 4 * np.maximum(predicted, fit.origin_std))
-    assert np.linalg.norm(fit.origin - origin) < 0.05e-3
+    # and as a whole within what the plan predicted: the length of a 3-vector of errors
+    # with these standard deviations exceeds three times their norm with odds below 1%
+    assert np.linalg.norm(fit.origin - origin) < 3 * np.linalg.norm(predicted)
     # the table: t first, pendant poses, distance empty
     out = tmp_path / "scan.csv"
     assert main(["plan", str(files["sphere_6r"]), "--count", "40", "--sensor-only", "--out",
