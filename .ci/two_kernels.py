@@ -102,7 +102,8 @@ def main() -> int:
         printed = {k: _worked_example(k, root / f"worked-{k or 'default'}") for k in kernels}
         for kernel, lines in printed.items():
             if lines != expected:
-                diff = [f"  README: {a}\n  {kernel}: {b}" for a, b in zip(expected, lines) if a != b]
+                diff = [f"  README: {a}\n  {kernel}: {b}"
+                        for a, b in zip(expected, lines) if a != b]
                 failures.append(f"worked example under {kernel} prints other lines than the "
                                 "README:\n" + "\n".join(diff or [f"  {len(lines)} lines vs "
                                                                  f"{len(expected)}"]))

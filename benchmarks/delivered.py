@@ -39,11 +39,11 @@ import numpy as np
 
 # The checkout this script lives in, not an installed copy, is what it measures.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from robocal_casadi.calibration.job import JobOptions, run_job  # noqa: E402
-from robocal_casadi.delivery.accuracy import SAMPLES, SEED, region_of  # noqa: E402
 from robocal_casadi.errors import RobocalError  # noqa: E402
 from robocal_casadi.instruments.datasets import load_dataset  # noqa: E402
 from robocal_casadi.instruments.simulate import simulate, true_parameters  # noqa: E402
+from robocal_casadi.job.accuracy import SAMPLES, SEED, region_of  # noqa: E402
+from robocal_casadi.job.run import JobOptions, run_job  # noqa: E402
 from robocal_casadi.model import examples  # noqa: E402
 from robocal_casadi.model.kinematics import Kinematics  # noqa: E402
 from robocal_casadi.model.robot import load_robot, save_robot  # noqa: E402

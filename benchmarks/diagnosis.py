@@ -33,10 +33,10 @@ from robocal_casadi.calibration import (
     models_for,
     solve,
 )
-from robocal_casadi.delivery.results import Decision
 from robocal_casadi.instruments.datasets import dataset_rows, load_dataset
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import industrial_6r
+from robocal_casadi.results import Decision
 
 NOISE = 1e-5  # [m]
 COMPLIANCE = {2: 1.5e-6, 3: 2.5e-6}  # [rad/Nm]

@@ -39,12 +39,12 @@ import numpy as np
 
 from robocal_casadi import load_dataset
 from robocal_casadi.calibration import calibrate, identification
-from robocal_casadi.delivery.results import mean_square_shares
 from robocal_casadi.instruments.datasets import dataset_rows
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.kinematics import Kinematics
 from robocal_casadi.model.pinocchio_model import frame_placements, pinocchio_model
 from robocal_casadi.model.robot import save_robot
+from robocal_casadi.results import mean_square_shares
 
 NOISE = 1e-5  # [m] per tracker coordinate
 AMPLITUDE = 3e-4  # [m] of the invented error

@@ -1,4 +1,5 @@
-"""README.md's "Measured" section, written from the benchmarks' saved JSON.
+"""docs/measured.md's generated section (the measured figures), written from the benchmarks'
+saved JSON.
 
 Every part of the section comes from one file ``benchmarks/results/<name>.json``: the
 JSON a benchmark script printed (``output``), saved by ``--run NAME`` with the command,
@@ -8,7 +9,7 @@ the script measured and nothing else. A record may carry ``notes``: how that run
 (``notes_source`` says so), never figures of another run.
 
     python benchmarks/readme_measured.py            # rewrite the section from the JSON
-    python benchmarks/readme_measured.py --check    # exit 1 if README.md differs
+    python benchmarks/readme_measured.py --check    # exit 1 if docs/measured.md differs
     python benchmarks/readme_measured.py --run calibration --run jobs   # measure, save, rewrite
 
 ``--run fleet_memory`` calibrates a thousand small robots: about half an hour on a quiet
@@ -33,7 +34,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).resolve().with_name("results")
-README = ROOT / "README.md"
+PAGE = ROOT / "docs" / "measured.md"  # the section lived in README.md before
 BEGIN = ("<!-- Written by benchmarks/readme_measured.py from benchmarks/results/*.json: "
          "edit those, not this section. -->")
 END = "<!-- End of the generated section. -->"
@@ -698,7 +699,7 @@ def render_delivered(record: dict) -> str:
             f"{_run_line(record)}")
     tail = ("The prediction is an expectation: where one combination of parameters carries "
             "most of the uncertainty (touch data), one robot's true error scatters widely "
-            "about it ([docs/delivery.md](docs/delivery.md#how-close-to-the-truth)).")
+            "about it ([docs/delivery.md](delivery.md#how-close-to-the-truth)).")
     return "\n\n".join([lead, "\n".join(rows), tail]) + _notes(record)
 
 
@@ -769,10 +770,10 @@ def rendered() -> str:
 
 
 def section(text: str) -> str:
-    """The generated body in README text ``text`` (between the markers)."""
+    """The generated body in the page's text ``text`` (between the markers)."""
     start, end = text.find(BEGIN), text.find(END)
     if start < 0 or end < start:
-        raise ValueError("README.md has no generated Measured section (markers missing)")
+        raise ValueError("docs/measured.md has no generated section (markers missing)")
     return text[start + len(BEGIN):end].strip("\n")
 
 
@@ -787,19 +788,20 @@ def main() -> None:
     parser.add_argument("--run", action="append", default=[], choices=sorted(RUNS),
                         help="measure this part again before writing (repeatable)")
     parser.add_argument("--check", action="store_true",
-                        help="only compare: exit 1 when README.md is not what the JSON gives")
+                        help="only compare: exit 1 when docs/measured.md is not what the "
+                        "JSON gives")
     args = parser.parse_args()
     for name in args.run:
         run(name)
-    text = README.read_text()
+    text = PAGE.read_text()
     body = rendered()
     if args.check:
         if section(text) != body:
-            print("README.md's Measured section differs from benchmarks/results/*.json; "
+            print("docs/measured.md's generated section differs from benchmarks/results/*.json; "
                   "run python benchmarks/readme_measured.py", file=sys.stderr)
             raise SystemExit(1)
         return
-    README.write_text(rewrite(text, body))
+    PAGE.write_text(rewrite(text, body))
 
 
 if __name__ == "__main__":

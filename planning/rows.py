@@ -7,7 +7,7 @@ and ``S = dr/d(shared placement)`` (e.g. the tracker frame or the sphere centre,
 out of the whole design). A ``Block`` holds ``X = P [G S]`` with ``P`` the projection
 orthogonal to ``L``; the design's Jacobian stacks the blocks' ``X``.
 
-The residual is the measurement model's own (``robocal_casadi.measurement``), at the
+The residual is the measurement model's own (``robocal_casadi.instruments``), at the
 nominal robot, the file's mounted values (``nominal_mounted``) and the instrument at
 its nominal place (``nominal_placement``): per row (``row_residual``) for models whose
 residual has entries per row, else the model's ``residual`` of a dataset made of the

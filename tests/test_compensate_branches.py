@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from robocal_casadi.cli import main
-from robocal_casadi.delivery.compensation import compensate
+from robocal_casadi.job.compensation import compensate
 from robocal_casadi.model.kinematics import nominal_pose
 from robocal_casadi.model.robot import load_robot
 from robocal_casadi.model.transforms import quaternion_from_matrix
@@ -86,7 +86,7 @@ def test_a_changed_model_keeps_each_seeds_branch(with_orientation):
 def test_unseeded_targets_keep_the_nominal_solutions_branch():
     """Without seeds the nominal robot's own inverse kinematics picks the branch and the
     calibrated answer stays on it."""
-    from robocal_casadi.delivery.compensation import target_poses
+    from robocal_casadi.job.compensation import target_poses
     from robocal_casadi.model.ik import inverse_kinematics
     from robocal_casadi.model.kinematics import Kinematics
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from robocal_casadi.cli import main
-from robocal_casadi.delivery.compensation import compensate
 from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.job.compensation import compensate
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.ik import orientation_angle, random_joints
 from robocal_casadi.model.kinematics import nominal_pose

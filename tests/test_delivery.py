@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import calibrate
-from robocal_casadi.calibration.job import JobOptions, calibrate_job
 from robocal_casadi.cli import main
 from robocal_casadi.common.table import read_table
-from robocal_casadi.delivery.accuracy import BAND, MEASURED, SAMPLES, SEED, predict, region_of
 from robocal_casadi.instruments.datasets import load_dataset
 from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.job.accuracy import BAND, MEASURED, SAMPLES, SEED, predict, region_of
+from robocal_casadi.job.run import JobOptions, calibrate_job
 from robocal_casadi.model.kinematics import nominal_pose
 from robocal_casadi.model.robot import load_robot
 

@@ -44,6 +44,7 @@ def test_demo_without_chromium_keeps_the_screenshot(small_case, capsys):
     reports = small_case / "reports"
     assert main(["demo", "--out", str(reports), "--no-diagnose"]) == 0
     case = reports / "small-bar"
+    check_report_folder(case)  # the page shows the numbers of result.json
     assert not (case / "report.png").exists()  # nothing to keep on a first run
     (case / "report.png").write_bytes(PNG)  # as rendered where Chromium was installed
     first = (case / "result.json").read_text()
@@ -77,7 +78,8 @@ def test_readme_order_on_the_shipped_reports_without_chromium(tmp_path, monkeypa
     capsys.readouterr()
     for case in sorted(p for p in reports.iterdir() if p.is_dir()):
         check_report_folder(case)
-        assert (case / "report.png").read_bytes() == screenshots[case.name]
+        if case.name in screenshots:  # the repository keeps one screenshot
+            assert (case / "report.png").read_bytes() == screenshots[case.name]
 
 
 def _git(*arguments: str, cwd: Path) -> subprocess.CompletedProcess:

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from robocal_casadi.calibration import Problem, calibrate, diagnosis, models_for, solve
-from robocal_casadi.delivery.results import Decision
 from robocal_casadi.effects import EFFECTS
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import ROBOTS
+from robocal_casadi.results import Decision
 
 NOISE = 1e-5  # [m] per tracker coordinate
 FLOOR = NOISE * np.sqrt(3)  # expected RMS of the 3-D point error from noise alone

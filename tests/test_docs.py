@@ -109,7 +109,8 @@ def test_the_slug_follows_github():
 
 
 def test_the_documentation_pages_exist():
-    for name in ("README.md", "conventions.md", "formats.md", "methods.md"):
+    for name in ("README.md", "conventions.md", "formats.md", "methods.md", "usage.md",
+                 "measured.md", "layout.md", "delivery.md"):
         assert (DOCS / name).is_file(), name
 
 
@@ -179,3 +180,92 @@ def test_the_checks_catch_what_they_look_for(tmp_path):
     page = tmp_path / "page.md"
     page.write_text("# Title\n## Modified DH\n```\n# not a heading\n```\n## Modified DH\n")
     assert anchors(page) == {"title", "modified-dh", "modified-dh-1"}
+
+
+# ----------------------------------------------------------------------------- README and docs
+
+FRONT_PAGES = [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.MULTILINE | re.DOTALL)
+INLINE_CODE = re.compile(r"(?<!`)`(robocal [^`]+)`(?!`)")
+
+
+def command_lines(text: str) -> list[str]:
+    """Every ``robocal ...`` command line of the text's fenced blocks (continuation lines
+    joined, ``$NAME`` expanded from ``NAME="..."`` set in the same block, comments and
+    printed ``robocal VERB: ...`` lines left out) and of its inline code."""
+    found = []
+    for block in FENCE.findall(text):
+        block = block.replace("\\\n", " ")
+        variables = dict(re.findall(r'^(\w+)="([^"]*)"', block, re.MULTILINE))
+        for line in block.splitlines():
+            line = line.split("  #", 1)[0].strip().removeprefix("$ ")
+            for name, value in variables.items():
+                line = line.replace(f"${name}", value)
+            if line.startswith("robocal ") and not line.split()[1].endswith(":"):
+                found.append(" ".join(line.split()))  # not a printed "robocal VERB: ..."
+    found += [" ".join(m.group(1).split()) for m in INLINE_CODE.finditer(text)
+              if not m.group(1).split()[1].endswith(":")]
+    return found
+
+
+def unknown_in(line: str, parsers: dict) -> list[str]:
+    """What of a ``robocal`` command line the command line does not know: the verb, or
+    any ``--option`` the verb does not take. Placeholders (``...``, ``DIR``) are left
+    alone: the line is checked, not run."""
+    words = line.replace("[", " ").replace("]", " ").replace("|", " ").split()
+    verb = words[1] if len(words) > 1 else ""
+    if verb.startswith("--"):
+        return [] if verb in ("--version", "--help") else [verb]
+    if verb not in parsers:
+        return [f"verb {verb!r}"]
+    known = parsers[verb]._option_string_actions
+    return [w for w in words[2:] if w.startswith("--") and w.split("=")[0] not in known]
+
+
+def verb_parsers() -> dict:
+    from robocal_casadi.cli import build_parser
+
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.dest == "verb")
+    return dict(action.choices)
+
+
+@pytest.mark.parametrize("page", FRONT_PAGES, ids=lambda p: p.name)
+def test_command_lines_name_verbs_and_options_that_exist(page):
+    parsers = verb_parsers()
+    lines = command_lines(page.read_text())
+    stale = [f"{line}: {unknown_in(line, parsers)}" for line in lines
+             if unknown_in(line, parsers)]
+    assert not stale, "\n".join(stale)
+
+
+def test_the_readme_and_usage_show_command_lines():
+    assert len(command_lines((ROOT / "README.md").read_text())) >= 10
+    assert len(command_lines((DOCS / "usage.md").read_text())) >= 5
+
+
+def test_the_readme_links_resolve():
+    source = ROOT / "README.md"
+    broken = []
+    for match in MARKDOWN_LINK.finditer(source.read_text()):
+        target = match.group(1)
+        if re.match(r"[a-z]+:", target):
+            continue
+        file_part, _, anchor = target.partition("#")
+        linked = (source.parent / file_part).resolve() if file_part else source
+        if not linked.exists():
+            broken.append(f"{target}: no file {linked}")
+        elif anchor and linked.suffix == ".md" and anchor not in anchors(linked):
+            broken.append(f"{target}: no heading #{anchor} in {linked.name}")
+    assert not broken, "\n".join(broken)
+
+
+def test_the_command_check_catches_a_stale_line():
+    parsers = verb_parsers()
+    text = ("```bash\nX=\"--seed 1\"\nrobocal simulate --kind cross_bar $X \\\n"
+            "    --out bar  # note\nrobocal calibrat bar/dataset.yaml\n```\n"
+            "and `robocal fk ROBOT.yaml J.csv --out P.csv --with-efects`")
+    lines = command_lines(text)
+    assert lines[0] == "robocal simulate --kind cross_bar --seed 1 --out bar"
+    assert [unknown_in(line, parsers) for line in lines] == [
+        [], ["verb 'calibrat'"], ["--with-efects"]]

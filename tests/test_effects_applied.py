@@ -13,9 +13,9 @@ import yaml
 
 from robocal_casadi.cli import main
 from robocal_casadi.common.table import read_table
-from robocal_casadi.delivery.compensation import compensate
 from robocal_casadi.effects.effect_model import load_effects
 from robocal_casadi.instruments.simulate import TrueRobot, simulate
+from robocal_casadi.job.compensation import compensate
 from robocal_casadi.model.robot import load_robot
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"

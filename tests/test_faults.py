@@ -132,7 +132,7 @@ def test_compensate_takes_a_robot_file(tmp_path):
     from robocal_casadi.model.kinematics import Kinematics
 
     q = np.array([0.3, -1.2, 1.0, -0.5, 1.1, 0.2])
-    point = Kinematics(robot).tool_poses(q[None])[0, :3, 3]
+    point = Kinematics(robot).tool_poses(q[None])[0, :3, 3] * 1000.0  # the file's mm
     by_file = compensate(str(UR10 / "robot.yaml"), [point])
     by_robot = compensate(robot, [point])
     assert by_file.status == by_robot.status == ("ok",)

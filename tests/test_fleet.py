@@ -318,8 +318,8 @@ def test_summary_of_an_effect_without_a_standard_error(tmp_path):
     instead of failing the robot (a simulated fleet robot whose calibration kept a map)."""
     from dataclasses import replace
 
-    from robocal_casadi.delivery.results import EffectFinding
     from robocal_casadi.fleet.robot_task import robot_summary
+    from robocal_casadi.results import EffectFinding
 
     data = simulate(examples.industrial_6r(), "tracker_points", out_dir=tmp_path / "d", rows=30,
                     noise=2e-5, seed=3, progress=False).load()

@@ -18,7 +18,7 @@ from robocal_casadi import Tracker, calibrate, compensate, load_dataset, simulat
 from robocal_casadi.calibration import Problem, models_for
 from robocal_casadi.calibration.solver import solve
 from robocal_casadi.common.checks import choice, count, positive, rotation_matrix
-from robocal_casadi.errors import ArgumentError, RobocalError
+from robocal_casadi.errors import ArgumentError, InputError, RobocalError
 from robocal_casadi.model.examples import industrial_6r
 from robocal_casadi.model.ik import InverseKinematics
 from robocal_casadi.model.kinematics import Kinematics
@@ -62,10 +62,12 @@ def test_calibrate_checks_every_option(dataset, options, fragments):
     refused(lambda: calibrate([dataset], diagnose=False, **options), *fragments)
 
 
-def test_calibrate_wants_loaded_datasets(dataset):
-    refused(lambda: calibrate(str(dataset.path)), "datasets", "load_dataset")
+def test_calibrate_wants_a_list_of_datasets(dataset):
+    refused(lambda: calibrate(str(dataset.path)), "datasets", "load_dataset", "a list")
     refused(lambda: calibrate(dataset), "datasets", "a list")
-    refused(lambda: calibrate([dataset], validation=[str(dataset.path)]), "validation", "str")
+    refused(lambda: calibrate([dataset], validation=[42]), "validation", "int")
+    with pytest.raises(InputError, match="missing.yaml: dataset file not found"):
+        calibrate([dataset], validation=[dataset.path.parent / "missing.yaml"])
 
 
 def test_solve_checks_shapes_and_names(dataset):

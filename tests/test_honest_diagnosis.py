@@ -19,13 +19,13 @@ from robocal_casadi.calibration import Problem, calibrate, models_for
 from robocal_casadi.calibration.folds import fold_schemes
 from robocal_casadi.calibration.identification import recommend
 from robocal_casadi.commands.calibrate import summary
-from robocal_casadi.delivery.results import Decision, RmsSummary
 from robocal_casadi.instruments.datasets import dataset_rows
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.kinematics import Kinematics
 from robocal_casadi.model.pinocchio_model import frame_placements, pinocchio_model
 from robocal_casadi.model.robot import save_robot
+from robocal_casadi.results import Decision, RmsSummary
 
 NOISE = 1e-5  # [m] per tracker coordinate
 FLOOR = NOISE * math.sqrt(3)  # RMS of the 3-D point error from noise alone

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from robocal_casadi.calibration import job
+from robocal_casadi.job import run as job
 
 
 def _blas_threads() -> list[int]:

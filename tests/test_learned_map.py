@@ -171,7 +171,7 @@ def test_the_map_follows_only_joint_readings():
 
 
 def test_shares_of_the_mean_square_add_up():
-    from robocal_casadi.delivery.results import EffectFinding, mean_square_shares
+    from robocal_casadi.results import EffectFinding, mean_square_shares
 
     mapped = EffectFinding(name="residual_map", joints=(2, 3), parameters={"map_gain": 1.0},
                            unit="1", evidence={"fit_rms_without": 0.3})

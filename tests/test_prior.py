@@ -12,13 +12,13 @@ import pytest
 from robocal_casadi.calibration import calibrate, solve
 from robocal_casadi.calibration.prior import Prior, PriorProblem, posterior, tolerance_of
 from robocal_casadi.commands.demo import data_folder
-from robocal_casadi.delivery.results import EffectFinding
 from robocal_casadi.errors import InputError
 from robocal_casadi.instruments.datasets import dataset_rows, load_dataset
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model import examples
 from robocal_casadi.model.parameters import ParameterRegistry
 from robocal_casadi.model.robot import load_robot, robot_to_dict
+from robocal_casadi.results import EffectFinding
 
 
 class LinearProblem:

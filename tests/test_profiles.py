@@ -12,7 +12,7 @@ import yaml
 from urdf_robots import ur10_urdf, write
 
 from robocal_casadi.cli import main
-from robocal_casadi.delivery.profiles import profile_parameters
+from robocal_casadi.formats import profile_parameters
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.robot import load_robot
 

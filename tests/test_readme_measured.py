@@ -1,5 +1,6 @@
-"""README.md's Measured section is what benchmarks/readme_measured.py renders from the
-saved benchmark JSON (benchmarks/results), and the renderer takes its figures from it."""
+"""docs/measured.md (the measured figures, once README.md's Measured section) is what
+benchmarks/readme_measured.py renders from the saved benchmark JSON (benchmarks/results),
+and the renderer takes its figures from it."""
 
 from __future__ import annotations
 
@@ -16,13 +17,13 @@ SPEC = importlib.util.spec_from_file_location("readme_measured",
 assert SPEC is not None and SPEC.loader is not None
 measured = importlib.util.module_from_spec(SPEC)
 SPEC.loader.exec_module(measured)
-README_TEXT = (ROOT / "README.md").read_text()
+PAGE_TEXT = (ROOT / "docs" / "measured.md").read_text()
 
 
-def test_the_readme_section_is_what_the_saved_json_renders():
-    # A hand edit of the section, or a new JSON without rewriting the README, fails here:
+def test_the_page_is_what_the_saved_json_renders():
+    # A hand edit of the section, or a new JSON without rewriting the page, fails here:
     # run `python benchmarks/readme_measured.py`.
-    assert measured.section(README_TEXT) == measured.rendered()
+    assert measured.section(PAGE_TEXT) == measured.rendered()
 
 
 @pytest.mark.parametrize("name", measured.ORDER)

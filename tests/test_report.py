@@ -21,7 +21,10 @@ import pytest
 
 from robocal_casadi.calibration.diagnosis import CandidateTest
 from robocal_casadi.common.units import Units
-from robocal_casadi.delivery.results import (
+from robocal_casadi.errors import InputError
+from robocal_casadi.model import examples
+from robocal_casadi.report import write_report
+from robocal_casadi.results import (
     CalibrationResult,
     DatasetResiduals,
     Decision,
@@ -30,9 +33,6 @@ from robocal_casadi.delivery.results import (
     ParameterEstimate,
     RmsSummary,
 )
-from robocal_casadi.errors import InputError
-from robocal_casadi.model import examples
-from robocal_casadi.report import write_report
 
 HELD_AT_NOMINAL = {
     "base_x": "bar data carries no absolute position",

@@ -11,10 +11,10 @@ import pytest
 from test_report import read_page, synthetic_result
 
 from robocal_casadi.common.units import Units
-from robocal_casadi.delivery.results import DatasetResiduals, ErrorTerm, Identifiability
 from robocal_casadi.report import write_report
 from robocal_casadi.report.figures import singular_values
 from robocal_casadi.report.kind_figures import position_axes
+from robocal_casadi.results import DatasetResiduals, ErrorTerm, Identifiability
 
 
 def _position_residuals(offset: np.ndarray, rows: int = 300) -> DatasetResiduals:

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from test_report import synthetic_result
 
-from robocal_casadi.delivery.results import DatasetResiduals, ErrorTerm
 from robocal_casadi.report.content import Paragraph, Table
 from robocal_casadi.report.iso9283 import (
     POSE_TOLERANCE,
@@ -17,6 +16,7 @@ from robocal_casadi.report.iso9283 import (
     same_poses,
 )
 from robocal_casadi.report.sections import build_document
+from robocal_casadi.results import DatasetResiduals, ErrorTerm
 
 R1, R2 = 20e-6, 50e-6  # [m] radii of the two shells of visits about one barycentre
 CENTRE = np.array([3e-4, -2e-4, 1e-4])  # [m] the pose's mean error: a bias, not a scatter

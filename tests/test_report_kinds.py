@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from test_report import body_rows, read_page, synthetic_result
 
-from robocal_casadi.delivery.results import RmsSummary, Unexplained
 from robocal_casadi.errors import InputError
 from robocal_casadi.model import examples
 from robocal_casadi.report import build_document, write_report
 from robocal_casadi.report.info import ReportInfo, info_from_mapping
+from robocal_casadi.results import RmsSummary, Unexplained
 
 
 def _figures(path: Path) -> set[str]:

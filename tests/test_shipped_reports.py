@@ -1,27 +1,37 @@
-"""The example reports in reports/ agree with the result.json written beside them.
+"""The example reports kept in reports/, and the check of a report page against its
+result.json.
 
-Written by `robocal demo` (real data: ur10-tracker, panda-sockets) and by
-reports/make_simulated.py (simulated bar, artifact and sphere data). The checks hold
-whether or not the demo was run again since, and with or without Chromium: the page's
-own numbers are always checked; the screenshot and the browser's view of the page only
-where there is a screenshot or a Chromium.
+The repository keeps what `robocal demo --out reports` writes that is small (result.json,
+errors.csv, the calibrated robot and effects, the folder's marker) and the one screenshot
+the README shows; the pages themselves (report.html) and the simulated examples of
+reports/make_simulated.py are generated, and git ignores them. A page written here is
+checked against the result.json beside it, and tests/test_demo.py checks a page the demo
+has just written the same way (``check_report_folder``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
+from robocal_casadi.common.output import read_marker
 from robocal_casadi.common.units import LENGTH_SCALE
 from robocal_casadi.model.robot import load_robot
 from robocal_casadi.report import find_chromium, page_state
 from robocal_casadi.report.numbers import format_number
 
-REPORTS = Path(__file__).resolve().parents[1] / "reports"
+ROOT = Path(__file__).resolve().parents[1]
+REPORTS = ROOT / "reports"
 CASES = sorted(p for p in REPORTS.iterdir() if (p / "result.json").is_file()) \
     if REPORTS.is_dir() else []
+PAGES = [p for p in CASES if (p / "report.html").is_file()]  # written here, not tracked
+SCREENSHOT = REPORTS / "ur10-tracker" / "report.png"  # the one the README shows
 KINDS = {"ur10-tracker": "tracker_points", "panda-sockets": "artifact_touches",
          "bar-simulated": "cross_bar", "artifact-simulated": "artifact_touches",
          "sphere-simulated": "sphere_laser"}
@@ -29,6 +39,8 @@ KIND_FIGURES = {"tracker_points": ("axes-fit", "workspace-fit", "joints-fit"),
                 "artifact_touches": ("axes-fit", "lengths-fit"),
                 "cross_bar": ("lengths-fit",),
                 "sphere_laser": ("scan-fit",)}
+KEPT = ("result.json", "errors.csv", "robot_calibrated.yaml")
+LARGEST_TRACKED = 4 * 2**20  # [bytes] all tracked files under reports/ together
 
 
 def test_demo_reports_are_present():
@@ -36,6 +48,43 @@ def test_demo_reports_are_present():
 
 
 @pytest.mark.parametrize("case", CASES, ids=[p.name for p in CASES])
+def test_kept_files_are_those_the_demo_wrote(case):
+    """Each kept file is listed in the folder's marker with the SHA-256 it has, so the
+    folder is what the demo wrote (and the demo may replace it); the calibrated robot
+    reads back in result.json's units."""
+    marker = read_marker(case)
+    assert marker is not None and marker.verb == "demo"
+    for name in KEPT:
+        assert name in marker.files and (case / name).is_file(), name
+    for name, digest in marker.files.items():
+        if (case / name).exists():
+            assert hashlib.sha256((case / name).read_bytes()).hexdigest() == digest, name
+    result = json.loads((case / "result.json").read_text())
+    robot = load_robot(case / "robot_calibrated.yaml")
+    assert robot.units.length == result["fit"]["unit"]
+
+
+def test_the_readme_shows_the_kept_screenshot():
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(r"!\[[^]]*\]\(reports/ur10-tracker/report\.png\)", readme)
+    data = SCREENSHOT.read_bytes()
+    assert data.startswith(b"\x89PNG\r\n\x1a\n") and len(data) > 10_000
+
+
+@pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(),
+                    reason="needs git and a checkout")
+def test_generated_pages_are_not_tracked():
+    listed = subprocess.run(["git", "ls-files", "reports"], cwd=ROOT, capture_output=True,
+                            text=True, check=True).stdout.split()
+    assert "reports/ur10-tracker/report.png" in listed
+    assert not [n for n in listed if n.endswith((".html", ".pdf"))
+                or (n.endswith(".png") and n != "reports/ur10-tracker/report.png")]
+    assert not [n for n in listed if "-simulated/" in n]
+    size = sum((ROOT / n).stat().st_size for n in listed if (ROOT / n).exists())
+    assert size < LARGEST_TRACKED, size
+
+
+@pytest.mark.parametrize("case", PAGES, ids=[p.name for p in PAGES])
 def test_report_numbers_match_result_json(case):
     check_report_folder(case)
 
@@ -72,7 +121,7 @@ def check_report_folder(case: Path) -> None:
 
 
 @pytest.mark.skipif(find_chromium() is None, reason="Chromium not installed")
-@pytest.mark.parametrize("case", CASES, ids=[p.name for p in CASES])
+@pytest.mark.parametrize("case", PAGES, ids=[p.name for p in PAGES])
 def test_report_loads_in_chromium_with_every_figure_drawn(case):
     html = (case / "report.html").read_text()
     state = page_state(case / "report.html")

@@ -19,6 +19,7 @@ from robocal_casadi.model.ik import random_joints
 from robocal_casadi.model.kinematics import nominal_pose
 from robocal_casadi.model.pinocchio_model import pinocchio_tool_pose
 from robocal_casadi.tracking import Tracker, TrackingProblem, observation_for
+from robocal_casadi.tracking.tracker import ANGLE_TOLERANCE, POSITION_TOLERANCE
 
 CAMERA = np.array([0.04, -0.03, 0.06])  # [m]
 STANDOFF = 0.25  # [m]
@@ -140,7 +141,10 @@ def test_a_cold_start_far_from_the_answer_is_seeded_from_inverse_kinematics(make
         tracker.reset()
         step = tracker.step(q_start, observation)
         assert step.ok, step
-        assert meets(robot, step.q, tracker.goal(q_start, observation))
+        # within what "ok" promises: a solve from far away may stop short of rounding
+        # level (one BLAS kernel converges to 1e-12, another stops at 8e-8)
+        assert meets(robot, step.q, tracker.goal(q_start, observation),
+                     tolerance=max(POSITION_TOLERANCE, ANGLE_TOLERANCE))
 
 
 def test_without_inverse_kinematics_the_cold_start_is_mostly_unreachable():

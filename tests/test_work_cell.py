@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 import yaml
 
-from robocal_casadi.calibration.job import JobOptions, calibrate_job, measured
 from robocal_casadi.calibration.prior import Prior, posterior
 from robocal_casadi.cli import main
-from robocal_casadi.delivery.accuracy import (
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.job.accuracy import (
     DATA_RANGES,
     MEASURED,
     PARTLY_DECLARED,
@@ -21,8 +22,7 @@ from robocal_casadi.delivery.accuracy import (
     predict,
     region_of,
 )
-from robocal_casadi.instruments.datasets import load_dataset
-from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.job.run import JobOptions, calibrate_job, measured
 
 UR10 = Path(__file__).resolve().parents[1] / "robocal_casadi" / "data" / "ur10-ipa" / "robot.yaml"
 ERRORS = {"a2": 4e-4, "d4": -3e-4, "alpha3": 5e-4}

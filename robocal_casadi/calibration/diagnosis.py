@@ -66,9 +66,9 @@ import numpy as np
 
 from ..common.memory import release_freed
 from ..common.progress import note, reports_stages, stage
-from ..delivery.results import Decision, EffectFinding, Identifiability
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
+from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
 from .solver import Loss, Method, Solution, solve

@@ -31,8 +31,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..delivery.results import Identifiability
 from ..errors import SolverError
+from ..results import Identifiability
 
 RANK_TOLERANCE = 1e-7  # own part of a column below which it is exactly dependent
 EXACT_TOLERANCE = 10 * RANK_TOLERANCE  # hold only what is exactly undeterminable

@@ -29,7 +29,11 @@ import numpy as np
 from ..common.checks import choice, count, positive
 from ..common.fields import cut
 from ..common.progress import reports_stages, stage
-from ..delivery.results import (
+from ..effects.base import Effect
+from ..errors import ArgumentError, InputError, SolverError
+from ..instruments.datasets import DatasetBase, dataset_rows
+from ..model.robot import Robot
+from ..results import (
     DOMINATED_SHARE,
     CalibrationResult,
     DatasetResiduals,
@@ -41,10 +45,6 @@ from ..delivery.results import (
     RmsSummary,
     SphereEstimate,
 )
-from ..effects.base import Effect
-from ..errors import ArgumentError, InputError, SolverError
-from ..instruments.datasets import DatasetBase, dataset_rows
-from ..model.robot import Robot
 from . import diagnosis, learned, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)

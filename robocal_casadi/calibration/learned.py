@@ -41,7 +41,6 @@ from scipy.linalg import cho_factor, cho_solve, eigh
 
 from ..common.memory import release_freed
 from ..common.units import Units
-from ..delivery.results import EffectFinding
 from ..effects.residual_map import (
     FADE,
     GAIN,
@@ -53,6 +52,7 @@ from ..effects.residual_map import (
     kernel_of,
     squared_distances,
 )
+from ..results import EffectFinding
 from .diagnosis import EXTRAPOLATION_TOLERANCE, MIN_GAIN, embed, sibling_problem
 from .folds import fold_schemes
 from .prior import Prior, PriorProblem, copy_weights, settled_decrease

@@ -47,9 +47,9 @@ from scipy.linalg import qr, solve_triangular
 from scipy.spatial import cKDTree
 from scipy.special import gammaincinv, ndtri  # chi2.ppf, norm.ppf without scipy.stats' import
 
-from ..delivery.results import RejectedReading
 from ..errors import InputError
 from ..instruments.datasets import dataset_rows
+from ..results import RejectedReading
 from .problem import Problem
 from .solver import Method, solve
 

@@ -41,8 +41,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..delivery.results import StructureTest, Unexplained
 from ..effects.motion import directions_of_motion
+from ..results import StructureTest, Unexplained
 from .folds import FoldGrams, fold_schemes
 
 ALPHA = 1e-3  # family-wise false-alarm level over all tests

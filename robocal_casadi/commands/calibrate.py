@@ -18,14 +18,14 @@ from pathlib import Path
 
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
-from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..calibration.outliers import rejected_lines
-from ..delivery.profiles import PROFILES, ProfileCost
-from ..delivery.results import CalibrationResult, Decision, mean_square_shares
 from ..effects import is_learned
 from ..effects.effect_model import delivered_lines
 from ..errors import InputError
+from ..formats import profiles
 from ..instruments.datasets import load_dataset
+from ..job.run import JobOptions, ReportOptions, run_job
+from ..results import CalibrationResult, Decision, ProfileCost, mean_square_shares
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -66,10 +66,10 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
                              "weighed against its tolerance (maximum a posteriori); fraction: "
                              "least squares, parameters with under 1%% of their effect their "
                              "own held at nominal")
-    parser.add_argument("--profile", choices=PROFILES, default=None,
-                        help="fit only the robot parameters this controller accepts "
-                             "(dh-only: no beta; ur: UR's calibration set; kuka: axis zero "
-                             "offsets, base and tool) and report what that costs")
+    sets = "; ".join(f"{p.name}: {p.phrase}" for p in profiles())
+    parser.add_argument("--profile", choices=[p.name for p in profiles()], default=None,
+                        help=f"fit only the robot parameters this controller accepts ({sets}) "
+                             "and report what that costs")
 
 
 def add_report_options(parser: argparse.ArgumentParser) -> None:

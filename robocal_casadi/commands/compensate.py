@@ -39,9 +39,10 @@ import numpy as np
 from ..common.fields import MAX_LENGTH, check_magnitude
 from ..common.output import atomic_file
 from ..common.table import read_table, write_table
-from ..delivery.compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
 from ..errors import InputError
 from ..instruments.datasets import check_unit_quaternions
+from ..job.compensation import STATUS_BRANCH, STATUS_UNREACHABLE, compensate
+from ..model.calibrated import nominal_of
 from ..model.robot import Robot, load_robot
 from .arguments import output_file, seed
 from .console import summarise
@@ -90,7 +91,7 @@ def robot_of(argument: str) -> Robot:
 def robot_and_calibration(args: argparse.Namespace) -> tuple[Robot, Path | None]:
     """The robot to compensate, and the calibration folder it comes from (None for a
     robot file alone): ``ROBOT.yaml [--calibrated DIR]``, or a folder in ROBOT's place."""
-    from .fk import calibrated_robot
+    from ..model.calibrated import calibrated_robot
 
     path = Path(args.robot)
     if path.is_dir():
@@ -252,7 +253,5 @@ def nominal_robot(argument: Path, calibrated: Robot) -> Robot:
     """The robot the controller knows: for a calibration folder with result.json the
     calibrated robot at the nominal values listed there, else ``calibrated`` itself."""
     if argument.is_dir() and (argument / "result.json").is_file():
-        from .export import nominal_of
-
         return nominal_of(calibrated, argument)
     return calibrated

@@ -23,8 +23,8 @@ import sys
 from importlib import resources
 from pathlib import Path
 
-from ..calibration.job import JobOptions, ReportOptions, run_job
 from ..instruments.datasets import load_dataset
+from ..job.run import JobOptions, ReportOptions, run_job
 from .arguments import add_force, output_folder
 from .calibrate import summary, summary_fields
 from .console import summarise

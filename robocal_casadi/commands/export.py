@@ -10,7 +10,9 @@ with its root link as the robot file's world frame. Without --like a DH robot is
 as a plain description (links frame_0..frame_n, joints joint_1..joint_n).
 --ur-calibration OUT.yaml writes UR's kinematics file (x, y, z, roll, pitch, yaw per joint,
 as ur_description and the UR ROS drivers read it) for arms with UR's structure; another
-arm is refused (``urdf.writer.ur_structure_problem``).
+arm is refused (``urdf.writer.ur_structure_problem``). --dh-table OUT.csv writes the
+joints as a plain DH table (joint, type, theta, d, a, alpha in the robot file's units).
+The formats and their flags come from ``robocal_casadi.formats``.
 
 Only the geometry is exported: effects listed in DIR/result.json are not part of a URDF.
 """
@@ -18,13 +20,13 @@ Only the geometry is exported: effects listed in DIR/result.json are not part of
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from ..common.fields import read_text
 from ..common.output import atomic_file
 from ..errors import InputError
-from ..model.robot import Robot, dump_yaml, load_robot
+from ..formats import ExportSource, model_formats, option_name
+from ..model.calibrated import nominal_of
+from ..model.robot import load_robot
 from .arguments import output_file
 from .console import summarise
 
@@ -34,50 +36,30 @@ RESULT = "result.json"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("folder", metavar="DIR", type=Path, help="a calibration result folder")
-    parser.add_argument("--urdf", metavar="OUT.urdf", type=Path,
-                        help="write the calibrated chain as URDF")
+    for fmt in model_formats():
+        parser.add_argument(fmt.flag, metavar=fmt.metavar, type=Path, dest=option_name(fmt),
+                            help=fmt.help)
     parser.add_argument("--like", metavar="VENDOR.urdf", type=Path,
                         help="the URDF to write over (default: the one the calibration read)")
     parser.add_argument("--base-link", metavar="NAME", help="first link of the --like chain")
     parser.add_argument("--tip-link", metavar="NAME", help="last link of the --like chain")
-    parser.add_argument("--ur-calibration", metavar="OUT.yaml", type=Path,
-                        help="write UR's kinematics file (six-joint UR arms)")
-
-
-def nominal_of(calibrated: Robot, folder: Path) -> Robot:
-    """The robot the calibration started from: ``calibrated`` with every parameter at the
-    ``nominal`` value result.json lists (robot file units)."""
-    path = folder / RESULT
-    try:
-        content = json.loads(read_text(path, what="result file"))
-        rows = {row["name"]: float(row["nominal"]) for row in content["parameters"]}
-    except (ValueError, KeyError, TypeError):
-        raise InputError("not a result.json of robocal calibrate (no parameters with "
-                         "nominal values)", file=path, where="parameters") from None
-    registry = calibrated.parameters()
-    values = calibrated.parameter_vector()
-    for i, name in enumerate(registry.names):
-        if name in rows:
-            values[i] = rows[name] * calibrated.units.scale(registry.quantity(name))
-    return calibrated.with_parameters(values)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..urdf.writer import ur_calibration, urdf_over
-
     folder: Path = args.folder
     if not folder.is_dir():
         raise InputError("calibration folder not found", file=folder)
-    if args.urdf is None and args.ur_calibration is None:
-        raise InputError("nothing to write: give --urdf OUT.urdf and/or --ur-calibration "
-                         "OUT.yaml", where="export")
+    asked = [(fmt, path) for fmt in model_formats()
+             if (path := getattr(args, option_name(fmt))) is not None]
+    if not asked:
+        raise InputError("nothing to write: give one or more of " + ", ".join(
+            f"{fmt.flag} {fmt.metavar}" for fmt in model_formats()), where="export")
     robot_path = folder / CALIBRATED_ROBOT
     if not robot_path.is_file():
         raise InputError(f"no {CALIBRATED_ROBOT} in the calibration folder", file=folder)
     inputs = [robot_path, folder / RESULT, args.like]
-    for option, path in (("--urdf", args.urdf), ("--ur-calibration", args.ur_calibration)):
-        if path is not None:
-            output_file(path, option, inputs=inputs)
+    for fmt, path in asked:
+        output_file(path, fmt.flag, inputs=inputs)
     calibrated = load_robot(robot_path)
     like = args.like
     if like is None and calibrated.urdf is not None:
@@ -86,19 +68,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"the URDF the calibration read ({like}) is gone; name it with "
                              "--like", file=robot_path, where="urdf.file")
     nominal = None if calibrated.convention == "urdf" else nominal_of(calibrated, folder)
-    texts = {}
-    if args.urdf is not None:
-        if like is None:
-            from ..model.pinocchio_model import urdf_text
-
-            texts[args.urdf] = urdf_text(calibrated)
-        else:
-            texts[args.urdf] = urdf_over(calibrated, like, nominal=nominal,
-                                         base_link=args.base_link, tip_link=args.tip_link)
-    if args.ur_calibration is not None:
-        content = ur_calibration(calibrated, args.like, nominal=nominal,
-                                 base_link=args.base_link, tip_link=args.tip_link)
-        texts[args.ur_calibration] = dump_yaml(content)
+    source = ExportSource(calibrated, nominal=nominal, like=args.like, urdf=like,
+                          base_link=args.base_link, tip_link=args.tip_link)
+    texts = {path: fmt.write(source) for fmt, path in asked}
     for path, text in texts.items():  # everything computed before anything is written
         with atomic_file(path) as staging:
             staging.write_text(text)

@@ -19,20 +19,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
 from ..common.output import atomic_file
 from ..common.table import read_table, write_table
 from ..errors import InputError
 from ..instruments.datasets import joint_readings as checked_joint_readings
-from ..model.kinematics import Kinematics
-from ..model.robot import Robot, load_robot
-from ..model.transforms import quaternion_from_matrix
+from ..model.calibrated import (
+    CALIBRATED_ROBOT,
+    POSE_COLUMNS,
+    calibrated_robot,
+    pose_rows,
+    tool_pose_rows,
+)
+from ..model.robot import load_robot
 from .arguments import input_file, output_file
 from .console import summarise
 
-POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
-CALIBRATED_ROBOT = "robot_calibrated.yaml"
+# The calibrated robot and the pose rows are shared with track, compensate and the
+# Python front door (``model.calibrated``); the names stay importable from here.
+__all__ = ["CALIBRATED_ROBOT", "POSE_COLUMNS", "add_arguments", "add_effect_options",
+           "calibrated_robot", "pose_rows", "run", "tool_pose_rows"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,35 +65,6 @@ def add_effect_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--temperature", type=float, metavar="C",
                         help="temperature [C] for every row, where the effects need one and "
                         "the table has no temperature column")
-
-
-def calibrated_robot(folder: Path, nominal: Robot, nominal_path: Path) -> Robot:
-    """The calibrated robot of a result folder, checked to have ``nominal``'s joints."""
-    path = folder / CALIBRATED_ROBOT
-    if not folder.is_dir():
-        raise InputError("calibration folder not found", file=folder, where="--calibrated")
-    if not path.is_file():
-        raise InputError(f"no {CALIBRATED_ROBOT} in the calibration folder", file=folder,
-                         where="--calibrated")
-    robot = load_robot(path)
-    if [j.type for j in robot.joints] != [j.type for j in nominal.joints]:
-        raise InputError(
-            f"joints {[j.type for j in robot.joints]} do not match {nominal_path.name}'s "
-            f"{[j.type for j in nominal.joints]}", file=path, where="joints")
-    return robot.with_units(nominal.units)
-
-
-def tool_pose_rows(robot: Robot, Q: np.ndarray) -> np.ndarray:
-    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7), robot file units, for readings ``Q`` [SI]."""
-    return pose_rows(Kinematics(robot).tool_poses(Q), robot)
-
-
-def pose_rows(poses: np.ndarray, robot: Robot) -> np.ndarray:
-    """Rows ``x, y, z, qw, qx, qy, qz`` (N x 7) of world poses [m], robot file units."""
-    rows = np.empty((len(poses), 7))
-    rows[:, :3] = poses[:, :3, 3] / robot.units.length_scale
-    rows[:, 3:] = [quaternion_from_matrix(T[:3, :3]) for T in poses]
-    return rows
 
 
 def run(args: argparse.Namespace) -> int:

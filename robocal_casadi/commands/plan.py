@@ -14,8 +14,10 @@ import argparse
 import os
 from pathlib import Path
 
-from ..common.table import Table, read_table
+from ..common.output import atomic_file
+from ..common.table import Table, read_table, write_table
 from ..errors import InputError
+from ..formats import option_name, program_formats
 from ..instruments import instrument
 from ..instruments.datasets import load_dataset
 from .arguments import add_allow_outside_data, output_file, seed
@@ -45,10 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="laser: plan the scan for the laser and sphere alone (the "
                              "robot taken as exact; PLAN.csv gets pendant pose columns); the "
                              "default when the dataset's table holds pendant poses")
-    parser.add_argument("--urscript", metavar="OUT.script",
-                        help="also write the plan as a URScript program (6 revolute joints)")
-    parser.add_argument("--krl", metavar="OUT.src",
-                        help="also write the plan as a KUKA KRL program (6 axes)")
+    for fmt in program_formats():
+        parser.add_argument(fmt.flag, metavar=fmt.metavar, dest=option_name(fmt),
+                            help=fmt.help)
     add_allow_outside_data(parser)
 
 
@@ -68,8 +69,8 @@ def holds_readings(table: Table, kind: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from planning.design import design_plan
-    from planning.plan_table import write_plan
+    from planning.designed import design, scans, table
+    from planning.trajectory import Scan
 
     if args.count < 1:
         raise InputError(f"expected a positive count, got {args.count}", where="--count")
@@ -77,9 +78,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
                          "plan in parts", where="--count")
     output_file(args.out, inputs=[args.dataset])
-    for option, path in (("--urscript", args.urscript), ("--krl", args.krl)):
+    for fmt in program_formats():
+        path = getattr(args, option_name(fmt))
         if path is not None:
-            output_file(path, option, inputs=[args.dataset])
+            output_file(path, fmt.flag, inputs=[args.dataset])
     dataset = load_dataset(args.dataset, require_data=False,
                            allow_outside_data=args.allow_outside_data)
     output_file(args.out, inputs=[dataset.robot_path])
@@ -89,20 +91,20 @@ def run(args: argparse.Namespace) -> int:
         if holds_readings(read_table(data), dataset.kind):
             raise InputError(f"{args.out} is the dataset's own data table and it holds "
                              "readings; write the plan to another file", where="--out")
-    planner = instrument(dataset.kind).planner
-    if planner is not None and planner.scans:
-        return _scan(dataset, args)
-    if args.sensor_only:
+    if args.sensor_only and not scans(dataset):
         raise InputError(f"--sensor-only is for laser scans, not {dataset.kind} data",
                          where="--sensor-only")
-    plan = design_plan(dataset, args.count, args.index, seed=args.seed,
-                       refine=not args.no_refine)
-    programs = _programs(plan.setup.robot, plan.joints, None, args)
-    write_plan(plan, args.out)
+    designed = design(dataset, args.count, args.index, seed=args.seed,
+                      refine=not args.no_refine, sensor_only=args.sensor_only)
+    times = designed.times if isinstance(designed, Scan) else None
+    programs = _programs(designed.setup.robot, designed.joints, times, args)
+    columns, rows = table(designed)
+    with atomic_file(args.out) as staging:
+        write_table(staging, columns, rows)
     _write_programs(programs)
-    print(plan.summary())
+    print(designed.summary())
     print(f"wrote {args.out}")
-    _summarise(args, plan, programs)
+    _summarise(args, designed, programs)
     return 0
 
 
@@ -117,33 +119,11 @@ def _summarise(args: argparse.Namespace, plan, programs) -> None:
                  if hasattr(plan, key)})
 
 
-def _scan(dataset, args) -> int:
-    """A laser plan: a scan trajectory sampled at the laser's rate."""
-    from planning.export import write_scan
-    from planning.trajectory import design_scan
-
-    scan = design_scan(dataset, args.count, args.index, seed=args.seed,
-                       sensor_only=True if args.sensor_only else None)
-    programs = _programs(scan.setup.robot, scan.joints, scan.times, args)
-    write_scan(scan, args.out)
-    _write_programs(programs)
-    print(scan.summary())
-    print(f"wrote {args.out}")
-    _summarise(args, scan, programs)
-    return 0
-
-
 def _programs(robot, joints, times, args) -> list[tuple[str, str]]:
     """The controller programs asked for, as (text, path); made before anything is written
     so that a refusal (e.g. not 6 axes) leaves no file behind."""
-    from planning.export import krl, urscript
-
-    out = []
-    if args.urscript is not None:
-        out.append((urscript(robot, joints, times), args.urscript))
-    if args.krl is not None:
-        out.append((krl(robot, joints, times), args.krl))
-    return out
+    return [(fmt.write(robot, joints, times), path) for fmt in program_formats()
+            if (path := getattr(args, option_name(fmt))) is not None]
 
 
 def _write_programs(programs) -> None:

@@ -25,14 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from ..common.output import atomic_file
-from ..common.progress import Progress
 from ..common.table import write_table
 from ..errors import InputError
+from ..model.calibrated import calibrated_robot
 from ..tracking.job import load_tracking_job
-from ..tracking.tracker import STATUSES, Tracker
+from ..tracking.run import joint_scales, track_job
+from ..tracking.tracker import STATUSES
 from .arguments import add_allow_outside_data, output_file
 from .console import summarise
-from .fk import calibrated_robot
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,17 +48,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_allow_outside_data(parser)
 
 
-def cycle_bound(job, row: int) -> np.ndarray | None:
-    """Row ``row``'s largest joint move [rad or m]: the job's speed limits times the time
-    since the previous row (the first row: times the time to the next one, the cycle the
-    controller runs at); None without speed limits or, for a one-row job, without a cycle
-    time."""
-    if job.max_velocity is None or job.rows < 2:
-        return None
-    other = row - 1 if row > 0 else 1
-    return job.max_velocity * abs(float(job.time[row] - job.time[other]))
-
-
 def run(args: argparse.Namespace) -> int:
     job_path = Path(args.job)
     output_file(args.out, inputs=[job_path])
@@ -71,28 +60,14 @@ def run(args: argparse.Namespace) -> int:
         robot = calibrated_robot(Path(args.calibrated), job.robot, job.robot_path)
         output_file(args.out, inputs=[Path(args.calibrated) / "robot_calibrated.yaml"])
         job = load_tracking_job(job_path, robot=robot, allow_outside_data=outside)
-    scales = np.array([job.units.angle_scale if j.revolute else job.units.length_scale
-                       for j in job.robot.joints])
     max_step = None
     if args.max_step is not None:
-        if not (np.isfinite(args.max_step) and args.max_step > 0):
-            raise InputError(f"expected a positive number, got {args.max_step}",
-                             where="--max-step")
-        max_step = scales * args.max_step
-    tracker = Tracker(job.robot, job.camera_xyz, job.standoff, up=job.up, max_step=max_step)
-    rows = []
-    counts = dict.fromkeys(STATUSES, 0)
-    with Progress("track", total=job.rows) as bar:
-        for i in range(job.rows):
-            step = tracker.step(job.joints[i], job.observations[i],
-                                max_step=cycle_bound(job, i))
-            counts[step.status] += 1
-            rows.append([job.time[i], *(step.q / scales), step.status, step.solve_ms])
-            bar.update(i + 1)
-    columns = ["time", *(f"q{i}" for i in range(1, job.robot.dof + 1)), "status", "solve_ms"]
+        max_step = joint_scales(job) * args.max_step
+    tracked = track_job(job, max_step=max_step)
     with atomic_file(args.out) as staging:
-        write_table(staging, columns, rows)
-    times = np.array([r[-1] for r in rows])
+        write_table(staging, tracked.columns(), tracked.rows())
+    counts = tracked.counts()
+    times = tracked.solve_ms
     tally = ", ".join(f"{counts[s]} {s}" for s in STATUSES)
     print(f"{job.rows} rows: {tally}; solve time median {np.median(times):.3f} ms, "
           f"max {times.max():.3f} ms -> {args.out}")

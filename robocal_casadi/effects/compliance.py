@@ -207,14 +207,6 @@ class JointCompliance(Effect):
             found = [t for t in range(count) if _term_name(joint, t) in order]
             self.terms[joint] = tuple(sorted(found, key=lambda t: order[_term_name(joint, t)]))
         return self
-        wanted = set(names)
-        width = 4 * len(self.terms.get(self.joints[0], ())) if False else None  # noqa: F841
-        for joint in self.joints:
-            count = max((t for t in self.terms[joint]), default=0) + 1
-            limit = max(count, len(FIRST_MOMENT_COMPONENTS) * 64)
-            self.terms[joint] = tuple(t for t in range(limit)
-                                      if _term_name(joint, t) in wanted)
-        return self
 
     def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
         """``payload``: whether the payload term was (or, with a payload column in the

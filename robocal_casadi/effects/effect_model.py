@@ -24,10 +24,10 @@ import casadi as ca
 import numpy as np
 
 from ..common.fields import load_yaml
-from ..delivery.results import Delivered
 from ..errors import InputError
 from ..model.kinematics import Kinematics
 from ..model.robot import Robot, dump_yaml
+from ..results import Delivered
 from . import EFFECTS, LEARNED, Effect, RowContext
 from .motion import is_derived_column, with_directions
 

@@ -284,7 +284,7 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
 
 def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, validation,
                files: list[tuple[str, Path]], digest: str) -> dict:
-    from ..calibration.job import JobOptions, ReportOptions, calibrate_job, write
+    from ..job.run import JobOptions, ReportOptions, calibrate_job, write
 
     if folder.exists():
         refusal = replace_refusal(folder, "fleet", also=(RECORD,)) if folder.is_dir() else \

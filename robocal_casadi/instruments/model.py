@@ -35,8 +35,8 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
-from ..delivery.results import ErrorTerm
 from ..model.parameters import ParameterRegistry
+from ..results import ErrorTerm
 from .dataset import dataset_rows
 
 PointsFunction = Callable[[ca.MX], ca.MX]

@@ -242,7 +242,7 @@ def load_robot(path: str | Path, *, base_link: str | None = None,
     that starts with ``<``); errors name the file and the key. ``base_link`` and
     ``tip_link`` choose a URDF's chain (default: its root to its single leaf)."""
     path = path_argument(path, "path", what="a robot file path")
-    from ..urdf.description import is_urdf, read_description
+    from .urdf_description import is_urdf, read_description
 
     if is_urdf(path):
         return robot_from_dict(read_description(path, base_link=base_link, tip_link=tip_link),

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..delivery.results import CalibrationResult, DatasetResiduals
+from ..results import CalibrationResult, DatasetResiduals
 from .numbers import MODELS, pooled
 
 
@@ -120,7 +120,7 @@ def delivered(result: CalibrationResult) -> list[Delivered]:
 
 def _written_errors(result: CalibrationResult) -> np.ndarray | None:
     """Per-measurement errors [m] of robot_calibrated.yaml as written, on the data the
-    delivered accuracy is judged on (``calibration.job.measured``), or None."""
+    delivered accuracy is judged on (``job.run.measured``), or None."""
     errors = {} if result.delivered is None else result.delivered.errors
     role, _ = judged_on(result)
     return errors.get(role)

@@ -9,7 +9,7 @@ that did not converge).
 
 from __future__ import annotations
 
-from ..delivery.results import CalibrationResult
+from ..results import CalibrationResult
 from .accuracy import recommended
 from .effect_views import effect_title
 from .numbers import ErrorStats, error_noun, format_number, pooled

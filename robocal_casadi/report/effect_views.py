@@ -30,11 +30,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..common.units import Units
-from ..delivery.results import CalibrationResult, DatasetResiduals, EffectFinding
 from ..effects import EFFECTS, data_columns, effect_title
 from ..effects.base import Effect
 from ..effects.motion import with_directions
 from ..model.robot import Robot
+from ..results import CalibrationResult, DatasetResiduals, EffectFinding
 from .numbers import display_units, errors_of, joint_reading_unit
 
 

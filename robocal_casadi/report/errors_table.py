@@ -20,7 +20,7 @@ import numpy as np
 
 from ..common.output import atomic_file
 from ..common.table import format_number
-from ..delivery.results import CalibrationResult, DatasetResiduals, ErrorTerm
+from ..results import CalibrationResult, DatasetResiduals, ErrorTerm
 
 FILE_NAME = "errors.csv"
 MM = 1e-3  # [m] per mm

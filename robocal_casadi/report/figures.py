@@ -22,8 +22,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..common.units import Units
-from ..delivery.results import DatasetResiduals, Identifiability
 from ..model.robot import Robot
+from ..results import DatasetResiduals, Identifiability
 from .numbers import MODEL_TITLES, errors_of, joint_reading_unit
 
 if TYPE_CHECKING:
@@ -369,7 +369,7 @@ def effect_evidence(view: EffectView, units: Units) -> Figure:
 def predicted_errors(errors: np.ndarray, scale: float, unit: str,
                      region: str = "the joint ranges the data cover") -> Figure:
     """Histogram of the predicted tool-position error [``unit``] over the sampled poses of
-    the work cell (``delivery.accuracy``)."""
+    the work cell (``job.accuracy``)."""
     with report_style():
         figure = new_figure(2.8)
         axes = figure.add_subplot()

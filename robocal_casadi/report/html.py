@@ -19,8 +19,8 @@ import jinja2
 from markupsafe import Markup
 
 from ..common.output import atomic_file
-from ..delivery.results import CalibrationResult
 from ..errors import ArgumentError, InputError
+from ..results import CalibrationResult
 from .content import Details, Document, Paragraph, Plot, Table
 from .figures import png_bytes
 from .info import ReportInfo

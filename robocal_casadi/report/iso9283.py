@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..delivery.results import CalibrationResult, DatasetResiduals
+from ..results import CalibrationResult, DatasetResiduals
 from .errors_table import csv_line
 from .numbers import MODELS
 

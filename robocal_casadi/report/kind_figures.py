@@ -20,8 +20,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..common.units import Units
-from ..delivery.results import DatasetResiduals
 from ..model.robot import Robot
+from ..results import DatasetResiduals
 from .figures import COLOURS, WIDTH, _binned_rms, _thin, log_scale, new_figure, report_style
 from .numbers import errors_of, format_at_resolution, joint_reading_unit, resolution_of
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..common.units import Units
-from ..delivery.results import DatasetResiduals
 from ..instruments import INSTRUMENTS
 from ..model.robot import Robot
+from ..results import DatasetResiduals
 
 MODELS = ("nominal", "geometric", "final")
 MODEL_TITLES = {"nominal": "nominal robot", "geometric": "geometric calibration",

@@ -10,8 +10,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..common.units import Units
-from ..delivery.results import CalibrationResult, RejectedReading
 from ..model.kinematics import Kinematics
+from ..results import CalibrationResult, RejectedReading
 from .content import Paragraph, Plot, Section, Table
 from .figures import log_scale, new_figure
 from .numbers import display_units

@@ -17,10 +17,9 @@ from functools import partial
 import numpy as np
 
 from ..common.units import Units
-from ..delivery.accuracy import BAND
-from ..delivery.results import CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from ..effects import is_learned
 from ..instruments import INSTRUMENTS
+from ..results import BAND, CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from . import figures, kind_figures
 from .accuracy import accuracy_rows, delivered, judged_on, recommended
 from .conclusion import conclusion_paragraphs
@@ -230,7 +229,7 @@ def applying_section(result: CalibrationResult) -> Section:
 
 def work_cell_section(result: CalibrationResult) -> Section | None:
     """The tool-position error predicted for robot_calibrated.yaml away from the measured
-    points, over the work cell (``delivery.accuracy``)."""
+    points, over the work cell (``job.accuracy``)."""
     predicted = result.predicted_accuracy
     if predicted is None:
         return None

@@ -16,7 +16,7 @@ from functools import partial
 import numpy as np
 
 from ..common.units import LENGTH_SCALE, Units
-from ..delivery.results import CalibrationResult, DatasetResiduals
+from ..results import CalibrationResult, DatasetResiduals
 from . import kind_figures
 from .accuracy import judged_on
 from .content import Paragraph, Plot

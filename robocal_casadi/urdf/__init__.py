@@ -2,14 +2,15 @@
 allow, and write a calibrated chain back over the user's own URDF (and UR's calibration
 format).
 
-``document`` (the file) and ``description`` (the chain as a robot-file mapping, which
-``robot.load_robot`` reads) need nothing of the robot model and are all this package
-imports; ``chain`` (file -> ``Robot``), ``equivalent`` (the standard DH equivalent) and
-``writer`` (calibrated robot -> URDF, UR kinematics) are imported from their modules.
+Reading the file is part of the robot model, since ``model.robot.load_robot`` reads URDF
+robots: ``model.urdf_document`` (the file) and ``model.urdf_description`` (the chain as a
+robot-file mapping), re-exported here. This package sits above the model: ``chain``
+(file -> ``Robot``), ``equivalent`` (the standard DH equivalent) and ``writer``
+(calibrated robot -> URDF, UR kinematics) are imported from their modules.
 """
 
-from .description import chain_description, is_urdf, read_description
-from .document import UrdfDocument, read_document
+from ..model.urdf_description import chain_description, is_urdf, read_description
+from ..model.urdf_document import UrdfDocument, read_document
 
 __all__ = ["UrdfDocument", "chain_description", "is_urdf", "read_description",
            "read_document"]

@@ -9,8 +9,8 @@ import numpy as np
 
 from ..model.robot import Frame, Robot, robot_from_dict
 from ..model.transforms import rpy_from_matrix
-from .description import chain_description, is_urdf
-from .document import UrdfDocument, read_document
+from ..model.urdf_description import chain_description, is_urdf
+from ..model.urdf_document import UrdfDocument, read_document
 
 __all__ = ["frame_of", "is_urdf", "read_urdf_robot", "robot_from_document"]
 

@@ -35,8 +35,8 @@ import numpy as np
 from ..errors import InputError
 from ..model.robot import Robot, UrdfSource
 from ..model.transforms import invert, rot_x, rot_y, rot_z, rpy_from_matrix, translation
+from ..model.urdf_document import UrdfDocument, read_document
 from .chain import frame_of, robot_from_document
-from .document import UrdfDocument, read_document
 
 AGREEMENT = 1e-6  # [m] and [rad]: a file's link frame must follow the robot file's this closely
 UR_SEGMENTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")

@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from ...delivery.results import ErrorTerm
 from ...model.parameters import ParameterRegistry
+from ...results import ErrorTerm
 from ..dataset import dataset_rows
 from ..model import MeasurementModel, PointsFunction
 

@@ -30,10 +30,10 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from ...delivery.results import ErrorTerm
 from ...errors import InputError
 from ...model.beam import beam_direction, tangent_basis
 from ...model.parameters import ParameterRegistry
+from ...results import ErrorTerm
 from ..model import MeasurementModel, PointsFunction
 from .sphere_fit import Scan, SensorFit, fit_dataset, sphere_centre
 

@@ -19,9 +19,9 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from ...delivery.results import ErrorTerm
 from ...model.parameters import ParameterRegistry
 from ...model.transforms import pose_from_xyz_rpy
+from ...results import ErrorTerm
 from ..model import MeasurementModel, PointsFunction
 
 

@@ -9,7 +9,8 @@ moving link with no ``<inertial>`` anywhere gets no inertial data for its joint 
 effects then use lumped unknowns).
 
 The mapping is what ``robot.robot_from_dict`` reads (lengths [m], angles [rad]), so this
-module needs nothing of the robot model and ``robot.load_robot`` can read URDF files.
+module needs only the transforms, not ``robot``, and ``robot.load_robot`` can read URDF
+files.
 """
 
 from __future__ import annotations
@@ -19,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..model.transforms import invert, rpy_from_matrix
-from .document import UrdfDocument, read_document
+from .transforms import invert, rpy_from_matrix
+from .urdf_document import UrdfDocument, read_document
 
 
 def is_urdf(path: str | Path) -> bool:

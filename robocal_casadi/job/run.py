@@ -5,7 +5,7 @@ this one job, so their results are the same, key by key:
 
 1. ``calibrate`` (geometry, then the effects diagnosis adds), restricted to a
    controller's parameter set when a ``profile`` is given;
-2. ``delivery.choose``: the best geometry-only model for ``robot_calibrated.yaml``, or
+2. ``job.choice.choose``: the best geometry-only model for ``robot_calibrated.yaml``, or
    doing nothing when the calibration is not better (``recommended`` ``nominal`` or
    ``instrument_only``, exit status 3);
 3. ``write``: the files staged in a new folder; every accuracy figure stated about a
@@ -34,22 +34,22 @@ from typing import ParamSpec, TypeVar
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ..calibration.evaluation import evaluate, held_out
+from ..calibration.identification import calibrate as _calibrate
+from ..calibration.outliers import kept_datasets
 from ..common.memory import release_freed
 from ..common.output import atomic_directory
 from ..common.output import json_safe as _clean
 from ..common.progress import reports_stages, stage
-from ..delivery.accuracy import predict, work_cell
-from ..delivery.choice import choose
-from ..delivery.profiles import ProfileCost, profile_parameters
-from ..delivery.results import CalibrationResult, CandidateFigures, Delivered
 from ..effects.effect_model import EFFECTS_FILE, load_effects, save_effects
 from ..errors import ArgumentError
+from ..formats import profile_parameters
 from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
-from .evaluation import evaluate, held_out
-from .identification import calibrate as _calibrate
-from .outliers import kept_datasets
+from ..results import CalibrationResult, CandidateFigures, Delivered, ProfileCost
+from .accuracy import predict, work_cell
+from .choice import choose
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -60,7 +60,9 @@ REFUSED = 3  # exit status: the calibration is not better than doing nothing
 @dataclass(frozen=True)
 class JobOptions:
     """How to calibrate (the options of ``calibration.calibrate``) and, with
-    ``profile``, the controller whose parameter set alone is fitted."""
+    ``profile``, the controller whose parameter set alone is fitted; ``effects`` declared
+    from the start and ``parameters`` (the robot parameters that may be fitted; None: all)
+    as ``calibration.calibrate`` takes them."""
 
     diagnose: bool = True
     method: str = "lm"
@@ -70,11 +72,13 @@ class JobOptions:
     rule: str = "prior"
     profile: str | None = None
     progress: bool = False
+    effects: Sequence = ()
+    parameters: Sequence[str] | str | None = None
 
     def calibrate_options(self) -> dict:
         return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
                     select_growth=self.select_growth, max_iterations=self.max_iterations,
-                    rule=self.rule, progress=self.progress)
+                    rule=self.rule, progress=self.progress, effects=self.effects)
 
 
 @dataclass(frozen=True)
@@ -125,7 +129,8 @@ def calibrate_job(datasets: Sequence, validation: Sequence = (),
     """Steps 1 and 2: the calibration with its delivery chosen (nothing written)."""
     datasets, validation = list(datasets), list(validation)
     if options.profile is None:
-        result = _calibrate(datasets, validation, **options.calibrate_options())
+        result = _calibrate(datasets, validation, parameters=options.parameters,
+                            **options.calibrate_options())
     else:
         result = _profiled(datasets, validation, options)
     return deliver(result, datasets, validation)
@@ -240,8 +245,8 @@ def _effects_left_out(result: CalibrationResult, robot) -> float:
     fit readings, when effects are recommended but a controller runs geometry alone."""
     if result.recommended != "final" or not result.effects:
         return 0.0
-    from ..delivery.projection import model_targets
     from ..model.kinematics import Kinematics
+    from .projection import model_targets
 
     final_robot = result.robot_nominal.with_parameters(
         np.array([p.estimate for p in result.parameters], dtype=float))
@@ -282,8 +287,11 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
 
 def _profiled(datasets, validation, options: JobOptions) -> CalibrationResult:
     """The calibration restricted to ``options.profile``'s parameters, carrying what the
-    unrestricted calibration of the same data reaches (``profiles.ProfileCost``)."""
+    unrestricted calibration of the same data reaches (``results.ProfileCost``)."""
     profile = str(options.profile)
+    if options.parameters is not None:
+        raise ArgumentError(f"a profile ({profile!r}) chooses the parameters itself; give "
+                            "one of profile and parameters", argument="parameters")
     allowed = profile_parameters(profile, datasets[0].robot)
     free = _calibrate(datasets, validation, **options.calibrate_options())
     restricted = _calibrate(datasets, validation, parameters=allowed,

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..common.units import Units
-from ..model.robot import Robot
+from .common.units import Units
+from .model.robot import Robot
 
 if TYPE_CHECKING:
-    from ..effects.base import Effect
+    from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 
@@ -352,7 +352,7 @@ class Unexplained:
 
 @dataclass(frozen=True)
 class CandidateFigures:
-    """One geometry-only model the delivery weighed (``delivery.choice``): its RMS [m]
+    """One geometry-only model the delivery weighed (``job.choice``): its RMS [m]
     on the fit data and on held-out data (None without any)."""
 
     name: str
@@ -363,7 +363,7 @@ class CandidateFigures:
 @dataclass(frozen=True)
 class Delivered:
     """What each output file delivers, measured from the files as written
-    (``calibration.job.measured``).
+    (``job.run.measured``).
 
     ``model`` is the candidate ``robot_calibrated.yaml`` holds (``geometric``,
     ``nominal``, ...), ``robot_file`` its RMS [m] by role (``fit``, ``validation``),
@@ -522,7 +522,7 @@ DOING_NOTHING = ("nominal", "instrument_only")  # recommendations that refuse a 
 
 @dataclass(frozen=True)
 class Candidate:
-    """One model a controller could run (``delivery.choice``): ``robot`` (geometry only)
+    """One model a controller could run (``job.choice``): ``robot`` (geometry only)
     with the ``mounted`` instrument values [SI] that belong to it; ``fit_rms`` and
     ``held_out_rms`` [m] (None where not measured)."""
 
@@ -539,7 +539,7 @@ class Candidate:
 
 @dataclass(frozen=True)
 class Delivery:
-    """What is delivered (``delivery.choice``): ``recommended`` (``final``, ``geometric``,
+    """What is delivered (``job.choice``): ``recommended`` (``final``, ``geometric``,
     ``nominal`` or ``instrument_only``), ``delivered`` the candidate robot_calibrated.yaml holds,
     the ``basis`` of the decision (``held-out data`` or ``cross-validation``), every
     ``candidates`` scored, the held-out RMS [m] of the calibrated model the user would
@@ -652,7 +652,7 @@ class CalibrationResult:
     spheres: tuple[SphereEstimate, ...] = ()
     notes: tuple[str, ...] = ()  # what a reader of the numbers must know (e.g. repeated data)
     profile: ProfileCost | None = None  # when restricted to a controller's parameter set
-    delivered: Delivered | None = None  # ``calibration.job.measured``: what each file delivers
+    delivered: Delivered | None = None  # ``job.run.measured``: what each file delivers
     # The geometric fit's own instrument values [SI] and the posterior covariance [SI] of
     # its free robot and mounted parameters (``covariance_names``, in that order): what
     # the delivery and its predicted work-cell accuracy start from (``delivery``).

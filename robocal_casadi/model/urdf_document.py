@@ -17,7 +17,7 @@ import numpy as np
 
 from ..common.fields import read_text
 from ..errors import InputError
-from ..model.transforms import pose_from_xyz_rpy
+from .transforms import pose_from_xyz_rpy
 
 JOINT_TYPES = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic",
                "fixed": "fixed"}

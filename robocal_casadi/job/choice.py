@@ -34,7 +34,7 @@ from ..calibration.identification import evaluate, models_for
 from ..calibration.problem import Problem
 from ..calibration.solver import solve
 from ..model.robot import Robot
-from .results import (  # noqa: F401 (the records, re-exported)
+from ..results import (  # noqa: F401 (the records, re-exported)
     DOING_NOTHING,
     Candidate,
     Delivery,

@@ -62,7 +62,7 @@ from ..calibration.prior import tolerance_of
 from ..model.kinematics import Kinematics
 from ..model.parameters import perturbed_stems
 from ..model.robot import Robot
-from .results import (  # noqa: F401 (the record and its region kinds, re-exported)
+from ..results import (  # noqa: F401 (the record and its region kinds, re-exported)
     BAND,
     DATA_RANGES,
     DECLARED,
