@@ -223,8 +223,11 @@ def _job_row(case: dict) -> str:
 
 def render_jobs(record: dict) -> str:
     """Whole calibration jobs per kind and size, from ``jobs.py``'s JSON."""
-    cases = [c for c in record["output"]["cases"] if "error" not in c]
-    failed = [c["case"] for c in record["output"]["cases"] if "error" in c]
+    # A job that stopped (an error, or an exit status other than 0) measured no calibration.
+    cases = [c for c in record["output"]["cases"] if "error" not in c and not c["exit_status"]]
+    failed = [f"{JOB_LABELS.get(c['case'], c['case'])} (exit status {c['exit_status']})"
+              if "exit_status" in c else JOB_LABELS.get(c["case"], c["case"])
+              for c in record["output"]["cases"] if "error" in c or c["exit_status"]]
     lead = ("**Whole jobs** (`robocal calibrate` with diagnosis, `result.json` and "
             "`report.html`, each in a fresh process, on simulated data of the example 6R "
             "or the shipped data; CPU seconds of the job, and of the C compiler apart (spent "
@@ -236,7 +239,7 @@ def render_jobs(record: dict) -> str:
     rows += [_job_row(c) for c in cases]
     parts = [lead, "\n".join(rows), _against_targets(cases)]
     if failed:
-        parts.append(f"Failed in this run: {', '.join(failed)}.")
+        parts.append(f"Failed in this run: {'; '.join(failed)}.")
     changes = f"\n\n{record['changes']}" if "changes" in record else ""
     return "\n\n".join(parts) + _notes(record) + changes
 

@@ -68,7 +68,9 @@ def timed(command: list[str], cwd: Path, timeout: float | None = None) -> dict:
     return {"exit_status": status, "finished": status is not None,
             "cpu_seconds": round(cpu, 1), "wall_seconds": round(wall, 1),
             "load_average_before": before, "load_average_after": _load(),
-            "last_line": lines[-1] if lines else "", "progress_percent": progress(text)}
+            "last_line": lines[-1] if lines else "", "progress_percent": progress(text),
+            "failed": [line.split()[1] for line in lines
+                       if line.startswith(("FAILED ", "ERROR ")) and len(line.split()) > 1]}
 
 
 def progress(printed: str) -> int | None:

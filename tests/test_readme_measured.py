@@ -126,6 +126,14 @@ def test_the_delivered_table_is_read_from_the_run():
     assert " 7.77" in text
 
 
+def test_a_job_that_stopped_is_listed_as_failed_not_timed():
+    record = copy.deepcopy(_run_record("jobs"))
+    case = record["output"]["cases"][0]
+    case["exit_status"], case["cpu_seconds"] = 2, 0.77
+    text = measured.render_jobs(record)
+    assert "| 0.77 |" not in text and "(exit status 2)" in text
+
+
 def test_the_fleet_paragraph_is_read_from_the_run():
     record = copy.deepcopy(_run_record("fleet"))
     output = record["output"]
