@@ -15,6 +15,7 @@ niced run waits longer for the processor, so its wall time says more about the m
 other work than about the command). Prints JSON.
 
     python benchmarks/setup.py [--tests] [--tests-timeout SECONDS] [--demo-runs 1]
+                               [--cold-cache]
 """
 
 from __future__ import annotations
@@ -45,7 +46,8 @@ def _load() -> list[float]:
     return [round(v, 2) for v in os.getloadavg()]
 
 
-def timed(command: list[str], cwd: Path, timeout: float | None = None) -> dict:
+def timed(command: list[str], cwd: Path, timeout: float | None = None,
+          env: dict[str, str] | None = None) -> dict:
     """Run ``command`` once; its exit status, CPU and wall seconds, load before and after,
     and the last line it printed (a summary for pytest). Past ``timeout`` seconds of wall
     time the command and everything it started are stopped (``finished`` false, exit
@@ -54,7 +56,7 @@ def timed(command: list[str], cwd: Path, timeout: float | None = None) -> dict:
     with tempfile.TemporaryFile("w+") as printed:
         process = subprocess.Popen(command, cwd=cwd, stdout=printed,
                                    stderr=subprocess.STDOUT, text=True,
-                                   start_new_session=True)
+                                   start_new_session=True, env=env)
         try:
             status: int | None = process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -107,13 +109,22 @@ def main() -> None:
                              "how far it came")
     parser.add_argument("--demo-runs", type=int, default=1,
                         help="times to run the demo (the first may compile C code)")
+    parser.add_argument("--cold-cache", action="store_true",
+                        help="run the demo on an empty compiled-code cache (ROBOCAL_CACHE "
+                             "in a new folder), as on a newcomer's machine; later demo runs "
+                             "reuse what the first compiled")
     args = parser.parse_args()
     out: dict = {"benchmark": "setup", "cores": os.cpu_count(), "niceness": os.nice(0),
                  "demo": []}
-    for _ in range(args.demo_runs):
-        with tempfile.TemporaryDirectory(prefix="robocal-setup-") as folder:
-            out["demo"].append(timed(robocal() + ["demo", "--no-screenshot", "--quiet",
-                                                  "--out", str(Path(folder) / "demo")], ROOT))
+    with tempfile.TemporaryDirectory(prefix="robocal-cache-") as cache:
+        env = dict(os.environ, ROBOCAL_CACHE=cache) if args.cold_cache else None
+        for run in range(args.demo_runs):
+            with tempfile.TemporaryDirectory(prefix="robocal-setup-") as folder:
+                figures = timed(robocal() + ["demo", "--no-screenshot", "--quiet", "--out",
+                                             str(Path(folder) / "demo")], ROOT, env=env)
+            figures["cache"] = ("the user's" if not args.cold_cache else
+                                "empty" if run == 0 else "filled by the run before")
+            out["demo"].append(figures)
     if args.tests:
         tests = timed([sys.executable, "-m", "pytest", "-q"], ROOT, args.tests_timeout)
         tests["counts"] = pytest_counts(tests["last_line"])

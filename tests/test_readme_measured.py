@@ -134,6 +134,15 @@ def test_a_job_that_stopped_is_listed_as_failed_not_timed():
     assert "| 0.77 |" not in text and "(exit status 2)" in text
 
 
+def test_the_first_demo_is_read_from_the_run():
+    record = copy.deepcopy(_run_record("first_run"))
+    first, again = record["output"]["demo"][:2]
+    assert (first["cache"], again["cache"]) == ("empty", "filled by the run before")
+    first["cpu_seconds"], again["exit_status"] = 87.0, 3
+    text = measured.render_first_run(record)
+    assert "with the cache empty: 87 s of CPU" in text and "(exit status 3)" in text
+
+
 def test_the_fleet_paragraph_is_read_from_the_run():
     record = copy.deepcopy(_run_record("fleet"))
     output = record["output"]
