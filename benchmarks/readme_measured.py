@@ -45,7 +45,7 @@ ORDER = ("setup", "first_run", "real_data", "identification", "kinematics", "cal
          "robust", "fleet", "fleet_memory", "table_memory", "delivered")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
 RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
-        "first_run": ("setup.py", "--cold-cache", "--demo-runs", "2"),
+        "first_run": ("setup.py", "--cold-cache", "--blas-default", "--demo-runs", "2"),
         "real_data": ("real_data.py",),
         "identification": ("identification.py", "--quick"),
         "kinematics": ("kinematics.py",),
@@ -519,12 +519,16 @@ def render_first_run(record: dict) -> str:
         f"{_seconds(d['wall_seconds'])} of wall time at load {d['load_average_before'][0]:.1f}"
         + ("" if d["exit_status"] == 0 else f" (exit status {d['exit_status']})")
         for d in demo)
+    threads = demo[0].get("blas_threads", "1")
+    if threads == "library default":
+        threads = "the library's default, as in a shell that sets none"
     return (f"**A newcomer's first demo** (`robocal demo --no-screenshot` run on an empty "
             f"compiled-code cache, `ROBOCAL_CACHE` pointing to a new folder, as on a machine "
             f"that has never run the toolkit, so the C compiler builds the compiled functions "
-            f"first; then again on what that run compiled; CPU seconds of the process and "
-            f"what it started, the compiler included). {_run_line(record)} "
-            f"{runs}.") + _notes(record)
+            f"first; then again on what that run compiled; OpenBLAS threads: {threads}; "
+            f"CPU seconds "
+            f"of the process and what it started, the compiler included). "
+            f"{_run_line(record)} Measured {runs}.") + _notes(record)
 
 
 REAL_SETS = {"series_D": "UR10, tracker, series D", "series_A": "UR10, tracker, series A"}

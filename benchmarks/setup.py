@@ -15,7 +15,7 @@ niced run waits longer for the processor, so its wall time says more about the m
 other work than about the command). Prints JSON.
 
     python benchmarks/setup.py [--tests] [--tests-timeout SECONDS] [--demo-runs 1]
-                               [--cold-cache]
+                               [--cold-cache] [--blas-default]
 """
 
 from __future__ import annotations
@@ -109,6 +109,10 @@ def main() -> None:
                              "how far it came")
     parser.add_argument("--demo-runs", type=int, default=1,
                         help="times to run the demo (the first may compile C code)")
+    parser.add_argument("--blas-default", action="store_true",
+                        help="run the demo without OPENBLAS_NUM_THREADS / OMP_NUM_THREADS in "
+                             "its environment, so that BLAS picks its own thread count as in "
+                             "a newcomer's shell")
     parser.add_argument("--cold-cache", action="store_true",
                         help="run the demo on an empty compiled-code cache (ROBOCAL_CACHE "
                              "in a new folder), as on a newcomer's machine; later demo runs "
@@ -117,11 +121,15 @@ def main() -> None:
     out: dict = {"benchmark": "setup", "cores": os.cpu_count(), "niceness": os.nice(0),
                  "demo": []}
     with tempfile.TemporaryDirectory(prefix="robocal-cache-") as cache:
-        env = dict(os.environ, ROBOCAL_CACHE=cache) if args.cold_cache else None
+        env = dict(os.environ, ROBOCAL_CACHE=cache) if args.cold_cache else dict(os.environ)
+        if args.blas_default:
+            for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+                env.pop(name, None)
         for run in range(args.demo_runs):
             with tempfile.TemporaryDirectory(prefix="robocal-setup-") as folder:
                 figures = timed(robocal() + ["demo", "--no-screenshot", "--quiet", "--out",
                                              str(Path(folder) / "demo")], ROOT, env=env)
+            figures["blas_threads"] = env.get("OPENBLAS_NUM_THREADS", "library default")
             figures["cache"] = ("the user's" if not args.cold_cache else
                                 "empty" if run == 0 else "filled by the run before")
             out["demo"].append(figures)
