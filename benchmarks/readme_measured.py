@@ -524,8 +524,8 @@ def render_first_run(record: dict) -> str:
         threads = "the library's default, as in a shell that sets none"
     return (f"**A newcomer's first demo** (`robocal demo --no-screenshot` run on an empty "
             f"compiled-code cache, `ROBOCAL_CACHE` pointing to a new folder, as on a machine "
-            f"that has never run the toolkit, so the C compiler builds the compiled functions "
-            f"first; then again on what that run compiled; OpenBLAS threads: {threads}; "
+            f"that has never run the toolkit, so whatever the demo compiles is compiled in "
+            f"that run; then again on that cache; OpenBLAS threads: {threads}; "
             f"CPU seconds "
             f"of the process and what it started, the compiler included). "
             f"{_run_line(record)} Measured {runs}.") + _notes(record)
