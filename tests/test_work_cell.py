@@ -82,7 +82,7 @@ def test_measured_poses_as_the_work_cell(tracker, tmp_path):
     predicted = measured(result, [dataset]).predicted_accuracy
     assert predicted.region_kind == MEASURED
     assert predicted.samples == len(predicted.errors) == min(SAMPLES, dataset.rows)
-    assert "measured in" in predicted.sentence(1e-3, "mm")
+    assert "the poses the data cover" in predicted.sentence(1e-3, "mm")
 
 
 @pytest.mark.parametrize("cell, fragment", [

@@ -25,7 +25,13 @@ from ..errors import InputError
 from ..formats import profiles
 from ..instruments.datasets import load_dataset
 from ..job.run import JobOptions, ReportOptions, run_job
-from ..results import CalibrationResult, Decision, ProfileCost, mean_square_shares
+from ..results import (
+    CalibrationResult,
+    Decision,
+    PredictedAccuracy,
+    ProfileCost,
+    mean_square_shares,
+)
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -132,7 +138,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if result.delivered is not None:
         lines += delivered_lines(result.delivered, s, units.length)
     if result.predicted_accuracy is not None:
-        lines.append(result.predicted_accuracy.sentence(s, units.length))
+        lines += result.predicted_accuracy.sentence(s, units.length).splitlines()
     lines += _refusal_lines(result)
     if result.unexplained is not None:
         taken = any(is_learned(e.name) for e in result.effects)
@@ -200,7 +206,17 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
                 "rms": result.predicted_accuracy.rms / s, "p95": result.predicted_accuracy.p95 / s,
                 "max": result.predicted_accuracy.max / s,
                 "rms_band": None if result.predicted_accuracy.band is None else [
-                    v / s for v in result.predicted_accuracy.band]}}
+                    v / s for v in result.predicted_accuracy.band],
+                **_regions(result.predicted_accuracy, s)}}
+
+
+def _regions(predicted: PredictedAccuracy, s: float) -> dict:
+    """The region of the summary's predicted figure, the nominal robot's over it, and
+    the box figure with the parameters that carry its difference (robot file units)."""
+    return {"region": predicted.region_kind,
+            "nominal_rms": None if predicted.nominal is None else predicted.nominal.rms / s,
+            "box_rms": None if predicted.box is None else predicted.box.rms / s,
+            "unseen": [u.name for u in predicted.unseen]}
 
 
 def _rejected(result: CalibrationResult, outcome: Decision) -> list[str]:

@@ -48,7 +48,7 @@ from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult, CandidateFigures, Delivered, ProfileCost
-from .accuracy import predict, work_cell
+from .accuracy import statement, work_cell
 from .choice import choose
 
 P = ParamSpec("P")
@@ -193,8 +193,12 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     names = list(mounted)[:3]  # the instrument's point on the flange comes first
     point = [mounted[n] for n in names] if len(names) == 3 else [0.0, 0.0, 0.0]
     region, region_kind = work_cell(result, datasets)
-    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured,
-                        region, region_kind) if region is not None else None
+    effects, effects_point = _effect_model(result, names)
+    predicted = statement(
+        result, robot, point, names if len(names) == 3 else (), structured, region,
+        region_kind, effects=effects, effects_point=effects_point,
+        nominal=_nominal(delivery, names), instrument=result.residuals[0].kind
+        if result.residuals else "") if region is not None else None
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None
@@ -238,6 +242,34 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
                                                anchors=datasets)
             out[role] = problem.rms(x)
     return out
+
+
+def _effect_model(result: CalibrationResult, names: list[str]):
+    """The model with effects and its instrument point [m] (flange frame), when effects
+    are recommended but a controller runs geometry alone; ``(None, None)`` otherwise."""
+    if result.recommended != "final" or not result.effects or len(names) != 3:
+        return None, None
+    from .projection import effect_model
+
+    final_robot = result.robot_nominal.with_parameters(
+        np.array([p.estimate for p in result.parameters], dtype=float))
+    values = {name: value for name, (value, _) in result.mounted.items()}
+    if not all(n in values for n in names):
+        return None, None
+    return effect_model(result, final_robot), [values[n] for n in names]
+
+
+def _nominal(delivery, names: list[str]):
+    """The nominal robot and its instrument point [m] as the file gives it, or None."""
+    try:
+        candidate = delivery.candidate("nominal")
+    except KeyError:
+        return None
+    if len(names) != 3:
+        return candidate.robot, [0.0, 0.0, 0.0]
+    if not all(n in candidate.mounted for n in names):
+        return None
+    return candidate.robot, [candidate.mounted[n] for n in names]
 
 
 def _effects_left_out(result: CalibrationResult, robot) -> float:

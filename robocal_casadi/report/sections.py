@@ -229,42 +229,77 @@ def applying_section(result: CalibrationResult) -> Section:
 
 def work_cell_section(result: CalibrationResult) -> Section | None:
     """The tool-position error predicted for robot_calibrated.yaml away from the measured
-    points, over the work cell (``job.accuracy``)."""
+    points, over the work cell (``job.accuracy``), beside the nominal robot's over the
+    same poses; the whole box of joint ranges beside it where it differs by more than 2x,
+    with what carries the difference."""
     predicted = result.predicted_accuracy
     if predicted is None:
         return None
     units = display_units(result.units)
     scale, unit = units.length_scale, units.length
-    rows: tuple[tuple[str, str], ...] = (
-            ("RMS", format_number(predicted.rms / scale)),
-            ("95th percentile", format_number(predicted.p95 / scale)),
-            ("maximum", format_number(predicted.max / scale)),
-            ("of which the model does not describe", format_number(predicted.structured / scale)))
+    figures_of = [("calibrated", predicted), ("nominal robot", predicted.nominal)]
+    box = predicted.box if predicted.box_differs else None
+    if box is not None:
+        figures_of += [("calibrated, whole box", box), ("nominal robot, whole box", box.nominal)]
+    shown = [(label, f) for label, f in figures_of if f is not None]
+
+    def row(name: str, value) -> tuple[str, ...]:
+        return (name, *(format_number(value(f) / scale) if value(f) is not None else "-"
+                        for _, f in shown))
+
+    rows: list[tuple[str, ...]] = [row("RMS", lambda f: f.rms),
+                                   row("95th percentile", lambda f: f.p95),
+                                   row("maximum", lambda f: f.max)]
+    rows.append(row("of which the model does not describe",
+                    lambda f: getattr(f, "structured", None)))
     if predicted.band is not None:  # where one robot's RMS lies (quantiles over robots)
-        low, high = (format_number(v / scale) for v in predicted.band)
-        rows = rows[:1] + ((f"RMS of one robot, {100 * BAND[0]:.0f}% of robots below", low),
-                           (f"RMS of one robot, {100 * BAND[1]:.0f}% of robots below",
-                            high)) + rows[1:]
+        for k, label in enumerate((f"RMS of one robot, {100 * BAND[0]:.0f}% of robots below",
+                                   f"RMS of one robot, {100 * BAND[1]:.0f}% of robots below")):
+            rows.insert(1 + k, row(label, lambda f, k=k: None if getattr(f, "band", None)
+                                   is None else f.band[k]))
     text = (f"The measured points say how well the model fits where the robot was measured. "
             f"Away from them, the error of robot_calibrated.yaml is predicted from the "
             f"uncertainty left in every parameter (the data and the tolerances together) and "
-            f"from what the model still lacks, at {predicted.samples} poses spread over "
-            f"{predicted.region_words}, after the robot's placement in the cell (a rigid "
-            f"motion of its base) is registered. Directions the data barely see keep the "
-            f"uncertainty of their tolerances: where this figure is well above the held-out "
-            f"error, the data determine the robot only near the measured region. The RMS is "
-            f"an average over robots calibrated like this one; one robot's RMS scatters about "
-            f"it, within the stated range for {predicted.band_words}, widely when one "
-            f"direction the data see poorly carries most of the uncertainty.")
-    blocks: list = [Paragraph(text), Table("predicted", f"Predicted tool-position error [{unit}]",
-                                           ("statistic", "value"), rows,
-                                           numeric=(False, True))]
+            f"from what the model still lacks (including what effects found in the data move "
+            f"that the geometry alone does not, under the loads of the data), at "
+            f"{predicted.samples} poses: {predicted.region_words}, after the robot's "
+            f"placement in the cell (a rigid motion of its base) is registered. The nominal "
+            f"robot's error over the same poses is beside it: the calibration's correction "
+            f"there plus what remains uncertain. The RMS is an average over robots "
+            f"calibrated like this one; one robot's RMS scatters about it, within the stated "
+            f"range for {predicted.band_words}.")
+    blocks: list = [Paragraph(text)]
+    if box is not None:
+        blocks.append(Paragraph(_box_words(predicted, scale, unit), "conclusion"))
+    header = ("statistic", *(label for label, _ in shown))
+    blocks.append(Table("predicted", f"Predicted tool-position error [{unit}]", header,
+                        tuple(rows), numeric=(False, *(True for _ in shown))))
     if len(predicted.errors):
-        blocks.append(Plot("predicted-error", "Predicted tool-position error over the poses "
-                           "sampled in the work cell.",
+        blocks.append(Plot("predicted-error", "Predicted tool-position error of "
+                           "robot_calibrated.yaml at the poses of the prediction.",
                            partial(figures.predicted_errors, predicted.errors, scale, unit,
                                    predicted.region_words)))
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
+
+
+def _box_words(predicted, scale: float, unit: str) -> str:
+    """Why the whole box of joint ranges gives another figure, and what would change it."""
+    box = predicted.box
+    text = (f"Over the whole box of joint ranges the data cover (every combination of joint "
+            f"angles within the measured ranges, including orientations the data never "
+            f"visit) the prediction is {format_number(box.rms / scale)} {unit} RMS, "
+            f"{format_number(box.rms / predicted.rms, 2)} times the figure over "
+            f"{predicted.region_words}.")
+    if not predicted.unseen:
+        return text + (" The data determine the robot only near the measured poses: "
+                       "measure more of the work cell (other poses, another placement of "
+                       "the instrument) before sending it elsewhere.")
+    named = "; ".join(f"{u.name}, which carries {format_number(u.rms / scale)} {unit} of "
+                      f"it: {u.remedy}" for u in predicted.unseen)
+    return (text + f" What carries the difference is what these data do not see, so it "
+            f"keeps (nearly) the uncertainty of its tolerance: {named}. Declare the work "
+            f"cell (work_cell: in the dataset file) where the robot will work only as it "
+            f"was measured, or measure so as to see it.")
 
 
 _RELATION = re.compile(r"(\w+) (acts like|~) ([^);]*)")
