@@ -245,9 +245,12 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
 
 
 def _effect_model(result: CalibrationResult, names: list[str]):
-    """The model with effects and its instrument point [m] (flange frame), when effects
-    are recommended but a controller runs geometry alone; ``(None, None)`` otherwise."""
-    if result.recommended != "final" or not result.effects or len(names) != 3:
+    """The model with effects and its instrument point [m] (flange frame) when effects
+    were identified, ``(None, None)`` otherwise. A controller runs geometry alone: what
+    the effects move is missing from robot_calibrated.yaml whichever model is
+    recommended (held-out data that favour the geometry may come from other loads or
+    another robot; counting it errs on the side of the customer)."""
+    if not result.effects or len(names) != 3:
         return None, None
     from .projection import effect_model
 
@@ -274,8 +277,8 @@ def _nominal(delivery, names: list[str]):
 
 def _effects_left_out(result: CalibrationResult, robot) -> float:
     """RMS distance [m] between the delivered geometry and the model with effects at the
-    fit readings, when effects are recommended but a controller runs geometry alone."""
-    if result.recommended != "final" or not result.effects:
+    fit readings, when effects were identified but a controller runs geometry alone."""
+    if not result.effects:
         return 0.0
     from ..model.kinematics import Kinematics
     from .projection import model_targets
