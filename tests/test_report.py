@@ -162,6 +162,8 @@ class _Page(HTMLParser):
         self.muted: dict[str, list[bool]] = {}
         self.paragraphs: list[tuple[str, str]] = []
         self._table = None
+        self._below = False  # inside a row of columns set under the row before
+        self._span: str | None = None
         self._cell: list[str] | None = None
         self._paragraph: tuple[str, list[str]] | None = None
 
@@ -173,15 +175,28 @@ class _Page(HTMLParser):
             self.tables[self._table] = []
             self.muted[self._table] = []
         elif tag == "tr" and self._table is not None:
-            self.tables[self._table].append([])
-            self.muted[self._table].append(attrs.get("class") == "muted")
-        elif tag in ("td", "th"):
+            classes = (attrs.get("class") or "").split()
+            self._below = "below" in classes
+            if not self._below:  # a row's columns set under it belong to that row
+                self.tables[self._table].append([])
+                self.muted[self._table].append("muted" in classes)
+        elif tag in ("td", "th") and not self._below:
             self._cell = []
+        elif tag == "span" and attrs.get("class") in ("below-header", "below-value"):
+            self._cell = []
+            self._span = attrs["class"]
         elif tag == "p":
             self._paragraph = (attrs.get("class", ""), [])
 
     def handle_endtag(self, tag):
-        if tag in ("td", "th") and self._cell is not None:
+        if tag == "span" and self._span is not None and self._cell is not None:
+            text, rows = "".join(self._cell), self.tables[self._table]
+            if self._span == "below-value":
+                rows[-1].append(text)
+            elif text not in rows[0]:  # its title joins the header, after the side columns
+                rows[0].append(text)
+            self._cell = self._span = None
+        elif tag in ("td", "th") and self._cell is not None:
             self.tables[self._table][-1].append("".join(self._cell))
             self._cell = None
         elif tag == "table":

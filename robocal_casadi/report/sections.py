@@ -18,6 +18,7 @@ import numpy as np
 
 from ..common.units import Units
 from ..effects import is_learned
+from ..effects.motion import is_derived_column
 from ..instruments import INSTRUMENTS
 from ..results import BAND, CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from . import figures, kind_figures
@@ -30,6 +31,7 @@ from .iso9283 import iso9283_blocks
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
+    dataset_name,
     display_units,
     error_noun,
     errors_of,
@@ -131,9 +133,8 @@ def robot_and_data_section(result: CalibrationResult) -> Section:
     rows = []
     for role, residuals in (("fit", result.residuals), ("validation", result.validation_residuals)):
         for r in residuals:
-            extras = ", ".join(sorted(r.extras)) or "-"
-            rows.append((r.label, role, r.kind, str(row_count(r)), str(len(r.errors_final)),
-                         extras))
+            rows.append((dataset_name(r), role, r.kind, str(row_count(r)),
+                         str(len(r.errors_final)), _extra_columns(r.extras)))
     data_table = Table("datasets", "Datasets", ("dataset", "role", "kind", "data rows",
                                                 "errors", "extra columns"), tuple(rows),
                        numeric=(False, False, False, True, True, False))
@@ -183,20 +184,43 @@ def accuracy_section(result: CalibrationResult) -> Section:
 
 def _validation_frames(result: CalibrationResult) -> str:
     """A sentence per kind of instrument placement the held-out data were judged in."""
-    fixed = [r.label for r in result.validation_residuals if r.placement_frame.endswith("(fixed)")]
-    refitted = [r.label for r in result.validation_residuals
-                if r.placement_frame and r.label not in fixed]
+    held = result.validation_residuals
+    fixed = [r for r in held if r.placement_frame.endswith("(fixed)")]
+    refitted = [r for r in held if r.placement_frame and r not in fixed]
     text = ""
     if fixed:
-        frames = {r.placement_frame for r in result.validation_residuals if r.label in fixed}
-        text += (f" Held-out data {', '.join(fixed)} keep the instrument placement the fit "
-                 f"data of the same station gave ({'; '.join(sorted(frames))}): their errors "
-                 f"are measured in the robot's own frame.")
+        frames = {r.placement_frame for r in fixed}
+        text += (f" {_held_out_sets(fixed, ('keeps', 'keep'))} the instrument placement "
+                 f"the fit data of the same station gave ({'; '.join(sorted(frames))}): "
+                 f"{'their' if len(fixed) > 1 else 'its'} errors are measured in the robot's "
+                 f"own frame.")
     if refitted:
-        text += (f" Held-out data {', '.join(refitted)} have the instrument placement refitted "
-                 f"on themselves: a rigid motion of the robot against the instrument does not "
-                 f"show in their errors.")
+        text += (f" {_held_out_sets(refitted, ('has', 'have'))} the instrument placement "
+                 f"refitted on {'themselves' if len(refitted) > 1 else 'itself'}: a rigid "
+                 f"motion of the robot against the instrument does not show in "
+                 f"{'their' if len(refitted) > 1 else 'its'} errors.")
     return text
+
+
+def _held_out_sets(residuals: list, verb: tuple[str, str]) -> str:
+    """``The held-out data set NAME keeps`` or ``The held-out data sets A and B keep``
+    (``verb``: singular and plural)."""
+    names = [dataset_name(r) for r in residuals]
+    if len(names) == 1:
+        return f"The held-out data set {names[0]} {verb[0]}"
+    listed = ", ".join(names[:-1]) + f" and {names[-1]}"
+    return f"The held-out data sets {listed} {verb[1]}"
+
+
+def _extra_columns(extras) -> str:
+    """A dataset's extra columns: the user's, then those derived from the row order
+    (direction of motion, travel since it changed), named as derived."""
+    given = sorted(c for c in extras if not is_derived_column(c))
+    derived = sorted(c for c in extras if is_derived_column(c))
+    text = ", ".join(given)
+    if derived:
+        text += ("; " if text else "") + "derived from the row order: " + ", ".join(derived)
+    return text or "-"
 
 
 def applying_section(result: CalibrationResult) -> Section:
@@ -417,7 +441,7 @@ def errors_section(result: CalibrationResult) -> Section:
         groups.append(("validation", result.validation_residuals))
     for role, residuals in groups:
         for r in residuals:
-            rows.append(_error_row(r.label, role, [errors_of(r, m) for m in
+            rows.append(_error_row(dataset_name(r), role, [errors_of(r, m) for m in
                                                    ("nominal", "geometric", "final")], units))
         if len(residuals) > 1:
             rows.append(_error_row(f"all {role} data", role, [pooled(residuals, m) for m in
@@ -449,10 +473,10 @@ def kind_blocks(result: CalibrationResult, role: str, residuals: tuple, units: U
     """The plots each kind of data in ``residuals`` calls for, before and after."""
     blocks: list = []
     mapped = [r for r in residuals if (np.asarray(r.rows) >= 0).any()]
-    names = mapped[0].label if len(mapped) == 1 else f"{role} data"
+    names = dataset_name(mapped[0]) if len(mapped) == 1 else f"{role} data"
     if kind_figures.has_kind(residuals, "position"):
         positioned = [r for r in residuals if kind_figures.has_kind((r,), "position")]
-        label = positioned[0].label if len(positioned) == 1 else f"{role} data"
+        label = dataset_name(positioned[0]) if len(positioned) == 1 else f"{role} data"
         blocks.append(Paragraph(f"Position errors, {label} ({role})", "heading"))
         blocks.append(Plot(f"axes-{role}", f"{label} ({role}): the x, y and z parts of the "
                            f"position error before and after; a mean away from zero is a "
@@ -582,9 +606,15 @@ DIAGNOSIS_HEADERS = {
     "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "held-out RMS before",
     "cv_rms_after": "held-out RMS with it", "decision": "decision",
     "estimate": "estimate (SI units, as in result.json)",
+    "extrapolation": "held-out squared error with it / without it, extrapolating folds",
+    "worst_region": "extrapolating split it helps least",
+    "label": "name in result.json",
 }
 NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
                 "cv_rms_before", "cv_rms_after"}
+# The short columns, side by side; the decision, the estimate and whatever else a
+# candidate records are set under its row (a page has no room for them side by side).
+DIAGNOSIS_SIDE_BY_SIDE = {"round", "effect", "joints", "parameters", "held"} | NUMERIC_KEYS
 
 
 def diagnosis_blocks(diagnosis: tuple[DiagnosisRecord, ...], units: Units) -> list:
@@ -659,7 +689,8 @@ def diagnosis_table(diagnosis: tuple[DiagnosisRecord, ...], units: Units, *,
                    else DIAGNOSIS_HEADERS.get(k, k) for k in keys)
     muted = tuple(entry.outcome is not Decision.ADDED for entry in diagnosis)
     return Table(name, caption, header, rows, muted,
-                 tuple(k in NUMERIC_KEYS for k in keys))
+                 tuple(k in NUMERIC_KEYS for k in keys),
+                 below=tuple(k not in DIAGNOSIS_SIDE_BY_SIDE for k in keys))
 
 
 def sphere_section(result: CalibrationResult) -> Section | None:
@@ -680,11 +711,12 @@ def sphere_section(result: CalibrationResult) -> Section | None:
     for r in spheres:
         centre = [(k, v, None) for k, v in result.placement.items() if _belongs(k, r.label)]
         if centre:
-            blocks.append(_values_table(f"sphere-{r.label}", f"Sphere centre, {r.label} (fitted)",
+            blocks.append(_values_table(f"sphere-{r.label}",
+                                        f"Sphere centre, {dataset_name(r)} (fitted)",
                                         centre, units))
         stats = ErrorStats.of(errors_of(r, "final"))
         blocks.append(Paragraph(
-            f"{r.label}: {stats.count} readings; distance from the sphere surface after "
+            f"{dataset_name(r)}: {stats.count} readings; distance from the sphere surface after "
             f"calibration {format_number(stats.rms / units.length_scale)} {units.length} RMS, "
             f"{format_number(stats.max / units.length_scale)} {units.length} at most."))
     return Section("sphere", "Sphere and laser", tuple(blocks))
