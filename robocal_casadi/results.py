@@ -482,7 +482,7 @@ class PredictedAccuracy:
     unseen: tuple[Unseen, ...] = ()
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
-        out = {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
+        out: dict[str, Any] = {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
                "max": self.max / length_scale, "structured": self.structured / length_scale,
                "rms_band": (None if self.band is None else
                             [self.band[0] / length_scale, self.band[1] / length_scale]),

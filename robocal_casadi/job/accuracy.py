@@ -71,7 +71,7 @@ import numpy as np
 
 from ..calibration.prior import tolerance_of
 from ..effects.effect_model import EffectModel
-from ..effects.motion import is_direction_column
+from ..effects.motion import is_derived_column
 from ..model.kinematics import Kinematics
 from ..model.parameters import perturbed_stems
 from ..model.robot import Robot
@@ -237,7 +237,7 @@ def _poses(result, region: tuple[tuple[float, float], ...], region_kind: str
     (fixed seed). A dataset without a column the others have counts it as 0."""
     blocks = [r for r in result.residuals if r.joints is not None and len(r.joints)]
     Q_data = np.vstack([np.asarray(r.joints, float) for r in blocks])
-    columns = sorted({c for r in blocks for c in r.extras if not is_direction_column(c)})
+    columns = sorted({c for r in blocks for c in r.extras if not is_derived_column(c)})
     extras_data = {c: np.concatenate([np.asarray(r.extras[c], float) if c in r.extras else
                                       np.zeros(len(r.joints)) for r in blocks])
                    for c in columns}
@@ -264,10 +264,16 @@ def _left_out(effects: EffectModel | None, effects_point, Q: np.ndarray,
     None without effects or when they read a value the data do not give."""
     if effects is None or effects_point is None:
         return None
-    needed = {c: extras[c] if c in extras else np.zeros(len(Q)) if c == "payload" else None
-              for c in effects.columns() if not is_direction_column(c)}
-    if any(v is None for v in needed.values()):
-        return None
+    needed: dict[str, np.ndarray] = {}
+    for column in effects.columns():
+        if is_derived_column(column):
+            continue  # direction and travel follow from the order of the poses
+        if column in extras:
+            needed[column] = extras[column]
+        elif column == "payload":  # data without the column carry none
+            needed[column] = np.zeros(len(Q))
+        else:
+            return None
     T_tool = effects.tool_poses(Q, needed)
     flange_tool = effects.robot.tool.matrix()
     offset = np.linalg.solve(flange_tool, np.r_[np.asarray(effects_point, float), 1.0])
