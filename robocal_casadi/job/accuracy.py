@@ -191,10 +191,11 @@ def _predict(result, delivered: Robot, point, point_names: Sequence[str], struct
     names = tuple(kinematics.registry.names) + tuple(point_names)
     basis = _rigid_basis(positions)
     PG = _without_rigid_motion(basis, G[:, :len(names)])
-    E, carried = _error_field(result, kinematics, names, PG)
+    left_out = _left_out(effects, effects_point, Q, extras, positions, basis)
+    E, carried = _error_field(result, kinematics, names, PG,
+                              _noise_ratio(result) if left_out is not None else 1.0)
     per_pose = (E**2).sum(axis=1).reshape(len(Q), 3).sum(axis=1)
     unexplained = 0.0 if result.unexplained is None else float(result.unexplained.rms)
-    left_out = _left_out(effects, effects_point, Q, extras, positions, basis)
     if left_out is None:
         left_out = np.full(len(Q), structured**2)
     s2 = unexplained**2 + left_out  # per pose [m^2]
@@ -318,8 +319,43 @@ def _without_rigid_motion(basis: np.ndarray, G: np.ndarray) -> np.ndarray:
     return G - basis @ (basis.T @ G)
 
 
+def _noise_ratio(result) -> float:
+    """How much of the geometric fit's residual [RMS ratio, >= 1] was structure the effects
+    took up: ``rms_geometric / rms_final`` of the fit; 1 where the covariance does not
+    have the plain posterior form (an artifact's certified distances) or nothing was
+    taken up."""
+    if any(r.kind == "artifact_touches" for r in result.residuals):
+        return 1.0
+    geometric, final = float(result.fit.rms_geometric), float(result.fit.rms_final)
+    if not (np.isfinite(geometric) and np.isfinite(final)) or final <= 0:
+        return 1.0
+    return max(1.0, geometric / final)
+
+
+def _sharpened(covariance: np.ndarray, names: Sequence[str], result, ratio: float
+               ) -> np.ndarray:
+    """The geometric fit's posterior covariance [SI] with its noise taken as the model
+    with effects leaves it rather than as the geometric residual. That residual holds what
+    the effects describe, which ``_left_out`` counts already: counted again through the
+    noise scale it would inflate every data-determined direction by ``ratio``. With
+    ``C = sigma^2 (J^T J + sigma^2 P)^-1`` (the prior weighed with the same noise ``sigma``)
+    the data's information is ``C^-1 - P``; at the noise ``sigma / ratio`` the posterior is
+    ``(ratio^2 (C^-1 - P) + P)^-1``: the prior's directions keep their tolerance."""
+    if ratio <= 1.0 or result.prior is None:
+        return covariance
+    tolerance = dict(result.prior.tolerance)
+    P = np.diag([1.0 / tolerance[n] ** 2 if tolerance.get(n) else 0.0 for n in names])
+    values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
+    if values.min() <= 0:
+        return covariance
+    information = (vectors / values) @ vectors.T - P  # the data's part [1 / SI^2]
+    values, vectors = np.linalg.eigh(0.5 * (information + information.T))
+    information = (vectors * np.clip(values, 0.0, None)) @ vectors.T
+    return np.linalg.inv(ratio**2 * information + P)
+
+
 def _error_field(result, kinematics: Kinematics, names: Sequence[str],
-                 PG: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+                 PG: np.ndarray, noise_ratio: float = 1.0) -> tuple[np.ndarray, dict[str, float]]:
     """``E`` (3N x m) [m]: the error field at the poses (rigid motion removed) is ``E z``
     with ``z`` standard normal (module docstring); ``PG``'s columns (3N rows) are
     ``names``. Its squared row norms summed per pose are the expected squared errors.
@@ -335,6 +371,8 @@ def _error_field(result, kinematics: Kinematics, names: Sequence[str],
     carried: dict[str, float] = {}
     if fitted:
         covariance = np.asarray(result.covariance, dtype=float)[np.ix_(kept, kept)]
+        covariance = _sharpened(covariance, [result.covariance_names[k] for k in kept], result,
+                                noise_ratio)
         covariance = covariance + _represented(result, registry, names, PG, fitted, covariance)
         covariance = 0.5 * (covariance + covariance.T)
         values, vectors = np.linalg.eigh(covariance)

@@ -244,13 +244,28 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
     return out
 
 
+TAKEN_UP = 0.5  # effects that leave under this share of the geometric fit's RMS count
+
+
+def _effects_count(result: CalibrationResult) -> bool:
+    """Whether what the identified effects move counts against robot_calibrated.yaml: when
+    they are recommended, or when they take up most of what the geometry leaves on the
+    fit data (its RMS falls below ``TAKEN_UP`` of the geometric fit's), whatever held-out
+    data say: such effects are in the robot, and held-out data that favour the geometry
+    then come from other loads or another robot. Effects recommended against that explain
+    little (a few per cent) are not counted: the held-out data say they are not there."""
+    if not result.effects:
+        return False
+    if result.recommended == "final":
+        return True
+    return bool(result.fit.rms_final < TAKEN_UP * result.fit.rms_geometric)
+
+
 def _effect_model(result: CalibrationResult, names: list[str]):
-    """The model with effects and its instrument point [m] (flange frame) when effects
-    were identified, ``(None, None)`` otherwise. A controller runs geometry alone: what
-    the effects move is missing from robot_calibrated.yaml whichever model is
-    recommended (held-out data that favour the geometry may come from other loads or
-    another robot; counting it errs on the side of the customer)."""
-    if not result.effects or len(names) != 3:
+    """The model with effects and its instrument point [m] (flange frame) when what the
+    effects move counts (``_effects_count``), ``(None, None)`` otherwise: a controller
+    runs geometry alone, so robot_calibrated.yaml misses it."""
+    if not _effects_count(result) or len(names) != 3:
         return None, None
     from .projection import effect_model
 
@@ -277,8 +292,9 @@ def _nominal(delivery, names: list[str]):
 
 def _effects_left_out(result: CalibrationResult, robot) -> float:
     """RMS distance [m] between the delivered geometry and the model with effects at the
-    fit readings, when effects were identified but a controller runs geometry alone."""
-    if not result.effects:
+    fit readings, when what the effects move counts (``_effects_count``) and a controller
+    runs geometry alone."""
+    if not _effects_count(result):
         return 0.0
     from ..model.kinematics import Kinematics
     from .projection import model_targets
