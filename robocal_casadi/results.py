@@ -466,7 +466,9 @@ class PredictedAccuracy:
     ``nominal``: the nominal robot's predicted error over the same poses, for "calibrated
     or not" read on one region. Where the region is the measured poses, ``box`` is the
     prediction over the box of joint ranges they span and ``unseen`` the parameters that
-    carry the difference (stated when the two differ by more than ``BOX_RATIO``)."""
+    carry the difference (stated when the two differ by more than ``BOX_RATIO``); else,
+    where the figure is more than ``BOX_RATIO`` times the delivered file's ``held_out``
+    RMS, ``unseen`` the parameters that carry the figure."""
 
     rms: float
     p95: float
@@ -480,6 +482,7 @@ class PredictedAccuracy:
     nominal: ErrorFigures | None = None
     box: PredictedAccuracy | None = None
     unseen: tuple[Unseen, ...] = ()
+    held_out: float | None = None  # [m] the delivered file's held-out RMS, when given
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
         out: dict[str, Any] = {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
@@ -494,8 +497,13 @@ class PredictedAccuracy:
         if self.box is not None:
             out["box"] = self.box.to_json(length_scale, unit, angle_unit)
             out["box_differs"] = self.box_differs
-            out["unseen"] = [u.to_json(length_scale) for u in self.unseen]
+        out["unseen"] = [u.to_json(length_scale) for u in self.unseen]
         return out
+
+    @property
+    def held_out_differs(self) -> bool:
+        """The figure is more than ``BOX_RATIO`` times the delivered file's held-out RMS."""
+        return self.held_out is not None and self.rms > BOX_RATIO * self.held_out
 
     @property
     def box_differs(self) -> bool:
@@ -533,7 +541,16 @@ class PredictedAccuracy:
                 f"{self.max / s:.4g} {unit}{nominal}")
         if self.box_differs and self.box is not None:
             text += "\n" + self.box_sentence(s, unit)
+        elif self.held_out_differs and self.unseen:
+            text += "\n" + self.held_out_sentence(s, unit)
         return text
+
+    def held_out_sentence(self, length_scale: float, unit: str) -> str:
+        """Why the figure is more than ``BOX_RATIO`` times the held-out RMS, in words."""
+        s = length_scale
+        named = "; ".join(f"{u.name} ({u.rms / s:.3g} {unit}): {u.remedy}" for u in self.unseen)
+        return (f"more than {BOX_RATIO:g} times the held-out RMS ({(self.held_out or 0) / s:.4g} "
+                f"{unit}): the uncertainty these data leave in {named}")
 
     def box_sentence(self, length_scale: float, unit: str) -> str:
         """The box figure and the parameters that carry its difference, in words."""

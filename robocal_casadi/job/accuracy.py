@@ -137,23 +137,46 @@ def statement(result, delivered: Robot, point, point_names: Sequence[str] = (),
               region: tuple[tuple[float, float], ...] | None = None,
               region_kind: str = MEASURED, *, effects: EffectModel | None = None,
               effects_point=None, nominal: tuple[Robot, Sequence[float]] | None = None,
-              instrument: str = "") -> PredictedAccuracy | None:
+              instrument: str = "", held_out: float | None = None
+              ) -> PredictedAccuracy | None:
     """What a customer reads: ``predict`` over the region, and, where the region is the
     measured poses, the prediction over the box of joint ranges they span with the
     parameters that carry the difference (``unseen``) when the two differ by more than
-    ``BOX_RATIO``. ``instrument`` (a dataset kind) words what would see them."""
-    predicted = predict(result, delivered, point, point_names, structured, region,
-                        region_kind, effects=effects, effects_point=effects_point,
-                        nominal=nominal)
-    if predicted is None or predicted.region_kind != MEASURED:
-        return predicted
-    box, carried = _predict(result, delivered, point, point_names, structured,
-                            predicted.region, DATA_RANGES, effects, effects_point, nominal)
-    predicted = replace(predicted, box=box)
-    if not predicted.box_differs:
-        return predicted
-    unseen = _unseen(result, carried, box.rms**2, tuple(point_names), instrument)
-    return replace(predicted, unseen=unseen)
+    ``BOX_RATIO``; else, when the figure is more than ``BOX_RATIO`` times the delivered
+    file's ``held_out`` RMS [m], the parameters that carry it. ``instrument`` (a dataset
+    kind) words what would see them."""
+    predicted, carried = _predict_or_none(result, delivered, point, point_names, structured,
+                                          region, region_kind, effects, effects_point,
+                                          nominal)
+    if predicted is None:
+        return None
+    predicted = replace(predicted, held_out=held_out)
+    if predicted.region_kind == MEASURED:
+        box, box_carried = _predict(result, delivered, point, point_names, structured,
+                                    predicted.region, DATA_RANGES, effects, effects_point,
+                                    nominal)
+        predicted = replace(predicted, box=box)
+        if predicted.box_differs:
+            return replace(predicted, unseen=_unseen(result, box_carried, box.rms**2,
+                                                     tuple(point_names), instrument))
+    if predicted.held_out_differs:
+        return replace(predicted, unseen=_unseen(result, carried, predicted.rms**2,
+                                                 tuple(point_names), instrument,
+                                                 weak_only=False))
+    return predicted
+
+
+def _predict_or_none(result, delivered: Robot, point, point_names: Sequence[str],
+                     structured: float, region, region_kind: str, effects, effects_point,
+                     nominal) -> tuple[PredictedAccuracy | None, dict[str, float]]:
+    """``_predict`` over ``region`` (the box of the fit data's joint ranges when None);
+    ``(None, {})`` when there is no region."""
+    if region is None:
+        region, region_kind = region_of(result), DATA_RANGES
+    if region is None:
+        return None, {}
+    return _predict(result, delivered, point, point_names, structured, region, region_kind,
+                    effects, effects_point, nominal)
 
 
 def predict(result, delivered: Robot, point, point_names: Sequence[str] = (),
@@ -405,14 +428,16 @@ _INSTRUMENT = {"tracker_points": ("tracker", "another reflector orientation: rea
 
 
 def _unseen(result, carried: dict[str, float], box_square: float,
-            point_names: tuple[str, ...], instrument: str) -> tuple[Unseen, ...]:
+            point_names: tuple[str, ...], instrument: str, *, weak_only: bool = True
+            ) -> tuple[Unseen, ...]:
     """The parameters the data barely see (their estimate owes more to the tolerance than
-    to the data, or they were held at nominal for it) that each carry at least
-    ``UNSEEN_SHARE`` of the box's mean square ``box_square`` [m^2], largest first."""
+    to the data, or they were held at nominal for it; any parameter unless ``weak_only``)
+    that each carry at least ``UNSEEN_SHARE`` of the mean square ``box_square`` [m^2],
+    largest first."""
     weak = set(result.identifiability.practical)
     if result.prior is not None:
         weak |= set(result.prior.dominated)
-    ranked = sorted(((n, v) for n, v in carried.items() if n in weak),
+    ranked = sorted(((n, v) for n, v in carried.items() if n in weak or not weak_only),
                     key=lambda item: item[1], reverse=True)
     named = [(n, v) for n, v in ranked if v >= UNSEEN_SHARE * box_square][:UNSEEN_SHOWN]
     return tuple(Unseen(n, float(np.sqrt(v)), remedy(n, point_names, instrument))

@@ -198,7 +198,8 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
         result, robot, point, names if len(names) == 3 else (), structured, region,
         region_kind, effects=effects, effects_point=effects_point,
         nominal=_nominal(delivery, names), instrument=result.residuals[0].kind
-        if result.residuals else "") if region is not None else None
+        if result.residuals else "", held_out=figures[ROBOT_FILE].get("validation")
+    ) if region is not None else None
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None

@@ -126,6 +126,12 @@ def _predicted_paragraph(result: CalibrationResult) -> str:
         else:
             text += ": the data determine the robot only near the measured poses"
         text += ". See Predicted accuracy over the work cell."
+    elif predicted.held_out_differs and predicted.unseen and predicted.held_out is not None:
+        named = _and([f"{u.name} ({_length(u.rms)}; {u.remedy})" for u in predicted.unseen])
+        text += (f" That is more than twice the held-out RMS of the delivered file "
+                 f"({_length(predicted.held_out)}): the held-out data measure what the "
+                 f"instrument sees, the prediction the whole tool position, and it is carried "
+                 f"by the uncertainty these data leave in {named}.")
     return text
 
 

@@ -295,6 +295,14 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     blocks: list = [Paragraph(text)]
     if box is not None:
         blocks.append(Paragraph(_box_words(predicted, scale, unit), "conclusion"))
+    elif predicted.held_out_differs and predicted.unseen and predicted.held_out is not None:
+        named = "; ".join(f"{u.name}, {format_number(u.rms / scale)} {unit}: {u.remedy}"
+                          for u in predicted.unseen)
+        blocks.append(Paragraph(
+            f"The prediction is more than twice the held-out RMS of robot_calibrated.yaml "
+            f"({format_number(predicted.held_out / scale)} {unit}): the held-out data "
+            f"measure what the instrument sees, the prediction the whole tool position. What "
+            f"carries it is the uncertainty these data leave in: {named}.", "conclusion"))
     header = ("statistic", *(label for label, _ in shown))
     blocks.append(Table("predicted", f"Predicted tool-position error [{unit}]", header,
                         tuple(rows), numeric=(False, *(True for _ in shown))))
