@@ -149,7 +149,8 @@ class EffectFinding:
 
 @dataclass(frozen=True)
 class PriorSummary:
-    """How the estimate weighed data against tolerances (see ``prior``).
+    """How the estimate weighed data against the prior (see ``prior``): the tolerances
+    or a fleet's population prior (``use``).
 
     ``rule`` is ``"prior"`` (maximum a posteriori) or ``"fraction"`` (least squares with
     weak parameters held); ``noise`` [m] the residual's standard deviation estimated from
@@ -163,6 +164,10 @@ class PriorSummary:
     tolerance: dict[str, float] = field(default_factory=dict)
     data_share: dict[str, float] = field(default_factory=dict)
     quantities: dict[str, str] = field(default_factory=dict)
+    # the prior's centre [SI] per parameter, and which prior it was: an object with
+    # ``to_json()`` (``calibration.population_prior.PriorUse``; None: the tolerance prior)
+    centre: dict[str, float] = field(default_factory=dict)
+    use: Any = None
 
     @property
     def dominated(self) -> tuple[str, ...]:
@@ -180,9 +185,11 @@ class PriorSummary:
                 "prior_dominated": name in self.dominated}
 
     def to_json(self, units: Units) -> dict:
+        source = {"source": "tolerance", "belongs": None} if self.use is None else \
+            self.use.to_json()
         return {"rule": self.rule,
                 "noise": self.noise / units.length_scale if np.isfinite(self.noise) else None,
-                "unit": units.length, "dominated": list(self.dominated)}
+                "unit": units.length, "dominated": list(self.dominated), **source}
 
 
 @dataclass(frozen=True)

@@ -50,8 +50,9 @@ mean (Box 1980): under the model ``m_i - mu`` has covariance ``Sigma - C_i`` (bo
 ``k_i`` the directions its data see (eigenvalues of ``Sigma^-1/2 (Sigma - C_i)
 Sigma^-1/2``, each the data's share of one direction, above ``SEEN_SHARE``). Its weight
 is that of the multivariate t model's EM (Lange, Little and Taylor 1989),
-``w_i = (nu + k_i) / (nu + d_i^2)`` with ``nu = T_DOF``: about one for a robot that
-belongs, ``~ k_i / d_i^2`` for one far off. A robot whose ``d_i^2`` exceeds the
+``w_i = (nu + k_i) / (nu + d_i^2)`` with ``nu = T_DOF``, capped at one (a robot that
+belongs counts once, as in the Gaussian model; only one far off, ``w_i ~ k_i / d_i^2``,
+counts less). A robot whose ``d_i^2`` exceeds the
 ``ODD_LEVEL`` quantile of ``chi^2(k_i)`` is named odd.
 
 Units: SI (m, rad) throughout; the caller converts at the file's edge.
@@ -200,7 +201,8 @@ def estimate(evidence: Sequence[Evidence], names: Sequence[str], tolerance: np.n
     mean, covariance = np.zeros(p), target.copy()
     weights = np.ones(len(evidence))
     rounds = 0
-    for rounds in range(1, MAX_ROUNDS + 1):
+    while rounds < MAX_ROUNDS:
+        rounds += 1
         posteriors = [_posterior(e.information, e.natural, mean, covariance, w)
                       for e, w in zip(evidence, weights)]
         new_mean = sum(w * m for w, (_, m) in zip(weights, posteriors)) / weights.sum()
@@ -227,7 +229,8 @@ def estimate(evidence: Sequence[Evidence], names: Sequence[str], tolerance: np.n
 
 
 def _t_weight(member: Membership) -> float:
-    return (T_DOF + member.seen) / (T_DOF + member.distance)
+    """The t model's weight, capped at one: a robot that belongs counts once."""
+    return min(1.0, (T_DOF + member.seen) / (T_DOF + member.distance))
 
 
 def _posterior(information: np.ndarray, natural: np.ndarray, mean: np.ndarray,

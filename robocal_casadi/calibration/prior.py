@@ -250,18 +250,7 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
         certified = None if certified is None else np.asarray(certified, bool)[rows]
     free_index = np.asarray(free_index, int)
     n = len(free_index)
-    precision_prior = np.zeros((n, n))
-    variance_prior = np.zeros(n)  # the prior's variance of each free unknown (0: none)
-    prior_position = np.zeros(0, int)
-    if prior is not None and len(prior.index):
-        position = {int(i): k for k, i in enumerate(free_index)}
-        prior_position = np.array([position.get(int(i), -1) for i in prior.index])
-        held = np.flatnonzero(prior_position >= 0)
-        # the unknowns outside ``free_index`` are fixed: the prior on the rest is the
-        # conditional one, whose precision is the block of the full precision
-        where = prior_position[held]
-        precision_prior[np.ix_(where, where)] = prior.precision[np.ix_(held, held)]
-        variance_prior[where] = prior.tolerance[held] ** 2
+    precision_prior, variance_prior, prior_position = _prior_over(prior, free_index)
     reached = (np.abs(J).sum(axis=0) > 0) | (variance_prior > 0)
     Jr = J[:, reached]
     data = Jr.T @ Jr
@@ -288,6 +277,26 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_reached, sigma_prior)
     share = _data_share(inverse, reached, prior_position, variance_prior, sigma_prior)
     return Posterior(covariance, share, sigma_new, dof)
+
+
+def _prior_over(prior: Prior | None, free_index: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The prior over the unknowns ``free_index``: its precision (n x n), each unknown's
+    prior variance (0: none) and, per prior entry, its position among them (-1: not
+    free). The unknowns not free are fixed: the prior on the rest is the conditional one,
+    whose precision is the block of the full precision."""
+    n = len(free_index)
+    precision_prior = np.zeros((n, n))
+    variance_prior = np.zeros(n)
+    prior_position = np.zeros(0, int)
+    if prior is not None and len(prior.index):
+        position = {int(i): k for k, i in enumerate(free_index)}
+        prior_position = np.array([position.get(int(i), -1) for i in prior.index])
+        held = np.flatnonzero(prior_position >= 0)
+        where = prior_position[held]
+        precision_prior[np.ix_(where, where)] = prior.precision[np.ix_(held, held)]
+        variance_prior[where] = prior.tolerance[held] ** 2
+    return precision_prior, variance_prior, prior_position
 
 
 def _data_share(inverse: np.ndarray, reached: np.ndarray, prior_position: np.ndarray,

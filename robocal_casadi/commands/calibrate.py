@@ -66,7 +66,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_model_options(parser: argparse.ArgumentParser) -> None:
-    """``--rule`` and ``--profile`` (calibrate and fleet)."""
+    """``--rule``, ``--profile`` and ``--prior`` (calibrate and fleet)."""
+    parser.add_argument("--prior", type=Path, default=None, metavar="PRIOR.yaml",
+                        help="a fleet prior of this robot model (robocal prior) in place of "
+                             "the tolerances; a robot whose data contradict it is told so "
+                             "and calibrated with the tolerance prior")
     parser.add_argument("--rule", choices=("prior", "fraction"), default="prior",
                         help="prior (default): every parameter not exactly undeterminable, "
                              "weighed against its tolerance (maximum a posteriori); fraction: "
@@ -109,6 +113,9 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     delivery = result.delivery
     if delivery is not None and delivery.refused:
         lines.insert(0, f"NOT BETTER THAN DOING NOTHING: {delivery.reason}")
+    use = result.prior.use if result.prior is not None else None
+    if use is not None and use.sentence:
+        lines.append(use.sentence)
     lines += [f"{rows} measurements from {', '.join(result.datasets)}; "
              f"{len(ident.identifiable)} of {len(ident.candidates)} parameters identifiable "
              f"(condition number {result.condition_number:.4g})"]
@@ -261,8 +268,22 @@ def report_info(args: argparse.Namespace, datasets: list):
 def read_options(args: argparse.Namespace) -> list[Path]:
     """The files and folders the command line names for reading: the datasets, the
     held-out datasets, the logo and the report templates."""
-    named = [*args.datasets, *args.validate, args.logo, args.report_templates]
+    named = [*args.datasets, *args.validate, args.logo, args.report_templates,
+             getattr(args, "prior", None)]
     return [Path(p) for p in named if p is not None]
+
+
+def fleet_prior_option(args: argparse.Namespace):
+    """The ``--prior`` file loaded (None when not given); ``--rule fraction`` refused
+    with it."""
+    if getattr(args, "prior", None) is None:
+        return None
+    if args.rule != "prior":
+        raise InputError("a fleet prior weighs the estimate: it needs --rule prior",
+                         where="--prior")
+    from ..calibration.population_prior import load_prior
+
+    return load_prior(args.prior)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -290,7 +311,8 @@ def run(args: argparse.Namespace) -> int:
                                                                      d.robot_path))])
     options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                          select_growth=args.select_growth, max_iterations=args.max_iterations,
-                         rule=args.rule, profile=args.profile, progress=sys.stderr.isatty())
+                         rule=args.rule, profile=args.profile, progress=sys.stderr.isatty(),
+                         fleet_prior=fleet_prior_option(args))
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
     outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate",

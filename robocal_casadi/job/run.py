@@ -37,6 +37,7 @@ from threadpoolctl import threadpool_limits
 from ..calibration.evaluation import evaluate, held_out
 from ..calibration.identification import calibrate as _calibrate
 from ..calibration.outliers import kept_datasets
+from ..calibration.population_prior import PopulationPrior, write_posterior
 from ..common.memory import release_freed
 from ..common.output import atomic_directory
 from ..common.output import json_safe as _clean
@@ -74,11 +75,13 @@ class JobOptions:
     progress: bool = False
     effects: Sequence = ()
     parameters: Sequence[str] | str | None = None
+    fleet_prior: PopulationPrior | None = None  # in place of the tolerance prior
 
     def calibrate_options(self) -> dict:
         return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
                     select_growth=self.select_growth, max_iterations=self.max_iterations,
-                    rule=self.rule, progress=self.progress, effects=self.effects)
+                    rule=self.rule, progress=self.progress, effects=self.effects,
+                    fleet_prior=self.fleet_prior)
 
 
 @dataclass(frozen=True)
@@ -326,6 +329,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2)
                                              + "\n")
         write_errors_csv(result, staging)
+        write_posterior(result, staging)
         if report.report:
             from ..report import write_report
 
