@@ -23,7 +23,9 @@ current population (``w_i`` its weight, below):
 M step:
 
     mu    = sum_i w_i m_i / sum_i w_i,
-    Sigma = (nu0 T + sum_i w_i [(m_i - mu)(m_i - mu)^T + C_i]) / (nu0 + N).
+    S     = sum_i w_i [(m_i - mu)(m_i - mu)^T + C_i] / N,
+
+and ``Sigma`` is ``S`` shrunk (below).
 
 Each robot's estimation covariance is taken out of the spread (``C_i``, not the scatter
 of raw estimates, enters ``Sigma``) and each robot counts along a parameter as much as its
@@ -31,14 +33,22 @@ data saw it: along a direction a robot's data do not see, ``m_i`` is the populat
 prediction and ``C_i`` the population's spread, so that robot neither pulls ``mu`` nor
 widens ``Sigma``.
 
-Shrinkage (``nu0`` pseudo-robots at the tolerance covariance ``T = diag(t^2)``): with few
-robots against many parameters the sample covariance is singular and overconfident. The
-M step above maximises the likelihood plus the log-density of an inverse-Wishart-shaped
-penalty ``-(nu0/2)(log|Sigma| + tr(Sigma^-1 T))``, the conjugate prior's update of a
-covariance (Gelman et al., Bayesian Data Analysis, 3rd ed., section 3.6): a fixed-weight
-version of shrinking the sample covariance toward a structured target (Ledoit and Wolf
-2004), with weight ``nu0 / (nu0 + N)`` on the target. Four robots with ``nu0 = 2`` keep
-a third of the tolerance's variance; forty keep five per cent.
+Shrinkage. With few robots against many parameters ``S`` is singular and overconfident.
+Variances and correlations are shrunk apart, with the target of Schaefer and Strimmer
+(2005, "A shrinkage approach to large-scale covariance matrix estimation", target "D":
+correlations toward zero) but fixed intensities instead of their estimated ones:
+
+    sigma_j^2 = (nu0 t_j^2 + N S_jj) / (nu0 + N),         (the tolerance as nu0 robots)
+    R         = (1 - lambda) corr(S) + lambda I,  lambda = p_seen / (p_seen + N),
+    Sigma     = diag(sigma) R diag(sigma),
+
+``t_j`` the tolerance, ``p_seen`` the parameters at least one robot saw. The variance's
+update is the conjugate one of a scaled inverse-chi-square prior worth ``nu0`` robots at
+the tolerance (Gelman et al., Bayesian Data Analysis, 3rd ed., section 2.6): with
+``nu0 = 0.25`` four robots keep a seventeenth of the tolerance's variance, forty about
+0.6 per cent. A parameter no robot saw keeps its tolerance (``S_jj = Sigma_jj`` there, whose
+fixed point is ``t_j^2``) and no correlation. The correlations, of which there are
+``p^2 / 2`` against ``N`` robots, weigh by how few robots there are per parameter.
 
 An odd robot (one built or repaired off the model) must not drag the mean. Its evidence
 is judged against the population by the prior-predictive statistic of its posterior
@@ -67,13 +77,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import chdtri
 
-PSEUDO_ROBOTS = 2.0  # nu0: the tolerance prior counts as this many robots
+PSEUDO_ROBOTS = 0.25  # nu0: the tolerance counts as this many robots in each variance
 T_DOF = 4.0  # nu: degrees of freedom of the t weights that down-weight an odd robot
 ODD_LEVEL = 0.999  # quantile of chi^2(k) beyond which a robot does not belong
 SEEN_SHARE = 0.05  # data share of a direction below which it is not counted as seen
 SAW_SHARE = 0.5  # data share of a parameter (under the tolerance) for "this robot saw it"
 MAX_ROUNDS = 2000
-SETTLED = 1e-9  # relative change of mu and Sigma (in tolerance units) that ends EM
+SETTLED = 1e-7  # change of mu, Sigma (in tolerance units) and weights that ends EM
 
 
 @dataclass(frozen=True)
@@ -165,8 +175,9 @@ class Population:
 def membership(robot: str, information: np.ndarray, natural: np.ndarray, mean: np.ndarray,
                covariance: np.ndarray, weight: float = 1.0) -> Membership:
     """The prior-predictive statistic of one robot's evidence (module docstring)."""
-    posterior, centre = _posterior(information, natural, mean, covariance, 1.0)
-    return conflict(robot, centre - mean, covariance, posterior, weight)
+    posterior, centre = _posteriors(information[None], natural[None], mean, covariance,
+                                    np.ones(1))
+    return conflict(robot, centre[0] - mean, covariance, posterior[0], weight)
 
 
 def conflict(robot: str, offset: np.ndarray, prior_covariance: np.ndarray,
@@ -182,69 +193,99 @@ def conflict(robot: str, offset: np.ndarray, prior_covariance: np.ndarray,
     z = vectors[:, seen].T @ np.linalg.solve(root, offset)
     distance = float(np.sum(z**2 / values[seen]))
     k = int(seen.sum())
-    threshold = float(chdtri(k, 1.0 - ODD_LEVEL)) if k else math.inf
-    return Membership(robot, distance, k, threshold, float(weight))
+    return Membership(robot, distance, k, _threshold(k), float(weight))
 
 
 def estimate(evidence: Sequence[Evidence], names: Sequence[str], tolerance: np.ndarray,
              pseudo_robots: float = PSEUDO_ROBOTS) -> Population:
     """The population ``N(mu, Sigma)`` over ``names`` from the robots' ``evidence``
-    (module docstring); ``tolerance`` [SI] per parameter sets the shrinkage target."""
+    (module docstring); ``tolerance`` [SI] per parameter sets the shrinkage target.
+
+    Computed in units of the tolerances (each parameter divided by its own), where every
+    matrix is of order one; the robots of a round are solved together."""
     tolerance = np.asarray(tolerance, float)
     p = len(names)
     if not evidence:
         raise ValueError("expected at least one robot's evidence, got none")
     if pseudo_robots <= 0:
         raise ValueError(f"pseudo_robots must be > 0, got {pseudo_robots}")
-    target = np.diag(tolerance**2)
-    scale = np.outer(tolerance, tolerance)
-    mean, covariance = np.zeros(p), target.copy()
+    information = np.array([e.information for e in evidence]) * np.outer(tolerance, tolerance)
+    natural = np.array([e.natural for e in evidence]) * tolerance
+    ones = np.ones(p)
+    shares = 1.0 - np.diagonal(np.linalg.inv(np.eye(p) + information), axis1=1, axis2=2)
+    seen = int(np.sum(np.any(shares >= SAW_SHARE, axis=0)))
+    mean, covariance = np.zeros(p), np.eye(p)
     weights = np.ones(len(evidence))
     rounds = 0
     while rounds < MAX_ROUNDS:
         rounds += 1
-        posteriors = [_posterior(e.information, e.natural, mean, covariance, w)
-                      for e, w in zip(evidence, weights)]
-        new_mean = sum(w * m for w, (_, m) in zip(weights, posteriors)) / weights.sum()
-        scatter = np.zeros((p, p))
-        for w, (c, m) in zip(weights, posteriors):
-            d = m - new_mean
-            scatter += w * (np.outer(d, d) + c)
-        new_covariance = (pseudo_robots * target + scatter) / (pseudo_robots + len(evidence))
-        new_covariance = 0.5 * (new_covariance + new_covariance.T)
-        new_weights = np.array([
-            _t_weight(membership(e.robot, e.information, e.natural, new_mean, new_covariance))
-            for e in evidence])
-        change = max(np.max(np.abs(new_mean - mean) / tolerance),
-                     np.max(np.abs(new_covariance - covariance) / scale),
+        posterior, centre = _posteriors(information, natural, mean, covariance, weights)
+        new_mean = weights @ centre / weights.sum()
+        offset = centre - new_mean
+        scatter = np.einsum("i,ij,ik->jk", weights, offset, offset) + np.einsum(
+            "i,ijk->jk", weights, posterior)
+        new_covariance = _shrunk(scatter / len(evidence), ones, len(evidence), pseudo_robots,
+                                 seen)
+        distance, count = _distances(information, natural, new_mean, new_covariance)
+        new_weights = np.minimum(1.0, (T_DOF + count) / (T_DOF + distance))
+        change = max(np.max(np.abs(new_mean - mean)),
+                     np.max(np.abs(new_covariance - covariance)),
                      np.max(np.abs(new_weights - weights)))
         mean, covariance, weights = new_mean, new_covariance, new_weights
         if change < SETTLED:
             break
-    members = tuple(membership(e.robot, e.information, e.natural, mean, covariance, w)
-                    for e, w in zip(evidence, weights))
-    seen_by = tuple(int(sum(_share_under(e.information, target)[j] >= SAW_SHARE
-                            for e in evidence)) for j in range(p))
-    return Population(tuple(names), mean, covariance, seen_by, members, rounds)
+    distance, count = _distances(information, natural, mean, covariance)
+    members = tuple(Membership(e.robot, float(d), int(k), _threshold(int(k)), float(w))
+                    for e, d, k, w in zip(evidence, distance, count, weights))
+    seen_by = tuple(int(k) for k in np.sum(shares >= SAW_SHARE, axis=0))
+    return Population(tuple(names), mean * tolerance,
+                      covariance * np.outer(tolerance, tolerance), seen_by, members, rounds)
 
 
-def _t_weight(member: Membership) -> float:
-    """The t model's weight, capped at one: a robot that belongs counts once."""
-    return min(1.0, (T_DOF + member.seen) / (T_DOF + member.distance))
+def _threshold(seen: int) -> float:
+    """The ``ODD_LEVEL`` quantile of chi^2(``seen``) (infinite for none seen)."""
+    return float(chdtri(seen, 1.0 - ODD_LEVEL)) if seen else math.inf
 
 
-def _posterior(information: np.ndarray, natural: np.ndarray, mean: np.ndarray,
-               covariance: np.ndarray, weight: float) -> tuple[np.ndarray, np.ndarray]:
-    """A robot's posterior covariance and mean under ``N(mean, covariance / weight)``."""
-    prior_precision = weight * _inverse(covariance)
-    posterior = _inverse(prior_precision + information)
-    return posterior, posterior @ (prior_precision @ mean + natural)
+def _posteriors(information: np.ndarray, natural: np.ndarray, mean: np.ndarray,
+                covariance: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every robot's posterior covariance and mean under ``N(mean, covariance / w_i)``."""
+    precision = _inverse(covariance)
+    posterior = np.linalg.inv(weights[:, None, None] * precision + information)
+    posterior = 0.5 * (posterior + np.swapaxes(posterior, 1, 2))
+    pulled = weights[:, None] * (precision @ mean) + natural
+    return posterior, np.einsum("ijk,ik->ij", posterior, pulled)
 
 
-def _share_under(information: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Per parameter, the data's share of its estimate under the prior ``target``."""
-    posterior = _inverse(_inverse(target) + information)
-    return 1.0 - np.diag(posterior) / np.diag(target)
+def _distances(information: np.ndarray, natural: np.ndarray, mean: np.ndarray,
+               covariance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every robot's prior-predictive statistic ``d^2`` and directions seen (``conflict``)
+    at weight one."""
+    posterior, centre = _posteriors(information, natural, mean, covariance,
+                                    np.ones(len(information)))
+    inverse_root = np.linalg.inv(np.linalg.cholesky(covariance))
+    whitened = inverse_root @ posterior @ inverse_root.T
+    share = np.eye(len(mean)) - 0.5 * (whitened + np.swapaxes(whitened, 1, 2))
+    values, vectors = np.linalg.eigh(share)
+    z = np.einsum("ijk,ij->ik", vectors, (centre - mean) @ inverse_root.T)
+    seen = values > SEEN_SHARE
+    distance = np.sum(np.where(seen, z**2 / np.where(seen, values, 1.0), 0.0), axis=1)
+    return distance, seen.sum(axis=1)
+
+
+def _shrunk(scatter: np.ndarray, tolerance: np.ndarray, robots: int, pseudo_robots: float,
+            seen: int) -> np.ndarray:
+    """The M step's covariance ``S`` shrunk: variances toward the tolerances, correlations
+    toward zero (module docstring)."""
+    variance = (pseudo_robots * tolerance**2 + robots * np.diag(scatter)) / (pseudo_robots
+                                                                              + robots)
+    root = np.sqrt(np.diag(scatter))
+    correlation = scatter / np.outer(root, root)
+    weight = seen / (seen + robots)
+    correlation = (1.0 - weight) * correlation + weight * np.eye(len(tolerance))
+    sigma = np.sqrt(variance)
+    out = correlation * np.outer(sigma, sigma)
+    return 0.5 * (out + out.T)
 
 
 def _inverse(matrix: np.ndarray) -> np.ndarray:
