@@ -71,6 +71,17 @@ class Calibration:
 
 def write_posterior(result, folder: Path) -> Path | None:
     """``geometry_posterior.json`` in ``folder`` from ``result`` (None: no posterior)."""
+    content = posterior_content(result)
+    if content is None:
+        return None
+    path = Path(folder) / POSTERIOR_FILE
+    path.write_text(json.dumps(content, indent=1) + "\n")
+    return path
+
+
+def posterior_content(result) -> dict | None:
+    """The content of ``geometry_posterior.json`` for ``result`` (file units; None when
+    the geometric fit has no posterior covariance)."""
     robot = result.robot_nominal
     registry = robot.parameters()
     names = [n for n in result.covariance_names if n in registry]
@@ -98,9 +109,7 @@ def write_posterior(result, folder: Path) -> Path | None:
             "centre": [float(c / s) for c, s in zip(prior[1], fitted_scale)],
             "covariance": (prior[2] / np.outer(fitted_scale, fitted_scale)).tolist()},
     }
-    path = Path(folder) / POSTERIOR_FILE
-    path.write_text(json.dumps(content, indent=1) + "\n")
-    return path
+    return content
 
 
 def _none(value: float | None, scale: float) -> float | None:
@@ -137,6 +146,16 @@ def read_calibration(folder: Path) -> Calibration:
                          file=folder)
     try:
         content = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise InputError(f"unreadable: {error}", file=path) from None
+    return calibration_from(content, folder, path)
+
+
+def calibration_from(content: dict, folder: Path, path: Path | None = None) -> Calibration:
+    """The ``Calibration`` a ``geometry_posterior.json`` ``content`` describes (``folder``
+    names the robot; ``path`` the file, for errors)."""
+    path = path if path is not None else Path(folder) / POSTERIOR_FILE
+    try:
         units = units_of(content, file=path)
         rows = content["parameters"]
         names = tuple(str(r["name"]) for r in rows)
@@ -154,7 +173,7 @@ def read_calibration(folder: Path) -> Calibration:
         covariance = covariance * np.outer(s, s)
         prior = content["prior"]
         model, convention = str(content["model"]), str(content["convention"])
-    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as error:
+    except (KeyError, TypeError, ValueError) as error:
         raise InputError(f"unreadable: {error}", file=path) from None
     if prior is None:
         information = np.linalg.pinv(covariance, hermitian=True)
