@@ -24,7 +24,10 @@ Every fit runs without diagnosis and with the linear loss (the robust screening 
 readings than the fewest counts here give); both priors see the same data.
 
     python benchmarks/fleet_prior.py [--part tracker,bar,panda] [--robots N] [--next M]
-        [--shared /work/shared/data] [--out benchmarks/results/fleet_prior.json]
+        [--shared DIR] [--out benchmarks/results/fleet_prior.json]
+
+``--shared DIR`` names the folder holding ``panda-mukca/`` and ``panda-fleet/`` (needed for
+``--part panda``).
 
 Prints and writes JSON.
 """
@@ -243,17 +246,20 @@ def pandas(shared: Path) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", default="tracker,bar,panda")
+    parser.add_argument("--part", default="tracker,bar")
     parser.add_argument("--robots", type=int, default=12, help="fleet robots the prior learns from")
     parser.add_argument("--next", type=int, default=5, help="new robots of the model measured")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--noise", type=float, default=NOISE * 1e3,
                         help="simulated noise per coordinate [mm] (default %(default)s)")
-    parser.add_argument("--shared", type=Path, default=Path("/work/shared/data"))
+    parser.add_argument("--shared", type=Path, default=None,
+                        help="folder holding panda-mukca/ and panda-fleet/")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results"
                         / "fleet_prior.json")
     args = parser.parse_args()
     parts = args.part.split(",")
+    if "panda" in parts and args.shared is None:
+        parser.error("--part panda needs --shared DIR")
     report: dict = {}
     with tempfile.TemporaryDirectory() as folder:
         for part in parts:

@@ -1,6 +1,6 @@
 """A fleet's population prior on file, and its use in the next robot's calibration.
 
-Three pieces (docs/formats.md#fleet-prior-file, docs/methods.md#population-prior):
+Three pieces (docs/formats.md#fleet-prior-file, docs/methods.md#fleet-prior):
 
 * ``geometry_posterior.json`` in every calibration result folder (``write_posterior``):
   the geometric fit's estimate and posterior covariance of the robot parameters it
