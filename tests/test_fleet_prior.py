@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -296,3 +297,32 @@ def test_calibrate_refuses_a_prior_of_another_model(fleet, tmp_path, capsys):
     assert main(["calibrate", str(data.dataset_path), "--no-report", "--prior", str(prior_file),
                  "--out", str(tmp_path / "out")]) == 2
     assert str(prior_file) in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_fleet_learns_a_leave_one_out_prior(fleet, capsys):
+    pytest.importorskip("distributed")
+    root, folders, _ = fleet
+    names = [f"r{k}" for k in range(len(folders))]
+    (root / "fleet.yaml").write_text("robots:\n" + "".join(
+        f"  - {{name: {n}, datasets: [data{k}/dataset.yaml]}}\n" for k, n in enumerate(names)))
+    out = root / "fleet-out"
+    assert main(["fleet", str(root / "fleet.yaml"), "--out", str(out), "--learn-prior",
+                 "--workers", "1", "--no-report", "--no-diagnose", "--loss", "linear"]) == 0
+    everyone = yaml.safe_load((out / "prior.yaml").read_text())
+    assert everyone["count"] == len(names)
+    summary = json.loads((out / "fleet.json").read_text())
+    rows = {row["robot"]: row for row in summary["fleet_prior"]["robots"]}
+    assert set(rows) == set(names)
+    for name in names:
+        own = yaml.safe_load((out / "priors" / f"{name}.yaml").read_text())
+        # leave one out: the robot's own prior never holds the robot itself
+        assert own["count"] == len(names) - 1
+        assert not any(Path(r).name == name for r in own["robots"])
+        used = json.loads((out / name / "result.json").read_text())["prior"]
+        expected = str((out / "priors" / f"{name}.yaml").resolve())
+        assert used["offered"] == expected
+        assert used["source"] == (expected if used["belongs"] else "tolerance")
+        assert rows[name]["belongs"] == used["belongs"]
+        assert (out / "tolerance-prior" / name / "result.json").is_file()
+    assert "What the fleet prior changed" in (out / "fleet.html").read_text()
