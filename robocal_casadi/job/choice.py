@@ -221,9 +221,7 @@ def _linear_cv(result, datasets, robot: Robot, mounted: dict[str, float],
 
 
 def _prior_rows(result, problem: Problem, x: np.ndarray, columns: np.ndarray):
-    """The prior as rows of ``[columns, -residual]`` (None without a prior): each
-    parameter's own spread about the prior's centre (a fleet prior's correlations left
-    out of the folds' check)."""
+    """The tolerance prior as rows of ``[columns, -residual]`` (None without a prior)."""
     prior = result.prior
     if prior is None or not prior.tolerance or not np.isfinite(prior.noise):
         return None
@@ -239,7 +237,7 @@ def _prior_rows(result, problem: Problem, x: np.ndarray, columns: np.ndarray):
             continue
         row = np.zeros(len(columns) + 1)
         row[position[i]] = sigma / tolerance
-        row[-1] = -(x[i] - prior.centre.get(name, start[i])) * sigma / tolerance
+        row[-1] = -(x[i] - start[i]) * sigma / tolerance
         rows.append(row)
     return np.array(rows) if rows else None
 
