@@ -43,7 +43,6 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal_casadi.calibration.job import JobOptions, calibrate_job
 from robocal_casadi.calibration.population_prior import (
     calibration_from,
     learn,
@@ -53,6 +52,7 @@ from robocal_casadi.calibration.prior import tolerance_of
 from robocal_casadi.instruments.dataset import dataset_rows
 from robocal_casadi.instruments.datasets import load_dataset
 from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.job.run import JobOptions, calibrate_job
 from robocal_casadi.model import examples
 from robocal_casadi.model.kinematics import Kinematics
 from robocal_casadi.model.parameters import perturbed_stems
