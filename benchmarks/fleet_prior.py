@@ -49,6 +49,7 @@ from robocal_casadi.calibration.population_prior import (
     posterior_content,
 )
 from robocal_casadi.calibration.prior import tolerance_of
+from robocal_casadi.errors import RobocalError
 from robocal_casadi.instruments.dataset import dataset_rows
 from robocal_casadi.instruments.datasets import load_dataset
 from robocal_casadi.instruments.simulate import simulate
@@ -127,11 +128,16 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
     Q = cell_poses(robot, np.random.default_rng(seed + 1))
     started = time.perf_counter()
     calibrations = []
+    refused: list[str] = []
     for k in range(robots):
         data = simulate(robot, kind, out_dir=folder / f"{part}-fleet-{k}", rows=full,
                         noise=noise, geometric_errors=fleet_errors(robot, rng, shared, OWN),
                         seed=seed + 10 + k, progress=False)
-        result = calibrate_job([data.load()], (), options())
+        try:
+            result = calibrate_job([data.load()], (), options())
+        except RobocalError as error:  # a robot whose data refuse: it teaches nothing
+            refused.append(f"robot-{k}: {error}")
+            continue
         calibrations.append(calibration_from(posterior_content(result), Path(f"robot-{k}")))
     prior = learn(calibrations)
     learned_s = time.perf_counter() - started
@@ -148,7 +154,12 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
             part_data = subset(dataset, kind, count)
             entry = {"robot": k, "off_model": off, "count": count}
             for label, used in (("tolerance", None), ("fleet", prior)):
-                result = calibrate_job([part_data], (), options(used))
+                try:
+                    result = calibrate_job([part_data], (), options(used))
+                except RobocalError as error:
+                    entry[label] = None
+                    entry[f"{label}_refused"] = str(error)
+                    continue
                 use = result.prior.use
                 entry[label] = true_cell_rms(result, data.truth, kinematics, Q) * 1e3
                 if used is not None:
@@ -160,6 +171,7 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
     return {"kind": kind, "robot": robot.name, "fleet_robots": robots, "full": full,
             "counts": list(counts), "shared": SHARED, "own": OWN, "off": OFF,
             "noise_mm": noise * 1e3, "learn_s": learned_s, "rows": rows,
+            "fleet_refused": refused,
             "summary": summarise(rows, counts, full)}
 
 
@@ -169,24 +181,31 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
     members = [r for r in rows if not r["off_model"]]
     out = {}
     for count in counts:
-        at = [r for r in members if r["count"] == count]
-        out[str(count)] = {"tolerance_median_mm": float(np.median([r["tolerance"] for r in at])),
-                           "fleet_median_mm": float(np.median([r["fleet"] for r in at])),
+        at = [r for r in members if r["count"] == count
+              and r["tolerance"] is not None and r["fleet"] is not None]
+        out[str(count)] = {"tolerance_median_mm": _median([r["tolerance"] for r in at]),
+                           "fleet_median_mm": _median([r["fleet"] for r in at]),
                            "belongs": sum(bool(r.get("belongs")) for r in at),
                            "robots": len(at)}
     third = min(counts, key=lambda c: abs(c - full / 3))
-    fleet_third = {r["robot"]: r["fleet"] for r in members if r["count"] == third}
-    tolerance_all = {r["robot"]: r["tolerance"] for r in members if r["count"] == full}
-    no_worse = [fleet_third[k] <= tolerance_all[k] for k in fleet_third]
+    fleet_third = {r["robot"]: r["fleet"] for r in members if r["count"] == third
+                   and r["fleet"] is not None}
+    tolerance_all = {r["robot"]: r["tolerance"] for r in members if r["count"] == full
+                     and r["tolerance"] is not None}
+    no_worse = [fleet_third[k] <= tolerance_all[k] for k in fleet_third if k in tolerance_all]
     off = [r for r in rows if r["off_model"]]
     return {"per_count": out, "third": third,
             "fleet_at_third_no_worse_than_tolerance_at_all": f"{sum(no_worse)}/{len(no_worse)}",
-            "fleet_third_median_mm": float(np.median(list(fleet_third.values()))),
-            "tolerance_all_median_mm": float(np.median(list(tolerance_all.values()))),
+            "fleet_third_median_mm": _median(list(fleet_third.values())),
+            "tolerance_all_median_mm": _median(list(tolerance_all.values())),
             "off_model_refused": f"{sum(r.get('belongs') is False for r in off)}/{len(off)}",
             "off_model_same_as_tolerance": all(
                 math.isclose(r["fleet"], r["tolerance"], rel_tol=1e-6) for r in off
-                if r.get("belongs") is False)}
+                if r.get("belongs") is False and r["fleet"] is not None)}
+
+
+def _median(values: list[float]) -> float | None:
+    return float(np.median(values)) if values else None
 
 
 def panda_robots(shared: Path) -> dict[str, list[Path]]:
