@@ -366,8 +366,7 @@ def _sharpened(covariance: np.ndarray, names: Sequence[str], result, ratio: floa
     ``(ratio^2 (C^-1 - P) + P)^-1``: the prior's directions keep their tolerance."""
     if ratio <= 1.0 or result.prior is None:
         return covariance
-    tolerance = dict(result.prior.tolerance)
-    P = np.diag([1.0 / tolerance[n] ** 2 if tolerance.get(n) else 0.0 for n in names])
+    P = _prior_precision(result, names)
     values, vectors = np.linalg.eigh(0.5 * (covariance + covariance.T))
     if values.min() <= 0:
         return covariance
@@ -375,6 +374,20 @@ def _sharpened(covariance: np.ndarray, names: Sequence[str], result, ratio: floa
     values, vectors = np.linalg.eigh(0.5 * (information + information.T))
     information = (vectors * np.clip(values, 0.0, None)) @ vectors.T
     return np.linalg.inv(ratio**2 * information + P)
+
+
+def _prior_precision(result, names: Sequence[str]) -> np.ndarray:
+    """The precision [1 / SI^2] of the prior the geometric fit used over ``names``: the
+    tolerances', or a fleet prior's full one where it was used (``prior.use``)."""
+    tolerance = dict(result.prior.tolerance)
+    P = np.diag([1.0 / tolerance[n] ** 2 if tolerance.get(n) else 0.0 for n in names])
+    use = getattr(result.prior, "use", None)
+    if use is None or use.source == "tolerance" or not len(use.names):
+        return P
+    held = [k for k, n in enumerate(names) if n in use.names]
+    where = [use.names.index(names[k]) for k in held]
+    P[np.ix_(held, held)] = np.linalg.inv(use.covariance[np.ix_(where, where)])
+    return P
 
 
 def _error_field(result, kinematics: Kinematics, names: Sequence[str],
