@@ -296,13 +296,7 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
     if box is not None:
         blocks.append(Paragraph(_box_words(predicted, scale, unit), "conclusion"))
     elif predicted.held_out_differs and predicted.unseen and predicted.held_out is not None:
-        named = "; ".join(f"{u.name}, {format_number(u.rms / scale)} {unit}: {u.remedy}"
-                          for u in predicted.unseen)
-        blocks.append(Paragraph(
-            f"The prediction is more than twice the held-out RMS of robot_calibrated.yaml "
-            f"({format_number(predicted.held_out / scale)} {unit}): the held-out data "
-            f"measure what the instrument sees, the prediction the whole tool position. What "
-            f"carries it is the uncertainty these data leave in: {named}.", "conclusion"))
+        blocks.append(Paragraph(_held_out_words(predicted, scale, unit), "conclusion"))
     header = ("statistic", *(label for label, _ in shown))
     blocks.append(Table("predicted", f"Predicted tool-position error [{unit}]", header,
                         tuple(rows), numeric=(False, *(True for _ in shown))))
@@ -312,6 +306,16 @@ def work_cell_section(result: CalibrationResult) -> Section | None:
                            partial(figures.predicted_errors, predicted.errors, scale, unit,
                                    predicted.region_words)))
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
+
+
+def _held_out_words(predicted, scale: float, unit: str) -> str:
+    """Why the prediction is more than twice the held-out RMS: what carries it."""
+    named = "; ".join(f"{u.name}, {format_number(u.rms / scale)} {unit}: {u.remedy}"
+                      for u in predicted.unseen)
+    return (f"The prediction is more than twice the held-out RMS of robot_calibrated.yaml "
+            f"({format_number(predicted.held_out / scale)} {unit}): the held-out data "
+            f"measure what the instrument sees, the prediction the whole tool position. What "
+            f"carries it is the uncertainty these data leave in: {named}.")
 
 
 def _box_words(predicted, scale: float, unit: str) -> str:
