@@ -127,6 +127,8 @@ def one_case(robot_file: Path, kind: str, seed: int, errors, rows: tuple[int, in
             pickle.dump({"result": result, "truth": fit.truth, "fit": fit_path,
                          "held": held_path}, handle)
     predicted = result.predicted_accuracy
+    # the truth is taken over the box of joint ranges: the statement's box figure
+    predicted = predicted if predicted is None or predicted.box is None else predicted.box
     out = {"seed": seed, "exit_status": outcome.exit_status, "recommended": result.recommended,
            "delivered_model": result.delivered.model,
            "true_error_delivered_mm": 1e3 * delivered_error,

@@ -25,7 +25,7 @@ from .common.workers import command_started
 from .errors import RobocalError
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
-         "fleet")
+         "fleet", "prior")
 MAX_MESSAGE = 1000  # characters of an error line
 INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT, as shells report it)
 

@@ -149,7 +149,8 @@ class EffectFinding:
 
 @dataclass(frozen=True)
 class PriorSummary:
-    """How the estimate weighed data against tolerances (see ``prior``).
+    """How the estimate weighed data against the prior (see ``prior``): the tolerances
+    or a fleet's population prior (``use``).
 
     ``rule`` is ``"prior"`` (maximum a posteriori) or ``"fraction"`` (least squares with
     weak parameters held); ``noise`` [m] the residual's standard deviation estimated from
@@ -163,6 +164,10 @@ class PriorSummary:
     tolerance: dict[str, float] = field(default_factory=dict)
     data_share: dict[str, float] = field(default_factory=dict)
     quantities: dict[str, str] = field(default_factory=dict)
+    # the prior's centre [SI] per parameter, and which prior it was: an object with
+    # ``to_json()`` (``calibration.population_prior.PriorUse``; None: the tolerance prior)
+    centre: dict[str, float] = field(default_factory=dict)
+    use: Any = None
 
     @property
     def dominated(self) -> tuple[str, ...]:
@@ -180,9 +185,11 @@ class PriorSummary:
                 "prior_dominated": name in self.dominated}
 
     def to_json(self, units: Units) -> dict:
+        source = {"source": "tolerance", "belongs": None} if self.use is None else \
+            self.use.to_json()
         return {"rule": self.rule,
                 "noise": self.noise / units.length_scale if np.isfinite(self.noise) else None,
-                "unit": units.length, "dominated": list(self.dominated)}
+                "unit": units.length, "dominated": list(self.dominated), **source}
 
 
 @dataclass(frozen=True)
@@ -420,12 +427,55 @@ MEASURED = "poses of the fit data"
 BAND = (0.1, 0.9)  # quantiles of one robot's RMS over the work cell a prediction gives
 
 
+BOX_RATIO = 2.0  # the box figure is stated beside the poses' when they differ by more
+
+
+@dataclass(frozen=True)
+class ErrorFigures:
+    """RMS, 95th percentile and maximum [m] of a predicted tool-position error over the
+    poses of a region."""
+
+    rms: float
+    p95: float
+    max: float
+
+    @staticmethod
+    def of(errors: np.ndarray) -> ErrorFigures:
+        errors = np.asarray(errors, dtype=float)
+        return ErrorFigures(float(np.sqrt(np.mean(errors**2))), float(np.percentile(errors, 95)),
+                            float(errors.max()))
+
+    def to_json(self, length_scale: float) -> dict:
+        return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
+                "max": self.max / length_scale}
+
+
+@dataclass(frozen=True)
+class Unseen:
+    """A parameter the data barely see: ``name``, the RMS [m] its remaining uncertainty
+    puts on the tool over the box of joint ranges (``rms``: how much of the box figure it
+    carries), and what it would take to see it (``remedy``, words)."""
+
+    name: str
+    rms: float
+    remedy: str
+
+    def to_json(self, length_scale: float) -> dict:
+        return {"parameter": self.name, "rms": self.rms / length_scale, "to_see_it": self.remedy}
+
+
 @dataclass(frozen=True)
 class PredictedAccuracy:
     """Predicted tool-position error over ``region`` [m]: ``rms``, ``p95``, ``max``;
-    ``structured`` [m] the part from what the model does not describe (``s``);
-    ``region`` the joint ranges (per joint ``[low, high]``, rad or m); ``band`` [m] the
-    ``BAND`` quantiles of one robot's RMS over the region (module docstring)."""
+    ``structured`` [m] the part from what the model does not describe (``s``, RMS over
+    the poses); ``region`` the joint ranges (per joint ``[low, high]``, rad or m); ``band``
+    [m] the ``BAND`` quantiles of one robot's RMS over the region (module docstring).
+    ``nominal``: the nominal robot's predicted error over the same poses, for "calibrated
+    or not" read on one region. Where the region is the measured poses, ``box`` is the
+    prediction over the box of joint ranges they span and ``unseen`` the parameters that
+    carry the difference (stated when the two differ by more than ``BOX_RATIO``); else,
+    where the figure is more than ``BOX_RATIO`` times the delivered file's ``held_out``
+    RMS, ``unseen`` the parameters that carry the figure."""
 
     rms: float
     p95: float
@@ -434,18 +484,41 @@ class PredictedAccuracy:
     region: tuple[tuple[float, float], ...]
     samples: int = SAMPLES
     errors: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)  # per pose [m]
-    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED or PARTLY_DECLARED
+    region_kind: str = DATA_RANGES  # DATA_RANGES, DECLARED, PARTLY_DECLARED or MEASURED
     band: tuple[float, float] | None = None
+    nominal: ErrorFigures | None = None
+    box: PredictedAccuracy | None = None
+    unseen: tuple[Unseen, ...] = ()
+    held_out: float | None = None  # [m] the delivered file's held-out RMS, when given
 
     def to_json(self, length_scale: float, unit: str, angle_unit: str = "rad") -> dict:
-        return {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
-                "max": self.max / length_scale, "structured": self.structured / length_scale,
-                "rms_band": (None if self.band is None else
-                             [self.band[0] / length_scale, self.band[1] / length_scale]),
-                "rms_band_quantiles": list(BAND),
-                "unit": unit,
-                "region": {"kind": self.region_kind, "samples": self.samples,
-                           "joints_rad_or_m": [list(r) for r in self.region]}}
+        out: dict[str, Any] = {"rms": self.rms / length_scale, "p95": self.p95 / length_scale,
+               "max": self.max / length_scale, "structured": self.structured / length_scale,
+               "rms_band": (None if self.band is None else
+                            [self.band[0] / length_scale, self.band[1] / length_scale]),
+               "rms_band_quantiles": list(BAND),
+               "unit": unit,
+               "region": {"kind": self.region_kind, "samples": self.samples,
+                          "joints_rad_or_m": [list(r) for r in self.region]},
+               "nominal": None if self.nominal is None else self.nominal.to_json(length_scale)}
+        if self.box is not None:
+            out["box"] = self.box.to_json(length_scale, unit, angle_unit)
+            out["box_differs"] = self.box_differs
+        out["unseen"] = [u.to_json(length_scale) for u in self.unseen]
+        return out
+
+    @property
+    def held_out_differs(self) -> bool:
+        """The figure is more than ``BOX_RATIO`` times the delivered file's held-out RMS."""
+        return self.held_out is not None and self.rms > BOX_RATIO * self.held_out
+
+    @property
+    def box_differs(self) -> bool:
+        """The box of joint ranges gives a figure more than ``BOX_RATIO`` from this one."""
+        if self.box is None or self.rms <= 0:
+            return False
+        ratio = self.box.rms / self.rms
+        return bool(ratio > BOX_RATIO or ratio < 1 / BOX_RATIO)
 
     @property
     def region_words(self) -> str:
@@ -453,8 +526,8 @@ class PredictedAccuracy:
         return {DECLARED: "the declared work cell",
                 PARTLY_DECLARED: "the declared work cell (other joints: the ranges the data "
                                  "cover)",
-                MEASURED: "the poses the fit data were measured in"}.get(
-            self.region_kind, "the joint ranges the data cover")
+                MEASURED: "the poses the data cover"}.get(
+            self.region_kind, "the whole box of joint ranges the data cover")
 
     @property
     def band_words(self) -> str:
@@ -462,12 +535,45 @@ class PredictedAccuracy:
         return f"{round(100 * (BAND[1] - BAND[0]))}% of robots calibrated like this"
 
     def sentence(self, length_scale: float, unit: str) -> str:
+        """The terminal's statement: the figure over the region with the nominal robot's
+        beside it, then, where it differs by more than ``BOX_RATIO``, the box figure and
+        what carries the difference (one line each)."""
+        s = length_scale
         band = "" if self.band is None else (
-            f" ({self.band[0] / length_scale:.3g} to {self.band[1] / length_scale:.3g} for "
-            f"{self.band_words})")
-        return (f"predicted tool-position error over {self.region_words}: RMS "
-                f"{self.rms / length_scale:.4g}{band}, 95% {self.p95 / length_scale:.4g}, max "
-                f"{self.max / length_scale:.4g} {unit}")
+            f" ({self.band[0] / s:.3g} to {self.band[1] / s:.3g} for {self.band_words})")
+        nominal = "" if self.nominal is None else (
+            f"; nominal robot over the same poses: RMS {self.nominal.rms / s:.4g} {unit}")
+        text = (f"predicted tool-position error over {self.region_words}: RMS "
+                f"{self.rms / s:.4g}{band}, 95% {self.p95 / s:.4g}, max "
+                f"{self.max / s:.4g} {unit}{nominal}")
+        if self.box_differs and self.box is not None:
+            text += "\n" + self.box_sentence(s, unit)
+        elif self.held_out_differs and self.unseen:
+            text += "\n" + self.held_out_sentence(s, unit)
+        return text
+
+    def held_out_sentence(self, length_scale: float, unit: str) -> str:
+        """Why the figure is more than ``BOX_RATIO`` times the held-out RMS, in words."""
+        s = length_scale
+        named = "; ".join(f"{u.name} ({u.rms / s:.3g} {unit}): {u.remedy}" for u in self.unseen)
+        return (f"more than {BOX_RATIO:g} times the held-out RMS ({(self.held_out or 0) / s:.4g} "
+                f"{unit}): the uncertainty these data leave in {named}")
+
+    def box_sentence(self, length_scale: float, unit: str) -> str:
+        """The box figure and the parameters that carry its difference, in words."""
+        s, box = length_scale, self.box
+        if box is None:
+            return ""
+        nominal = "" if box.nominal is None else f", nominal robot {box.nominal.rms / s:.4g}"
+        text = (f"over {box.region_words} (every joint combination within the measured "
+                f"ranges): RMS {box.rms / s:.4g} {unit}{nominal}")
+        if self.unseen:
+            named = "; ".join(f"{u.name} ({u.rms / s:.3g} {unit}): {u.remedy}"
+                              for u in self.unseen)
+            return text + f"; carried by what these data do not see: {named}"
+        return text + ("; the data determine the robot only near the measured poses: "
+                       "measure more of the work cell (other poses, another placement of "
+                       "the instrument)")
 
     def __repr__(self) -> str:
         return (f"PredictedAccuracy(rms={self.rms:.4g} m, p95={self.p95:.4g} m, "

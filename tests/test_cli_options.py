@@ -43,7 +43,8 @@ def test_an_unknown_option_is_refused_in_the_verbs_name(verb, capsys):
               "track": ["j.yaml", "--out", "o.csv"], "fk": ["r.yaml", "j.csv", "--out", "o.csv"],
               "simulate": ["--example", "industrial_6r", "--kind", "cross_bar", "--out", "o"],
               "compensate": ["r.yaml", "t.csv", "--out", "o.csv"], "export": ["d"],
-              "demo": [], "fleet": ["f.yaml", "--out", "o"]}[verb]
+              "demo": [], "fleet": ["f.yaml", "--out", "o"],
+              "prior": ["r1", "--out", "p.yaml"]}[verb]
     with pytest.raises(SystemExit) as stop:
         main([verb, *needed, "--no-such-option", "7"])
     assert stop.value.code == 2

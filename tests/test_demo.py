@@ -55,7 +55,8 @@ def test_demo_without_chromium_keeps_the_screenshot(small_case, capsys):
     assert (case / "result.json").read_text().splitlines()[:20] == first.splitlines()[:20]
     assert (case / MARKER).is_file()
     assert sorted(p.name for p in case.iterdir() if not p.name.startswith(".")) == [
-        "errors.csv", "report.html", "report.png", "result.json", "robot_calibrated.yaml"]
+        "errors.csv", "geometry_posterior.json", "report.html", "report.png", "result.json",
+        "robot_calibrated.yaml"]
 
 
 def test_demo_does_not_replace_a_folder_it_did_not_write(small_case, capsys):

@@ -259,8 +259,8 @@ def test_the_geometry_refitted_with_the_map_is_the_maximum_a_posteriori_fit(tmp_
     problem = Problem(robot, models_for([data]))
     x0 = refit_placement(problem, problem.initial())
     start = solve(problem, x0, problem.mask("placement"))
-    _, geometric, prior = _map_geometric(problem, x0, start.x, 1e-5, None, method="lm",
-                                         loss="linear", max_iterations=100)
+    _, geometric, prior, _ = _map_geometric(problem, x0, start.x, 1e-5, None, method="lm",
+                                            loss="linear", max_iterations=100)
     outcome = learn(problem, geometric.x, ("q2", "q3"))
     assert outcome is not None and outcome.effect is not None, outcome
     mapped, refit = with_map(problem, geometric, outcome.effect, prior=prior)

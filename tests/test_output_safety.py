@@ -87,8 +87,8 @@ def test_simulate_replaces_its_own_output(simulated, tmp_path, capsys):
 def test_calibrate_replaces_its_own_unchanged_result(simulated, result, capsys):
     assert main(["calibrate", str(simulated / "dataset.yaml"), "--out", str(result),
                  *FAST]) == 0
-    assert sorted(read_marker(result).files) == ["errors.csv", "result.json",
-                                                 "robot_calibrated.yaml"]
+    assert sorted(read_marker(result).files) == ["errors.csv", "geometry_posterior.json",
+                                                 "result.json", "robot_calibrated.yaml"]
 
 
 @pytest.mark.parametrize("change", ["added", "edited", "subfolder"])

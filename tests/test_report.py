@@ -162,6 +162,8 @@ class _Page(HTMLParser):
         self.muted: dict[str, list[bool]] = {}
         self.paragraphs: list[tuple[str, str]] = []
         self._table = None
+        self._below = False  # inside a row of columns set under the row before
+        self._span: str | None = None
         self._cell: list[str] | None = None
         self._paragraph: tuple[str, list[str]] | None = None
 
@@ -173,15 +175,28 @@ class _Page(HTMLParser):
             self.tables[self._table] = []
             self.muted[self._table] = []
         elif tag == "tr" and self._table is not None:
-            self.tables[self._table].append([])
-            self.muted[self._table].append(attrs.get("class") == "muted")
-        elif tag in ("td", "th"):
+            classes = (attrs.get("class") or "").split()
+            self._below = "below" in classes
+            if not self._below:  # a row's columns set under it belong to that row
+                self.tables[self._table].append([])
+                self.muted[self._table].append("muted" in classes)
+        elif tag in ("td", "th") and not self._below:
             self._cell = []
+        elif tag == "span" and attrs.get("class") in ("below-header", "below-value"):
+            self._cell = []
+            self._span = attrs["class"]
         elif tag == "p":
             self._paragraph = (attrs.get("class", ""), [])
 
     def handle_endtag(self, tag):
-        if tag in ("td", "th") and self._cell is not None:
+        if tag == "span" and self._span is not None and self._cell is not None:
+            text, rows = "".join(self._cell), self.tables[self._table]
+            if self._span == "below-value":
+                rows[-1].append(text)
+            elif text not in rows[0]:  # its title joins the header, after the side columns
+                rows[0].append(text)
+            self._cell = self._span = None
+        elif tag in ("td", "th") and self._cell is not None:
             self.tables[self._table][-1].append("".join(self._cell))
             self._cell = None
         elif tag == "table":
@@ -666,3 +681,42 @@ def test_pdf_prints_the_folded_diagnosis_table(tmp_path):
     assert len(details[0].blocks[0].rows) == 20
     write_pdf(document, tmp_path / "report.pdf")
     assert (tmp_path / "report.pdf").read_bytes().startswith(b"%PDF")
+
+
+def test_dataset_names_read_as_names_and_derived_columns_as_derived(tmp_path):
+    """Held-out data are named by their file, not by the calibration's key
+    (``validation:NAME``), in a sentence that agrees in number; the columns derived from
+    the row order are listed apart from the user's own."""
+    base = synthetic_result()
+    held = replace(base.validation_residuals[0], label="validation:series_D_validation",
+                   placement_frame="fitted on these data")
+    fit = replace(base.residuals[0], extras={
+        **base.residuals[0].extras, "direction_q2": np.zeros(len(base.residuals[0].rows)),
+        "travel_q2": np.zeros(len(base.residuals[0].rows))})
+    result = replace(base, residuals=(fit, *base.residuals[1:]), validation_residuals=(held,))
+    path = write_report(result, tmp_path / "report.html")
+    text = path.read_text(encoding="utf-8")
+    assert "validation:series_D" not in text
+    assert ("The held-out data set series_D_validation has the instrument placement refitted "
+            "on itself") in text
+    page = read_page(path)
+    rows = body_rows(page, "datasets")
+    assert rows["series_D_validation"][1] == "validation"
+    extra = rows["series_A.yaml"][-1]
+    assert extra == "temperature; derived from the row order: direction_q2, travel_q2"
+
+
+def test_workspace_before_and_after_share_one_colour_scale():
+    """A colour means one error in both rows: every panel's scale runs from zero to the
+    99th percentile of the before and after errors together."""
+    from robocal_casadi.report.kind_figures import workspace
+
+    residuals = synthetic_result().residuals[0]
+    positions = np.random.default_rng(2).uniform(-1, 1, size=(len(residuals.rows), 3))
+    figure = workspace((residuals,), (positions,), Units("mm", "deg"), "series_A")
+    assert len(figure.axes) == 5  # four panels and one colour bar
+    scales = [(c.norm.vmin, c.norm.vmax) for axes in figure.axes[:4] for c in axes.collections]
+    both = np.abs(np.concatenate([residuals.errors_nominal, residuals.errors_final])) / 1e-3
+    assert len(scales) == 4
+    assert all(low == 0.0 and high == pytest.approx(np.percentile(both, 99), rel=1e-12)
+               for low, high in scales)

@@ -82,7 +82,7 @@ def test_measured_poses_as_the_work_cell(tracker, tmp_path):
     predicted = measured(result, [dataset]).predicted_accuracy
     assert predicted.region_kind == MEASURED
     assert predicted.samples == len(predicted.errors) == min(SAMPLES, dataset.rows)
-    assert "measured in" in predicted.sentence(1e-3, "mm")
+    assert "the poses the data cover" in predicted.sentence(1e-3, "mm")
 
 
 @pytest.mark.parametrize("cell, fragment", [
@@ -135,3 +135,33 @@ def test_certified_entries_give_the_covariance_of_the_estimate():
     bound = 4 * np.sqrt(2 / draws)
     assert np.diag(stated.covariance) / scale == pytest.approx(np.diag(sampled), rel=bound)
     assert np.all(np.diag(counted.covariance) > (1 + bound) * np.diag(sampled) * scale)
+
+
+def test_a_figure_far_above_the_held_out_rms_names_what_carries_it(tmp_path):
+    """A cross bar sees distances only: over the poses the data cover the predicted tool
+    error stands several times above the held-out RMS of the bar's distances. The
+    statement then names the parameters whose remaining uncertainty carries it, each a
+    part of the figure, with what would let the data see them."""
+    from robocal_casadi.model.examples import industrial_6r
+    from robocal_casadi.model.robot import save_robot
+
+    save_robot(industrial_6r(), tmp_path / "robot.yaml")
+    errors = {"a2": 3e-4, "alpha3": 3.5e-4, "d4": -2e-4, "theta5": 5e-4}
+    sims = [simulate(tmp_path / "robot.yaml", "cross_bar", out_dir=tmp_path / name, rows=rows,
+                     noise=1e-5, geometric_errors=errors, mounted_error=0.0, seed=seed,
+                     progress=False) for name, rows, seed in (("fit", 40, 1), ("held", 20, 2))]
+    out = tmp_path / "out"
+    assert main(["calibrate", str(sims[0].dataset_path), "--validate", str(sims[1].dataset_path),
+                 "--out", str(out), "--no-report", "--quiet"]) == 0
+    import json
+
+    result = json.loads((out / "result.json").read_text())
+    stated = result["predicted_accuracy"]
+    held_out = result["delivered"]["robot_calibrated.yaml"]["validation"]
+    assert stated["rms"] > 2 * held_out  # the premise: a bar's distances see little
+    named = stated["unseen"]
+    assert named, stated
+    assert all(u["to_see_it"] for u in named)
+    # each named parameter carries at least a tenth of the mean square and at most the
+    # whole (what knowing it would take off; correlated ones share a direction)
+    assert all(0.1 * (1 - 1e-9) <= (u["rms"] / stated["rms"]) ** 2 <= 1 + 1e-9 for u in named)

@@ -49,6 +49,7 @@ from . import diagnosis, learned, outliers, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
+from .population_prior import PopulationPrior, PriorUse, judge, prior_for
 from .prior import (
     SIGMA_ITERATIONS,
     SIGMA_SETTLED,
@@ -227,6 +228,7 @@ class GeometricFit:
     dominated: frozenset[str]
     distinct: np.ndarray
     notes: tuple[str, ...]
+    use: PriorUse | None = None  # which prior was used, and whether the robot belongs
 
 
 @dataclass(frozen=True)
@@ -255,7 +257,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
               diagnose: bool = True, method: Method = "lm", loss: CalibrationLoss = "robust",
               select_growth: float | None = None, max_iterations: int = 200,
               progress: bool = False, rule: Rule = "prior",
-              parameters: Sequence[str] | None = None) -> CalibrationResult:
+              parameters: Sequence[str] | None = None,
+              fleet_prior: PopulationPrior | None = None) -> CalibrationResult:
     """Calibrate the robot shared by ``datasets``; see the module docstring.
 
     ``effects`` are declared effects identified from the start; ``diagnose`` lets the
@@ -289,10 +292,15 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     (``profiles``); the others are held at nominal. Default: all of them. ``progress``
     shows each stage (fits, identifiability, diagnosis rounds and refits, the
     unexplained test) with its elapsed time on standard error when it is a terminal.
+    ``fleet_prior`` (rule ``"prior"`` only): a population prior learned from robots of
+    this model (``population_prior``), used in place of the tolerances of the robot
+    parameters it covers unless this robot's data contradict it beyond their noise, in
+    which case the tolerance prior is used and ``result.prior.use`` says so.
     """
     request = _Request.checked(datasets, validation, effects, method=method, loss=loss,
                                rule=rule, max_iterations=max_iterations,
-                               select_growth=select_growth, parameters=parameters)
+                               select_growth=select_growth, parameters=parameters,
+                               fleet_prior=fleet_prior)
     nominal, rejected, geometric, final = _fits(request, diagnose)
     structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
     if diagnose:
@@ -316,6 +324,7 @@ class _Request:
     max_iterations: int
     select_growth: float | None
     parameters: tuple[str, ...] | None
+    fleet_prior: PopulationPrior | None = None
 
     @property
     def robust(self) -> bool:
@@ -330,7 +339,8 @@ class _Request:
     @classmethod
     def checked(cls, datasets: Sequence, validation: Sequence, effects: Sequence[Effect], *,
                 method: Method, loss: CalibrationLoss, rule: Rule, max_iterations: int,
-                select_growth: float | None, parameters: Sequence[str] | None) -> _Request:
+                select_growth: float | None, parameters: Sequence[str] | None,
+                fleet_prior: PopulationPrior | None = None) -> _Request:
         """The arguments checked, in canonical form (``ArgumentError``, ``InputError``)."""
         method = choice(method, METHODS, "method")
         rule = choice(rule, RULES, "rule")
@@ -349,8 +359,13 @@ class _Request:
         robot = datasets[0].robot
         names = None if parameters is None else parameter_names(
             parameters, robot.parameters().names, "parameters")
+        if fleet_prior is not None:
+            if rule != "prior":
+                raise ArgumentError("a fleet prior needs rule 'prior', got 'fraction'",
+                                    argument="fleet_prior")
+            fleet_prior.check_robot(robot, fleet_prior.path)
         return cls(robot, datasets, validation, effects, method, loss, rule, max_iterations,
-                   select_growth, names)
+                   select_growth, names, fleet_prior)
 
 
 def _fits(request: _Request, diagnose: bool
@@ -372,7 +387,8 @@ def _fits(request: _Request, diagnose: bool
         identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
                                                         max_iterations=max_iterations)
         geometric = _prior_fit(nominal, identifiability, least_squares, request.rule,
-                               method=method, loss=fit_loss, max_iterations=max_iterations)
+                               method=method, loss=fit_loss, max_iterations=max_iterations,
+                               fleet=request.fleet_prior)
         final = _diagnose(nominal.problem, geometric, request.validation, diagnose,
                           method=method, loss=fit_loss)
         # Effects found change what the residual holds: readings set aside before they
@@ -679,7 +695,8 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
 
 
 def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squares: Solution,
-               rule: Rule, *, method: Method, loss: Loss, max_iterations: int) -> GeometricFit:
+               rule: Rule, *, method: Method, loss: Loss, max_iterations: int,
+               fleet: PopulationPrior | None = None) -> GeometricFit:
     """Stage 3 under ``rule``: ``"prior"`` refits by maximum a posteriori; both flag
     repeated readings and the parameters the prior dominates."""
     # The least-squares fit, on the parameters with a fair share of their own, also gives
@@ -687,15 +704,15 @@ def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squa
     problem = nominal.problem
     distinct, repeated, units_of_data = duplicate_rows(problem)
     notes = (_warn_duplicates(repeated, units_of_data),) if repeated else ()
-    geometric, prior = least_squares, None
+    geometric, prior, use = least_squares, None, None
     if rule == "prior":
         noise = posterior(problem.jacobian(geometric.x, geometric.free),
                           problem.residual(geometric.x), np.flatnonzero(geometric.free), None,
                           rows=distinct).sigma
         determined = identifiability
-        identifiability, geometric, prior = _map_geometric(
+        identifiability, geometric, prior, use = _map_geometric(
             problem, nominal.solution.x, geometric.x, noise, distinct, method=method, loss=loss,
-            max_iterations=max_iterations, candidates=nominal.candidates)
+            max_iterations=max_iterations, candidates=nominal.candidates, fleet=fleet)
         # The condition number describes the data: that of the parameters with a fair share
         # of their effect their own (the weak ones lean on the prior, not on the data).
         identifiability = replace(identifiability,
@@ -707,7 +724,7 @@ def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squa
                 f"{geometric.iterations} iterations",
                 stats={"iterations": geometric.iterations, "status": geometric.status})
     dominated = frozenset(_dominated(problem, geometric, prior, distinct))
-    return GeometricFit(identifiability, geometric, prior, dominated, distinct, notes)
+    return GeometricFit(identifiability, geometric, prior, dominated, distinct, notes, use)
 
 
 def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[DatasetBase],
@@ -771,7 +788,7 @@ def _standard_errors(final: DiagnosedFit, geometric: GeometricFit,
     if not np.isfinite(statistics.sigma):
         notes = ("the distinct readings leave no degree of freedom to estimate the noise: "
                  "no standard errors",)
-    return std, _prior_summary(problem, prior, statistics, rule), notes
+    return std, _prior_summary(problem, prior, statistics, rule, geometric.use), notes
 
 
 def _finite(value: float) -> float | None:
@@ -784,21 +801,6 @@ def _warn_duplicates(repeated: int, units: int) -> str:
             f"one exactly; standard errors count each distinct reading once")
     print(f"warning: {note}", file=sys.stderr)
     return note
-
-
-def _prior_of(problem: Problem, free: np.ndarray, sigma: float) -> Prior:
-    """The prior on the free robot and mounted parameters, centred on their start values."""
-    start = problem.initial()
-    weighed, tolerance = [], []
-    for i in np.flatnonzero(free & problem.mask("robot", "mounted")):
-        name = problem.unknowns.names[i]
-        t = tolerance_of(name, problem.unknowns.quantity(name), problem.robot)
-        if t is not None:
-            weighed.append(i)
-            tolerance.append(t)
-    index = np.array(weighed, dtype=int)
-    return Prior(tuple(problem.unknowns.names[i] for i in index), index, start[index],
-                 np.array(tolerance, float), sigma)
 
 
 def _dominated(problem: Problem, solution: Solution, prior: Prior | None, distinct) -> set[str]:
@@ -822,15 +824,17 @@ def _holding(solution: Solution, held: np.ndarray) -> Solution:
 
 
 def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
-                   rule: str) -> PriorSummary:
-    """What the prior did: tolerances and the data's share per parameter, noise level."""
+                   rule: str, use: PriorUse | None = None) -> PriorSummary:
+    """What the prior did: tolerances (the prior's standard deviations) and the data's
+    share per parameter, noise level, centres, and which prior it was."""
     if prior is None:
         return PriorSummary(rule=rule, noise=statistics.sigma)
     share = dict(zip(prior.names, (float(s) for s in statistics.share)))
     return PriorSummary(rule=rule, noise=statistics.sigma,
                         tolerance=dict(zip(prior.names, map(float, prior.tolerance))),
                         data_share=share,
-                        quantities={n: problem.unknowns.quantity(n) for n in prior.names})
+                        quantities={n: problem.unknowns.quantity(n) for n in prior.names},
+                        centre=dict(zip(prior.names, map(float, prior.centre))), use=use)
 
 
 def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,
@@ -841,7 +845,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
     """
     decrease = settled_decrease(problem)
     for _ in range(SIGMA_ITERATIONS):
-        with stage("identification with the tolerance prior"):
+        with stage("identification with the prior"):
             solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
                              method=method, loss=loss, max_iterations=max_iterations,
                              decrease=decrease)
@@ -859,7 +863,8 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
                    distinct, *, method: Method, loss: Loss, max_iterations: int,
-                   candidates: Sequence[str] | None = None):
+                   candidates: Sequence[str] | None = None,
+                   fleet: PopulationPrior | None = None):
     """Identifiability with exact dependencies only, and the MAP fit of the rest
     (``candidates``: the unknowns that may be fitted, default all).
 
@@ -868,16 +873,37 @@ def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray,
     flange axis, an offset of exactly zero) and there parameters act alike that a real
     robot, off its drawing by its tolerances, tells apart. What the data barely see there
     is left to the prior, not held at nominal.
+
+    With a ``fleet`` population prior, the fit is made under it first; when this robot's
+    data contradict it (``population_prior.judge``), again under the tolerance prior.
+    Returns the identifiability, the solution, the prior used and a ``PriorUse``.
     """
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(problem.rms(x_start), 1e-12)
     identifiability = analyse_identifiability(problem, generic_point(problem, x_nominal),
                                               candidates, tolerance=EXACT_TOLERANCE)
     free = _free_mask(problem, identifiability)
-    solution, prior = _map_solve(problem, x_start, free, _prior_of(problem, free, sigma),
+    tolerance_prior = prior_for(problem, free, sigma, None)
+    offered, member = None, None
+    if fleet is not None:
+        solution, prior = _map_solve(problem, x_start, free, prior_for(problem, free, sigma,
+                                                                      fleet),
+                                     distinct, method=method, loss=loss,
+                                     max_iterations=max_iterations)
+        position = {int(i): k for k, i in enumerate(np.flatnonzero(free))}
+        where = [position[int(i)] for i in prior.index]
+        member = judge(prior, solution.covariance[np.ix_(where, where)], solution.x, fleet,
+                       problem.robot.name)
+        offered = str(fleet.path) if fleet.path is not None else "fleet prior"
+        if member.belongs:
+            return identifiability, solution, prior, PriorUse(
+                offered, offered, True, member, prior.names, prior.centre, prior.covariance)
+    solution, prior = _map_solve(problem, x_start, free, tolerance_prior,
                                  distinct, method=method, loss=loss,
                                  max_iterations=max_iterations)
-    return identifiability, solution, prior
+    use = PriorUse("tolerance", offered, None if fleet is None else False, member,
+                   prior.names, prior.centre, prior.covariance)
+    return identifiability, solution, prior, use
 
 
 GENERIC_SCALE = 0.1  # generic point: robot and mounted parameters off nominal by this x tolerance

@@ -26,7 +26,7 @@ Default tolerances per kind of parameter (``DEFAULT_TOLERANCE``); a robot file's
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -85,30 +85,70 @@ def tolerance_of(name: str, quantity: str, robot) -> float | None:
 
 @dataclass(frozen=True)
 class Prior:
-    """Gaussian prior on ``x[index]`` (parameters ``names``): centre [SI], tolerance [SI],
-    noise ``sigma`` [m]."""
+    """Gaussian prior on ``x[index]`` (parameters ``names``): centre [SI], tolerance [SI]
+    (the square root of its covariance's diagonal), noise ``sigma`` [m].
+
+    ``root`` (None: the parameters are independent, ``diag(1 / tolerance)``) is a matrix
+    ``W`` with ``W^T W = C^-1`` for a full prior covariance ``C`` [SI^2] (a population
+    prior learned from a fleet, ``population``); the prior's residual rows are then
+    ``sigma W (x[index] - centre)``.
+    """
 
     names: tuple[str, ...]
     index: np.ndarray
     centre: np.ndarray
     tolerance: np.ndarray
     sigma: float
+    root: np.ndarray | None = None
 
     @property
     def weights(self) -> np.ndarray:
-        """``sigma / t_i`` [1 / (SI of the parameter) * m]: the prior rows' weights."""
+        """``sigma / t_i`` [1 / (SI of the parameter) * m]: the prior rows' weights (of the
+        independent prior; see ``rows``)."""
         return self.sigma / self.tolerance
 
+    @property
+    def rows(self) -> np.ndarray:
+        """``sigma W``: the prior rows' coefficients (k x k)."""
+        if self.root is None:
+            return np.diag(self.weights)
+        return self.sigma * self.root
+
+    @property
+    def precision(self) -> np.ndarray:
+        """``C^-1`` [1/SI^2]: the prior's precision matrix."""
+        if self.root is None:
+            return np.diag(1.0 / self.tolerance**2)
+        return self.root.T @ self.root
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """``C`` [SI^2]: the prior's covariance matrix."""
+        if self.root is None:
+            return np.diag(self.tolerance**2)
+        inverse_root = np.linalg.inv(self.root)
+        return inverse_root @ inverse_root.T
+
     def with_sigma(self, sigma: float) -> Prior:
-        return Prior(self.names, self.index, self.centre, self.tolerance, float(sigma))
+        return replace(self, sigma=float(sigma))
 
     def placed_in(self, problem) -> Prior:
         """The prior in ``problem``'s layout (same names; effects may shift the indices)."""
-        return Prior(self.names, problem.unknowns.indices(self.names), self.centre,
-                     self.tolerance, self.sigma)
+        return replace(self, index=problem.unknowns.indices(self.names))
+
+    @classmethod
+    def correlated(cls, names: tuple[str, ...], index: np.ndarray, centre: np.ndarray,
+                   covariance: np.ndarray, sigma: float) -> Prior:
+        """The prior ``N(centre, covariance)`` [SI, SI^2] with its full covariance."""
+        covariance = 0.5 * (np.asarray(covariance, float) + np.asarray(covariance, float).T)
+        lower = np.linalg.cholesky(covariance)
+        root = np.linalg.solve(lower, np.eye(len(names)))  # L^-1: (L^-1)^T L^-1 = C^-1
+        return cls(names, np.asarray(index, int), np.asarray(centre, float),
+                   np.sqrt(np.diag(covariance)), float(sigma), root)
 
     def __repr__(self) -> str:
-        return f"Prior({len(self.index)} parameters, sigma={self.sigma:.3g} m)"
+        kind = "independent" if self.root is None else "correlated"
+        return f"Prior({len(self.index)} parameters, {kind}, sigma={self.sigma:.3g} m)"
 
 
 class PriorProblem:
@@ -129,7 +169,7 @@ class PriorProblem:
 
     def prior_rows(self, x: np.ndarray) -> np.ndarray:
         p = self.prior
-        return p.weights * (np.asarray(x, float)[p.index] - p.centre)
+        return p.rows @ (np.asarray(x, float)[p.index] - p.centre)
 
     def residual(self, x: np.ndarray) -> np.ndarray:
         r = self.problem.residual(x)
@@ -151,19 +191,20 @@ class PriorProblem:
         rows = np.zeros((len(self.prior.index), J.shape[1]))
         where = position[self.prior.index]
         present = where >= 0
-        rows[np.flatnonzero(present), where[present]] = self.prior.weights[present]
+        rows[:, where[present]] = self.prior.rows[:, present]
         return np.vstack([J, rows])
 
     def symbolic_residual(self, x):
         import casadi as ca
 
         p = self.prior
-        extra = [float(w) * (x[int(i)] - float(c))
-                 for i, c, w in zip(p.index, p.centre, p.weights)]
+        offset = ca.vertcat(*[x[int(i)] - float(c) for i, c in zip(p.index, p.centre)])
         r = self.problem.symbolic_residual(x)
         if self.root_weights is not None:
             r = r * ca.DM(self.root_weights)
-        return ca.vertcat(r, *extra)
+        if not len(p.index):
+            return r
+        return ca.vertcat(r, ca.mtimes(ca.DM(p.rows), offset))
 
 
 @dataclass(frozen=True)
@@ -209,25 +250,20 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
         certified = None if certified is None else np.asarray(certified, bool)[rows]
     free_index = np.asarray(free_index, int)
     n = len(free_index)
-    precision_prior = np.zeros(n)
-    prior_position = np.zeros(0, int)
-    if prior is not None and len(prior.index):
-        position = {int(i): k for k, i in enumerate(free_index)}
-        prior_position = np.array([position.get(int(i), -1) for i in prior.index])
-        held = prior_position >= 0
-        precision_prior[prior_position[held]] = 1.0 / prior.tolerance[held] ** 2
-    reached = (np.abs(J).sum(axis=0) > 0) | (precision_prior > 0)
+    precision_prior, variance_prior, prior_position = _prior_over(prior, free_index)
+    reached = (np.abs(J).sum(axis=0) > 0) | (variance_prior > 0)
     Jr = J[:, reached]
     data = Jr.T @ Jr
     m = len(r)
     rss = float(r @ r)
     sigma_prior = sigma if sigma is not None else (prior.sigma if prior is not None else None)
+    precision_reached = precision_prior[np.ix_(reached, reached)]
 
     def solve_for(s: float | None):
         if s is None or not np.isfinite(s):
             information = data
         else:
-            information = data + np.diag(s**2 * precision_prior[reached])
+            information = data + s**2 * precision_reached
         inverse = np.linalg.pinv(information, rcond=1e-14, hermitian=True)
         spent = float(np.trace(inverse @ data))
         return inverse, spent
@@ -238,17 +274,37 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     covariance = np.full((n, n), np.nan)
     scale = sigma_new**2
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
-    covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_prior[reached],
-                                        sigma_prior)
-    share = _data_share(inverse, reached, prior_position, precision_prior, sigma_prior)
+    covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_reached, sigma_prior)
+    share = _data_share(inverse, reached, prior_position, variance_prior, sigma_prior)
     return Posterior(covariance, share, sigma_new, dof)
 
 
+def _prior_over(prior: Prior | None, free_index: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The prior over the unknowns ``free_index``: its precision (n x n), each unknown's
+    prior variance (0: none) and, per prior entry, its position among them (-1: not
+    free). The unknowns not free are fixed: the prior on the rest is the conditional one,
+    whose precision is the block of the full precision."""
+    n = len(free_index)
+    precision_prior = np.zeros((n, n))
+    variance_prior = np.zeros(n)
+    prior_position = np.zeros(0, int)
+    if prior is not None and len(prior.index):
+        position = {int(i): k for k, i in enumerate(free_index)}
+        prior_position = np.array([position.get(int(i), -1) for i in prior.index])
+        held = np.flatnonzero(prior_position >= 0)
+        where = prior_position[held]
+        precision_prior[np.ix_(where, where)] = prior.precision[np.ix_(held, held)]
+        variance_prior[where] = prior.tolerance[held] ** 2
+    return precision_prior, variance_prior, prior_position
+
+
 def _data_share(inverse: np.ndarray, reached: np.ndarray, prior_position: np.ndarray,
-                precision_prior: np.ndarray, sigma_prior: float | None) -> np.ndarray:
-    """Per prior entry, the share of its estimate the data decide: the diagonal of the
-    resolution matrix (J^T J + s^2 P)^-1 J^T J, i.e. 1 - s^2 (J^T J + s^2 P)^-1_ii / t_i^2
-    with the noise s the prior was weighed with; NaN where no prior or no data reach."""
+                variance_prior: np.ndarray, sigma_prior: float | None) -> np.ndarray:
+    """Per prior entry, the share of its estimate the data decide: one less the ratio of
+    its posterior to its prior variance, 1 - s^2 (J^T J + s^2 P)^-1_ii / C_ii with the
+    noise s the prior was weighed with (for independent priors the diagonal of the
+    resolution matrix (J^T J + s^2 P)^-1 J^T J); NaN where no prior or no data reach."""
     share = np.full(len(prior_position), np.nan)
     if not len(prior_position) or sigma_prior is None:
         return share
@@ -256,7 +312,7 @@ def _data_share(inverse: np.ndarray, reached: np.ndarray, prior_position: np.nda
     diagonal[reached] = np.diag(inverse)
     for k, position in enumerate(prior_position):
         if position >= 0 and np.isfinite(diagonal[position]):
-            share[k] = 1.0 - sigma_prior**2 * diagonal[position] * precision_prior[position]
+            share[k] = 1.0 - sigma_prior**2 * diagonal[position] / variance_prior[position]
     return share
 
 
@@ -269,7 +325,7 @@ def _sandwich(inverse: np.ndarray, J: np.ndarray, certified: np.ndarray | None,
     noisy = J[~np.asarray(certified, bool)]
     middle = noisy.T @ noisy
     if s is not None and np.isfinite(s):
-        middle = middle + np.diag(s**2 * precision)
+        middle = middle + s**2 * precision
     out = inverse @ middle @ inverse
     return 0.5 * (out + out.T)
 

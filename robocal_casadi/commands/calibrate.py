@@ -25,7 +25,13 @@ from ..errors import InputError
 from ..formats import profiles
 from ..instruments.datasets import load_dataset
 from ..job.run import JobOptions, ReportOptions, run_job
-from ..results import CalibrationResult, Decision, ProfileCost, mean_square_shares
+from ..results import (
+    CalibrationResult,
+    Decision,
+    PredictedAccuracy,
+    ProfileCost,
+    mean_square_shares,
+)
 from .arguments import add_allow_outside_data, add_force, not_replacing_inputs, output_folder
 from .console import summarise
 
@@ -60,7 +66,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_model_options(parser: argparse.ArgumentParser) -> None:
-    """``--rule`` and ``--profile`` (calibrate and fleet)."""
+    """``--rule``, ``--profile`` and ``--prior`` (calibrate and fleet)."""
+    parser.add_argument("--prior", type=Path, default=None, metavar="PRIOR.yaml",
+                        help="a fleet prior of this robot model (robocal prior) in place of "
+                             "the tolerances; a robot whose data contradict it is told so "
+                             "and calibrated with the tolerance prior")
     parser.add_argument("--rule", choices=("prior", "fraction"), default="prior",
                         help="prior (default): every parameter not exactly undeterminable, "
                              "weighed against its tolerance (maximum a posteriori); fraction: "
@@ -103,6 +113,9 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     delivery = result.delivery
     if delivery is not None and delivery.refused:
         lines.insert(0, f"NOT BETTER THAN DOING NOTHING: {delivery.reason}")
+    use = result.prior.use if result.prior is not None else None
+    if use is not None and use.sentence:
+        lines.append(use.sentence)
     lines += [f"{rows} measurements from {', '.join(result.datasets)}; "
              f"{len(ident.identifiable)} of {len(ident.candidates)} parameters identifiable "
              f"(condition number {result.condition_number:.4g})"]
@@ -132,7 +145,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if result.delivered is not None:
         lines += delivered_lines(result.delivered, s, units.length)
     if result.predicted_accuracy is not None:
-        lines.append(result.predicted_accuracy.sentence(s, units.length))
+        lines += result.predicted_accuracy.sentence(s, units.length).splitlines()
     lines += _refusal_lines(result)
     if result.unexplained is not None:
         taken = any(is_learned(e.name) for e in result.effects)
@@ -200,7 +213,17 @@ def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict
                 "rms": result.predicted_accuracy.rms / s, "p95": result.predicted_accuracy.p95 / s,
                 "max": result.predicted_accuracy.max / s,
                 "rms_band": None if result.predicted_accuracy.band is None else [
-                    v / s for v in result.predicted_accuracy.band]}}
+                    v / s for v in result.predicted_accuracy.band],
+                **_regions(result.predicted_accuracy, s)}}
+
+
+def _regions(predicted: PredictedAccuracy, s: float) -> dict:
+    """The region of the summary's predicted figure, the nominal robot's over it, and
+    the box figure with the parameters that carry its difference (robot file units)."""
+    return {"region": predicted.region_kind,
+            "nominal_rms": None if predicted.nominal is None else predicted.nominal.rms / s,
+            "box_rms": None if predicted.box is None else predicted.box.rms / s,
+            "unseen": [u.name for u in predicted.unseen]}
 
 
 def _rejected(result: CalibrationResult, outcome: Decision) -> list[str]:
@@ -245,8 +268,22 @@ def report_info(args: argparse.Namespace, datasets: list):
 def read_options(args: argparse.Namespace) -> list[Path]:
     """The files and folders the command line names for reading: the datasets, the
     held-out datasets, the logo and the report templates."""
-    named = [*args.datasets, *args.validate, args.logo, args.report_templates]
+    named = [*args.datasets, *args.validate, args.logo, args.report_templates,
+             getattr(args, "prior", None)]
     return [Path(p) for p in named if p is not None]
+
+
+def fleet_prior_option(args: argparse.Namespace):
+    """The ``--prior`` file loaded (None when not given); ``--rule fraction`` refused
+    with it."""
+    if getattr(args, "prior", None) is None:
+        return None
+    if args.rule != "prior":
+        raise InputError("a fleet prior weighs the estimate: it needs --rule prior",
+                         where="--prior")
+    from ..calibration.population_prior import load_prior
+
+    return load_prior(args.prior)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -274,7 +311,8 @@ def run(args: argparse.Namespace) -> int:
                                                                      d.robot_path))])
     options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                          select_growth=args.select_growth, max_iterations=args.max_iterations,
-                         rule=args.rule, profile=args.profile, progress=sys.stderr.isatty())
+                         rule=args.rule, profile=args.profile, progress=sys.stderr.isatty(),
+                         fleet_prior=fleet_prior_option(args))
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
     outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate",

@@ -20,6 +20,13 @@ after, its effects, and the robots that stand out (an RMS error or a joint compl
 far above the fleet's, or, with --previous DIR, a joint offset that moved since that
 run beyond its standard errors), with a plot per quantity across the robots.
 
+With --learn-prior, every robot is first calibrated with the tolerance prior into
+DIR/tolerance-prior/<name>/; the fleet's population prior is written to DIR/prior.yaml
+and, per robot, the prior of the others (leave one out) to DIR/priors/<name>.yaml; every
+robot is then calibrated with its own into DIR/<name>/, and fleet.html shows what the
+prior changed (docs/methods.md#fleet-prior). --prior PRIOR.yaml instead uses one given
+fleet prior for every robot.
+
 Exit status: 0 when every robot was calibrated (or unchanged), 1 when any robot failed,
 2 when FLEET.yaml or an option is bad (nothing is run).
 """
@@ -80,6 +87,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="skip each robot's report.html (fleet.html is always written)")
     parser.add_argument("--force", action="store_true",
                         help="write into an --out folder that robocal did not write")
+    parser.add_argument("--learn-prior", action="store_true",
+                        help="calibrate every robot again with the fleet prior learned from "
+                             "the others; write DIR/prior.yaml from all of them")
     add_allow_outside_data(parser)
     add_model_options(parser)
     add_report_options(parser)
@@ -185,7 +195,8 @@ def _settings(args: argparse.Namespace):
                     report_fields=tuple((n, getattr(info, n)) for n in REPORT_FIELDS
                                         if getattr(info, n)),
                     logo=None if info.logo is None else os.path.abspath(info.logo),
-                    templates=None if templates is None else os.path.abspath(templates))
+                    templates=None if templates is None else os.path.abspath(templates),
+                    prior=None if args.prior is None else os.path.abspath(args.prior))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -200,6 +211,16 @@ def run(args: argparse.Namespace) -> int:
             raise InputError("--workers sizes the local cluster; an existing cluster "
                              "(--scheduler) has its own workers", where="--workers")
     positive_count(args.max_iterations, "--max-iterations")
+    if args.learn_prior and args.prior is not None:
+        raise InputError("--learn-prior learns the prior from this fleet; give it or --prior, "
+                         "not both", where="--learn-prior")
+    if (args.learn_prior or args.prior is not None) and args.rule != "prior":
+        raise InputError("a fleet prior weighs the estimate: it needs --rule prior",
+                         where="--learn-prior" if args.learn_prior else "--prior")
+    if args.prior is not None:
+        from ..calibration.population_prior import load_prior
+
+        load_prior(args.prior)  # a bad file is refused before anything runs
     fleet = load_fleet(args.fleet)
     _apart(args.out, args.previous)
     previous = _previous(args.previous, fleet)  # read now: a robot may replace it below
@@ -244,12 +265,44 @@ def _run_locked(args: argparse.Namespace, fleet, settings, previous) -> tuple[li
                 failed += not outcome.ok
                 bar.update(done, f"robots ({failed} failed)" if failed else "robots")
 
-            outcomes = run_fleet(fleet, args.out, settings, scheduler=args.scheduler,
-                                 workers=args.workers, on_done=show)
+            learned = ""
+            if args.learn_prior:
+                outcomes, learned = _learning(args, fleet, settings, show)
+            else:
+                outcomes = run_fleet(fleet, args.out, settings, scheduler=args.scheduler,
+                                     workers=args.workers, on_done=show)
         summary = compare(fleet, outcomes, previous=previous,
                             previous_folder=None if args.previous is None else str(args.previous))
+        content = summary.to_json()
+        extra = ""
+        if args.learn_prior:
+            from ..fleet.learning import PRIOR_FILE, changes, table_html
+
+            rows = changes(args.out, [robot.name for robot in fleet.robots])
+            content["fleet_prior"] = {"prior": str(args.out / PRIOR_FILE), "robots": rows}
+            extra = table_html(rows)
+            print(learned)
         with atomic_file(args.out / "fleet.json") as staging:
-            staging.write_text(json.dumps(_clean(summary.to_json()), indent=1) + "\n")
+            staging.write_text(json.dumps(_clean(content), indent=1) + "\n")
         with atomic_file(args.out / "fleet.html") as staging:
-            staging.write_text(render(summary))
+            staging.write_text(render(summary, extra))
     return outcomes, summary
+
+
+def _learning(args: argparse.Namespace, fleet, settings, show) -> tuple[list, str]:
+    """The two passes of --learn-prior (``fleet.learning``): the outcomes of the second
+    and a line saying what was learned."""
+    from dataclasses import replace
+
+    from ..fleet.engine import run_fleet
+    from ..fleet.learning import FIRST_PASS, PRIOR_FILE, PRIORS, learn_priors
+
+    first = args.out / FIRST_PASS
+    first.mkdir(exist_ok=True)
+    run_fleet(fleet, first, settings, scheduler=args.scheduler, workers=args.workers)
+    learned = learn_priors(args.out, [robot.name for robot in fleet.robots])
+    outcomes = run_fleet(fleet, args.out, replace(settings, prior=os.path.abspath(
+        args.out / PRIORS)), scheduler=args.scheduler, workers=args.workers, on_done=show)
+    return outcomes, (f"fleet prior learned from {len(learned)} robots: "
+                      f"{args.out / PRIOR_FILE}; each robot calibrated with the prior of the "
+                      "others")

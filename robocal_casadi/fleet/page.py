@@ -92,8 +92,8 @@ def _effects(summary: dict | None) -> str:
     return "; ".join(parts)
 
 
-def render(summary: FleetSummary) -> str:
-    """The page's HTML."""
+def render(summary: FleetSummary, extra: str = "") -> str:
+    """The page's HTML; ``extra`` (HTML) is a section added at the end."""
     length = summary.units.length
     s = summary.units.length_scale
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
@@ -150,5 +150,5 @@ def render(summary: FleetSummary) -> str:
                      + "".join(f"<td class='num'>{c}</td>" for c in cells)
                      + f"<td>{_e(_effects(outcome.summary)) if outcome.ok else _e(outcome.error)}"
                      "</td></tr>")
-    parts.append("</table></body></html>\n")
+    parts.append("</table>" + extra + "</body></html>\n")
     return "".join(parts)

@@ -57,6 +57,8 @@ class Settings:
     report_fields: tuple[tuple[str, str], ...] = ()  # (ReportInfo field, text) given for all
     logo: str | None = None  # path of the reports' logo
     templates: str | None = None  # folder of report templates
+    # a fleet prior for every robot: a file, or a folder holding ``<robot name>.yaml``
+    prior: str | None = None
 
     def hashed(self) -> dict:
         """The settings a result depends on (not ``recompute``)."""
@@ -72,6 +74,13 @@ class Settings:
             files += [("templates", p) for p in sorted(Path(self.templates).iterdir())
                       if p.is_file()]
         return files
+
+    def prior_of(self, name: str) -> Path | None:
+        """The fleet prior file robot ``name`` is calibrated with (None: the tolerances)."""
+        if self.prior is None:
+            return None
+        path = Path(self.prior)
+        return path / f"{name}.yaml" if path.is_dir() else path
 
     def report_info(self, datasets):
         """The report's fields: the datasets' ``report:`` blocks, then the run's own."""
@@ -269,6 +278,9 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
             datasets = [load_dataset(p, allow_outside_data=outside) for p in robot.datasets]
             validation = [load_dataset(p, allow_outside_data=outside) for p in robot.validate]
             files = input_files(datasets, validation) + settings.read_files()
+            prior = settings.prior_of(robot.name)
+            if prior is not None:
+                files.append(("prior", prior))
             digest = input_hash(files, settings)
             record = None if settings.recompute else complete_record(folder, digest)
             if record is not None:
@@ -280,6 +292,14 @@ def calibrate_robot(robot: FleetRobot, out: str | Path, settings: Settings) -> R
         except Exception as error:  # noqa: BLE001 - one robot's failure is its own
             return _finish(clock, robot.name, "failed", caught, error=one_line(error),
                            input_hash=digest)
+
+
+def _prior(settings: Settings, name: str):
+    """The fleet prior robot ``name`` is calibrated with, loaded (None: the tolerances)."""
+    from ..calibration.population_prior import load_prior
+
+    path = settings.prior_of(name)
+    return None if path is None else load_prior(path)
 
 
 def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, validation,
@@ -296,7 +316,8 @@ def _calibrate(robot: FleetRobot, folder: Path, settings: Settings, datasets, va
     result = calibrate_job(datasets, validation,
                            JobOptions(diagnose=settings.diagnose, method=settings.method,
                                       loss=settings.loss, max_iterations=settings.max_iterations,
-                                      rule=settings.rule, profile=settings.profile))
+                                      rule=settings.rule, profile=settings.profile,
+                                      fleet_prior=_prior(settings, robot.name)))
     if input_hash(files, settings) != digest:
         raise InputError("its input files changed while it was being calibrated; run again",
                          where=robot.name)

@@ -57,11 +57,7 @@ def projected_geometry(result, final_robot: Robot, start_robot: Robot) -> Robot 
 def model_targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] | None:
     """Fit readings (N x dof) and the tool poses (N x 4 x 4) [m] the model with effects
     gives there, at most ``MAX_ROWS`` rows evenly spread."""
-    com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
-    payload = any("payload" in r.extras for r in result.residuals)
-    x, y, z = (0.0, 0.0, 0.0) if com is None else (float(v) for v in com)
-    model = EffectModel(final_robot, tuple(result.effect_models),
-                        np.asarray(result.effect_values, dtype=float), (x, y, z), payload)
+    model = effect_model(result, final_robot)
     readings, poses = [], []
     for residuals in result.residuals:
         if residuals.joints is None or not len(residuals.joints):
@@ -84,6 +80,16 @@ def model_targets(result, final_robot: Robot) -> tuple[np.ndarray, np.ndarray] |
     Q_all, T_all = np.vstack(readings), np.concatenate(poses)
     keep = np.unique(np.linspace(0, len(Q_all) - 1, min(MAX_ROWS, len(Q_all))).astype(int))
     return Q_all[keep], T_all[keep]
+
+
+def effect_model(result, final_robot: Robot) -> EffectModel:
+    """``result``'s model with effects on the geometry ``final_robot``, the payload's
+    centre of mass [m] as the fit data give it."""
+    com = next((r.payload_com for r in result.residuals if r.payload_com is not None), None)
+    payload = any("payload" in r.extras for r in result.residuals)
+    x, y, z = (0.0, 0.0, 0.0) if com is None else (float(v) for v in com)
+    return EffectModel(final_robot, tuple(result.effect_models),
+                       np.asarray(result.effect_values, dtype=float), (x, y, z), payload)
 
 
 def _functions(kinematics: Kinematics, Q: np.ndarray, T_target: np.ndarray, free: np.ndarray

@@ -37,6 +37,7 @@ from threadpoolctl import threadpool_limits
 from ..calibration.evaluation import evaluate, held_out
 from ..calibration.identification import calibrate as _calibrate
 from ..calibration.outliers import kept_datasets
+from ..calibration.population_prior import PopulationPrior, write_posterior
 from ..common.memory import release_freed
 from ..common.output import atomic_directory
 from ..common.output import json_safe as _clean
@@ -48,7 +49,7 @@ from ..model.robot import load_robot, save_robot
 from ..report.errors_table import write_errors_csv
 from ..report.info import ReportInfo
 from ..results import CalibrationResult, CandidateFigures, Delivered, ProfileCost
-from .accuracy import predict, work_cell
+from .accuracy import statement, work_cell
 from .choice import choose
 
 P = ParamSpec("P")
@@ -74,11 +75,13 @@ class JobOptions:
     progress: bool = False
     effects: Sequence = ()
     parameters: Sequence[str] | str | None = None
+    fleet_prior: PopulationPrior | None = None  # in place of the tolerance prior
 
     def calibrate_options(self) -> dict:
         return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
                     select_growth=self.select_growth, max_iterations=self.max_iterations,
-                    rule=self.rule, progress=self.progress, effects=self.effects)
+                    rule=self.rule, progress=self.progress, effects=self.effects,
+                    fleet_prior=self.fleet_prior)
 
 
 @dataclass(frozen=True)
@@ -193,8 +196,13 @@ def measured(result: CalibrationResult, datasets: Sequence, validation: Sequence
     names = list(mounted)[:3]  # the instrument's point on the flange comes first
     point = [mounted[n] for n in names] if len(names) == 3 else [0.0, 0.0, 0.0]
     region, region_kind = work_cell(result, datasets)
-    predicted = predict(result, robot, point, names if len(names) == 3 else (), structured,
-                        region, region_kind) if region is not None else None
+    effects, effects_point = _effect_model(result, names)
+    predicted = statement(
+        result, robot, point, names if len(names) == 3 else (), structured, region,
+        region_kind, effects=effects, effects_point=effects_point,
+        nominal=_nominal(delivery, names), instrument=result.residuals[0].kind
+        if result.residuals else "", held_out=figures[ROBOT_FILE].get("validation")
+    ) if region is not None else None
     if delivery.refused:
         structured = 0.0  # nothing calibrated: no posterior to propagate
         predicted = None
@@ -240,10 +248,57 @@ def _with_effects(result: CalibrationResult, robot, datasets, validation,
     return out
 
 
+TAKEN_UP = 0.5  # effects that leave under this share of the geometric fit's RMS count
+
+
+def _effects_count(result: CalibrationResult) -> bool:
+    """Whether what the identified effects move counts against robot_calibrated.yaml: when
+    they are recommended, or when they take up most of what the geometry leaves on the
+    fit data (its RMS falls below ``TAKEN_UP`` of the geometric fit's), whatever held-out
+    data say: such effects are in the robot, and held-out data that favour the geometry
+    then come from other loads or another robot. Effects recommended against that explain
+    little (a few per cent) are not counted: the held-out data say they are not there."""
+    if not result.effects:
+        return False
+    if result.recommended == "final":
+        return True
+    return bool(result.fit.rms_final < TAKEN_UP * result.fit.rms_geometric)
+
+
+def _effect_model(result: CalibrationResult, names: list[str]):
+    """The model with effects and its instrument point [m] (flange frame) when what the
+    effects move counts (``_effects_count``), ``(None, None)`` otherwise: a controller
+    runs geometry alone, so robot_calibrated.yaml misses it."""
+    if not _effects_count(result) or len(names) != 3:
+        return None, None
+    from .projection import effect_model
+
+    final_robot = result.robot_nominal.with_parameters(
+        np.array([p.estimate for p in result.parameters], dtype=float))
+    values = {name: value for name, (value, _) in result.mounted.items()}
+    if not all(n in values for n in names):
+        return None, None
+    return effect_model(result, final_robot), [values[n] for n in names]
+
+
+def _nominal(delivery, names: list[str]):
+    """The nominal robot and its instrument point [m] as the file gives it, or None."""
+    try:
+        candidate = delivery.candidate("nominal")
+    except KeyError:
+        return None
+    if len(names) != 3:
+        return candidate.robot, [0.0, 0.0, 0.0]
+    if not all(n in candidate.mounted for n in names):
+        return None
+    return candidate.robot, [candidate.mounted[n] for n in names]
+
+
 def _effects_left_out(result: CalibrationResult, robot) -> float:
     """RMS distance [m] between the delivered geometry and the model with effects at the
-    fit readings, when effects are recommended but a controller runs geometry alone."""
-    if result.recommended != "final" or not result.effects:
+    fit readings, when what the effects move counts (``_effects_count``) and a controller
+    runs geometry alone."""
+    if not _effects_count(result):
         return 0.0
     from ..model.kinematics import Kinematics
     from .projection import model_targets
@@ -274,6 +329,7 @@ def write(result: CalibrationResult, datasets: Sequence, validation: Sequence, o
         (staging / "result.json").write_text(json.dumps(_clean(result.to_json()), indent=2)
                                              + "\n")
         write_errors_csv(result, staging)
+        write_posterior(result, staging)
         if report.report:
             from ..report import write_report
 

@@ -25,7 +25,8 @@ FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-
          "--disable-dev-shm-usage", "--hide-scrollbars", "--mute-audio")
 VIRTUAL_TIME_BUDGET = 5000  # [ms] of page time before the DOM is read
 TIMEOUT = 120.0  # [s] wall clock for one browser run
-WIDTH = 1280  # [CSS px] window width of a screenshot
+WIDTH = 1280  # [CSS px] window width of a screenshot and of a loaded page
+WINDOW_HEIGHT = 900  # [CSS px] window height a page is loaded in
 MAX_HEIGHT = 30000  # [CSS px] tallest screenshot taken
 
 
@@ -66,18 +67,22 @@ def _run(arguments: list[str], chromium: str | None) -> subprocess.CompletedProc
     return done
 
 
-def dump_dom(html_path: str | Path, *, chromium: str | None = None) -> str:
-    """The page's DOM after loading ``html_path`` and letting its scripts run."""
+def dump_dom(html_path: str | Path, *, width: int = WIDTH, chromium: str | None = None) -> str:
+    """The page's DOM after loading ``html_path`` in a window ``width`` CSS px wide and
+    letting its scripts run."""
     url = Path(html_path).resolve().as_uri()
-    done = _run([f"--virtual-time-budget={VIRTUAL_TIME_BUDGET}", "--dump-dom", url], chromium)
+    done = _run([f"--window-size={int(width)},{WINDOW_HEIGHT}",
+                 f"--virtual-time-budget={VIRTUAL_TIME_BUDGET}", "--dump-dom", url], chromium)
     if "<body" not in done.stdout:
         raise BrowserError(f"Chromium returned no page for {html_path}")
     return done.stdout
 
 
-def page_state(html_path: str | Path, *, chromium: str | None = None) -> dict[str, str]:
-    """The ``data-*`` attributes on ``<body>`` of the loaded report (names without ``data-``)."""
-    dom = dump_dom(html_path, chromium=chromium)
+def page_state(html_path: str | Path, *, width: int = WIDTH,
+               chromium: str | None = None) -> dict[str, str]:
+    """The ``data-*`` attributes on ``<body>`` of the report loaded ``width`` CSS px wide
+    (names without ``data-``)."""
+    dom = dump_dom(html_path, width=width, chromium=chromium)
     body = re.search(r"<body([^>]*)>", dom)
     if body is None:
         raise BrowserError(f"no <body> in the page Chromium loaded from {html_path}")
@@ -94,7 +99,7 @@ def screenshot_report(html_path: str | Path, png_path: str | Path, *, width: int
     """
     html_path, png_path = Path(html_path), Path(png_path)
     if height is None:
-        state = page_state(html_path, chromium=chromium)
+        state = page_state(html_path, width=width, chromium=chromium)
         height = int(state.get("page-height", "2000") or 2000)
     height = max(200, min(int(height), MAX_HEIGHT))
     url = html_path.resolve().as_uri()

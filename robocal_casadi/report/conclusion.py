@@ -29,6 +29,9 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     held_out = result.validation is not None
     summary = result.validation if result.validation is not None else result.fit
     paragraphs = _opening(result)
+    predicted = _predicted_paragraph(result)
+    if predicted:
+        paragraphs.append(predicted)
     if not held_out:
         paragraphs.append("No held-out data was given, so this shows how well the model fits, "
                           "not how well it predicts new poses; calibrate with --validate to "
@@ -96,6 +99,40 @@ def _opening(result: CalibrationResult) -> list[str]:
                              + (" with only the mounted instrument calibrated" if
                                 delivery.recommended == "instrument_only" else "") + ".")
     return paragraphs
+
+
+def _predicted_paragraph(result: CalibrationResult) -> str:
+    """The predicted accuracy a customer can act on: over the poses the data cover (or the
+    declared work cell), the nominal robot's beside it, and the whole box of joint ranges
+    with what carries the difference where it differs by more than 2x."""
+    predicted = getattr(result, "predicted_accuracy", None)
+    delivery = getattr(result, "delivery", None)
+    if predicted is None or (delivery is not None and delivery.refused):
+        return ""
+    text = (f"Predicted tool-position error of robot_calibrated.yaml over "
+            f"{predicted.region_words}: {_length(predicted.rms)} RMS")
+    if predicted.nominal is not None:
+        text += f", against {_length(predicted.nominal.rms)} for the nominal robot there"
+    text += "."
+    box = predicted.box
+    if box is not None and predicted.box_differs:
+        text += (f" Over the whole box of joint ranges the data cover (joint combinations "
+                 f"the data never visit) it is {_length(box.rms)}")
+        if box.nominal is not None:
+            text += f" ({_length(box.nominal.rms)} nominal)"
+        if predicted.unseen:
+            named = _and([f"{u.name} ({_length(u.rms)}; {u.remedy})" for u in predicted.unseen])
+            text += f", carried by what these data do not see: {named}"
+        else:
+            text += ": the data determine the robot only near the measured poses"
+        text += ". See Predicted accuracy over the work cell."
+    elif predicted.held_out_differs and predicted.unseen and predicted.held_out is not None:
+        named = _and([f"{u.name} ({_length(u.rms)}; {u.remedy})" for u in predicted.unseen])
+        text += (f" That is more than twice the held-out RMS of the delivered file "
+                 f"({_length(predicted.held_out)}): the held-out data measure what the "
+                 f"instrument sees, the prediction the whole tool position, and it is carried "
+                 f"by the uncertainty these data leave in {named}.")
+    return text
 
 
 def _identifiability_paragraph(result: CalibrationResult) -> str:

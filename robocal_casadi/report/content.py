@@ -27,7 +27,9 @@ class Table:
     """A table of display strings. ``muted[i]`` greys row i (e.g. a parameter held at nominal).
 
     ``name`` becomes the HTML class, so tests and styles can find the table.
-    ``numeric[j]`` right-aligns column j.
+    ``numeric[j]`` right-aligns column j. ``below[j]`` sets column j's text under its row,
+    across the table's width, headed by its title: a long text (a decision, an estimate)
+    reads as a sentence there, and the table keeps to the width of a page.
     """
 
     name: str
@@ -36,6 +38,7 @@ class Table:
     rows: tuple[tuple[str, ...], ...]
     muted: tuple[bool, ...] = ()
     numeric: tuple[bool, ...] = ()
+    below: tuple[bool, ...] = ()
 
     def __post_init__(self):
         for i, row in enumerate(self.rows):
@@ -46,6 +49,18 @@ class Table:
             object.__setattr__(self, "muted", (False,) * len(self.rows))
         if not self.numeric:
             object.__setattr__(self, "numeric", (False,) * len(self.header))
+        if not self.below:
+            object.__setattr__(self, "below", (False,) * len(self.header))
+
+    @property
+    def columns(self) -> tuple[int, ...]:
+        """The columns set side by side (those not set under their row)."""
+        return tuple(j for j, under in enumerate(self.below) if not under)
+
+    def under(self, row: int) -> tuple[tuple[str, str], ...]:
+        """``(title, text)`` of row ``row``'s columns set under it, empty texts left out."""
+        return tuple((self.header[j], self.rows[row][j]) for j, under in enumerate(self.below)
+                     if under and self.rows[row][j] not in ("", "-"))
 
     def __repr__(self) -> str:
         return f"Table({self.name!r}, {len(self.rows)} rows x {len(self.header)} columns)"

@@ -5,7 +5,9 @@ replace one by one to brand the report. Plots are embedded as base64 PNG ``data:
 the style sheet and a small script are inline: the page needs no network and no other
 file. The script marks ``<body>`` with
 ``data-images-total``, ``data-images-loaded`` (images with a decoded bitmap),
-``data-page-height`` [CSS px] and ``data-report-ready="true"`` once every image has
+``data-page-height`` [CSS px], ``data-tables-clipped`` (the tables wider than the space
+they are given, which a reader would have to scroll sideways; empty when none),
+``data-sign-off-bottom`` [CSS px] and ``data-report-ready="true"`` once every image has
 loaded, so a headless browser can check the page (``report.browser``).
 """
 
@@ -38,6 +40,24 @@ READY_SCRIPT = """
     body.setAttribute("data-images-loaded", String(loaded));
     body.setAttribute("data-page-height",
                       String(Math.ceil(document.documentElement.scrollHeight)));
+    // tables wider than the space they are given (clipped on screen: scrolled sideways),
+    // folded ones unfolded for the measurement and folded again
+    var folded = document.querySelectorAll("details:not([open])");
+    for (var f = 0; f < folded.length; f++) { folded[f].open = true; }
+    var wraps = document.querySelectorAll(".table-wrap"), clipped = [];
+    for (var k = 0; k < wraps.length; k++) {
+      if (wraps[k].scrollWidth > wraps[k].clientWidth + 1) {
+        var table = wraps[k].querySelector("table");
+        clipped.push(table ? table.className || "table" : "table");
+      }
+    }
+    for (f = 0; f < folded.length; f++) { folded[f].open = false; }
+    body.setAttribute("data-tables-clipped", clipped.join(" "));
+    var signOff = document.getElementById("sign-off");
+    if (signOff) {
+      body.setAttribute("data-sign-off-bottom", String(Math.ceil(
+        signOff.getBoundingClientRect().bottom + window.scrollY)));
+    }
     if (loaded === images.length) { body.setAttribute("data-report-ready", "true"); }
   }
   window.addEventListener("load", check);
@@ -149,7 +169,8 @@ def _view(block) -> dict:
     if isinstance(block, Table):
         return {"type": "table", "name": block.name, "caption": block.caption,
                 "header": block.header, "rows": block.rows, "muted": block.muted,
-                "numeric": block.numeric}
+                "numeric": block.numeric, "columns": block.columns,
+                "under": [block.under(i) for i in range(len(block.rows))]}
     if isinstance(block, Plot):
         figure = block.draw()
         width, height = (int(round(v)) for v in figure.get_size_inches() * figure.dpi)

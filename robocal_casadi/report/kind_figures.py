@@ -23,7 +23,13 @@ from ..common.units import Units
 from ..model.robot import Robot
 from ..results import DatasetResiduals
 from .figures import COLOURS, WIDTH, _binned_rms, _thin, log_scale, new_figure, report_style
-from .numbers import errors_of, format_at_resolution, joint_reading_unit, resolution_of
+from .numbers import (
+    dataset_name,
+    errors_of,
+    format_at_resolution,
+    joint_reading_unit,
+    resolution_of,
+)
 
 BEFORE, AFTER = "nominal", "final"
 TITLES = {BEFORE: "before: nominal robot", AFTER: "after: calibrated"}
@@ -159,7 +165,8 @@ def magnitude_against_joints(residuals: Sequence[DatasetResiduals], robot: Robot
 def workspace(residuals: Sequence[DatasetResiduals], positions: Sequence[np.ndarray],
               units: Units, title: str) -> Figure:
     """``|error|`` over the workspace: flange positions seen from above (x, y) and from the
-    side (x, z), coloured by the error before (top) and after (bottom).
+    side (x, z), coloured by the error before (top) and after (bottom), on one colour
+    scale (zero to the 99th percentile of both), so that a colour means one error.
 
     ``positions[k]`` are the flange positions [m] (rows x 3, robot base frame) of dataset
     ``k``'s data rows.
@@ -173,25 +180,27 @@ def workspace(residuals: Sequence[DatasetResiduals], positions: Sequence[np.ndar
             errors[model].append(np.abs(errors_of(r, model)[mapped]))
     xyz = np.vstack(points) / units.length_scale
     keep = _thin(len(xyz))
+    magnitudes = {model: np.concatenate(errors[model]) / units.length_scale
+                  for model in (BEFORE, AFTER)}
+    top = float(np.percentile(np.concatenate(list(magnitudes.values())), 99)) or None
     with report_style():
         figure = new_figure(6.0)
         panels = figure.subplots(2, 2)
         for row, model in enumerate((BEFORE, AFTER)):
-            magnitude = np.concatenate(errors[model]) / units.length_scale
+            magnitude = magnitudes[model]
             for column, (a, b) in enumerate(((0, 1), (0, 2))):
                 axes = panels[row, column]
                 order = keep[np.argsort(magnitude[keep])]  # largest errors drawn on top
                 dots = axes.scatter(xyz[order, a], xyz[order, b], c=magnitude[order], s=9,
                                     cmap="viridis", linewidths=0, rasterized=True,
-                                    vmin=0.0, vmax=float(np.percentile(magnitude, 99)) or None)
+                                    vmin=0.0, vmax=top)
                 axes.set_aspect("equal", adjustable="datalim")
                 axes.set_xlabel(f"{AXES[a]} [{units.length}]")
                 axes.set_ylabel(f"{AXES[b]} [{units.length}]")
                 axes.set_title(f"{'top' if column == 0 else 'side'} view, {TITLES[model]}",
                                fontsize=9)
-                if column == 1:
-                    bar = figure.colorbar(dots, ax=panels[row, :], shrink=0.9)
-                    bar.set_label(f"|error| [{units.length}]")
+        bar = figure.colorbar(dots, ax=panels, shrink=0.9)  # one scale for both rows
+        bar.set_label(f"|error| [{units.length}], before and after")
         figure.suptitle(f"{title}: error across the workspace (flange positions, base frame)")
     return figure
 
@@ -216,7 +225,7 @@ def placement_lengths(residuals: Sequence[DatasetResiduals], units: Units) -> Fi
             else:
                 a, c, b, d = term.points
                 name = f"perpendicularity {a}{c}.{b}{d} / L"
-            prefix = f"{r.label} " if len(residuals) > 1 else ""
+            prefix = f"{dataset_name(r)} " if len(residuals) > 1 else ""
             series.setdefault(name, []).append(
                 (f"{prefix}{term.pose}", r.components[BEFORE][i, 0] / units.length_scale,
                  r.components[AFTER][i, 0] / units.length_scale))

@@ -100,6 +100,12 @@ def error_noun(residuals: tuple[DatasetResiduals, ...]) -> str:
     return "error"
 
 
+def dataset_name(residuals: DatasetResiduals) -> str:
+    """The dataset's name as a reader knows it (its file's stem), without the role prefix
+    the calibration keys held-out data by (``validation:``): the role is shown beside it."""
+    return residuals.label.removeprefix("validation:")
+
+
 def row_count(residuals: DatasetResiduals) -> int:
     """Data rows of a dataset: the joint table's length, else the highest mapped row + 1."""
     if residuals.joints is not None:

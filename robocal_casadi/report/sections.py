@@ -18,6 +18,7 @@ import numpy as np
 
 from ..common.units import Units
 from ..effects import is_learned
+from ..effects.motion import is_derived_column
 from ..instruments import INSTRUMENTS
 from ..results import BAND, CalibrationResult, Decision, DiagnosisRecord, mean_square_shares
 from . import figures, kind_figures
@@ -30,6 +31,7 @@ from .iso9283 import iso9283_blocks
 from .numbers import (
     MODEL_TITLES,
     ErrorStats,
+    dataset_name,
     display_units,
     error_noun,
     errors_of,
@@ -131,9 +133,8 @@ def robot_and_data_section(result: CalibrationResult) -> Section:
     rows = []
     for role, residuals in (("fit", result.residuals), ("validation", result.validation_residuals)):
         for r in residuals:
-            extras = ", ".join(sorted(r.extras)) or "-"
-            rows.append((r.label, role, r.kind, str(row_count(r)), str(len(r.errors_final)),
-                         extras))
+            rows.append((dataset_name(r), role, r.kind, str(row_count(r)),
+                         str(len(r.errors_final)), _extra_columns(r.extras)))
     data_table = Table("datasets", "Datasets", ("dataset", "role", "kind", "data rows",
                                                 "errors", "extra columns"), tuple(rows),
                        numeric=(False, False, False, True, True, False))
@@ -183,20 +184,43 @@ def accuracy_section(result: CalibrationResult) -> Section:
 
 def _validation_frames(result: CalibrationResult) -> str:
     """A sentence per kind of instrument placement the held-out data were judged in."""
-    fixed = [r.label for r in result.validation_residuals if r.placement_frame.endswith("(fixed)")]
-    refitted = [r.label for r in result.validation_residuals
-                if r.placement_frame and r.label not in fixed]
+    held = result.validation_residuals
+    fixed = [r for r in held if r.placement_frame.endswith("(fixed)")]
+    refitted = [r for r in held if r.placement_frame and r not in fixed]
     text = ""
     if fixed:
-        frames = {r.placement_frame for r in result.validation_residuals if r.label in fixed}
-        text += (f" Held-out data {', '.join(fixed)} keep the instrument placement the fit "
-                 f"data of the same station gave ({'; '.join(sorted(frames))}): their errors "
-                 f"are measured in the robot's own frame.")
+        frames = {r.placement_frame for r in fixed}
+        text += (f" {_held_out_sets(fixed, ('keeps', 'keep'))} the instrument placement "
+                 f"the fit data of the same station gave ({'; '.join(sorted(frames))}): "
+                 f"{'their' if len(fixed) > 1 else 'its'} errors are measured in the robot's "
+                 f"own frame.")
     if refitted:
-        text += (f" Held-out data {', '.join(refitted)} have the instrument placement refitted "
-                 f"on themselves: a rigid motion of the robot against the instrument does not "
-                 f"show in their errors.")
+        text += (f" {_held_out_sets(refitted, ('has', 'have'))} the instrument placement "
+                 f"refitted on {'themselves' if len(refitted) > 1 else 'itself'}: a rigid "
+                 f"motion of the robot against the instrument does not show in "
+                 f"{'their' if len(refitted) > 1 else 'its'} errors.")
     return text
+
+
+def _held_out_sets(residuals: list, verb: tuple[str, str]) -> str:
+    """``The held-out data set NAME keeps`` or ``The held-out data sets A and B keep``
+    (``verb``: singular and plural)."""
+    names = [dataset_name(r) for r in residuals]
+    if len(names) == 1:
+        return f"The held-out data set {names[0]} {verb[0]}"
+    listed = ", ".join(names[:-1]) + f" and {names[-1]}"
+    return f"The held-out data sets {listed} {verb[1]}"
+
+
+def _extra_columns(extras) -> str:
+    """A dataset's extra columns: the user's, then those derived from the row order
+    (direction of motion, travel since it changed), named as derived."""
+    given = sorted(c for c in extras if not is_derived_column(c))
+    derived = sorted(c for c in extras if is_derived_column(c))
+    text = ", ".join(given)
+    if derived:
+        text += ("; " if text else "") + "derived from the row order: " + ", ".join(derived)
+    return text or "-"
 
 
 def applying_section(result: CalibrationResult) -> Section:
@@ -229,42 +253,89 @@ def applying_section(result: CalibrationResult) -> Section:
 
 def work_cell_section(result: CalibrationResult) -> Section | None:
     """The tool-position error predicted for robot_calibrated.yaml away from the measured
-    points, over the work cell (``job.accuracy``)."""
+    points, over the work cell (``job.accuracy``), beside the nominal robot's over the
+    same poses; the whole box of joint ranges beside it where it differs by more than 2x,
+    with what carries the difference."""
     predicted = result.predicted_accuracy
     if predicted is None:
         return None
     units = display_units(result.units)
     scale, unit = units.length_scale, units.length
-    rows: tuple[tuple[str, str], ...] = (
-            ("RMS", format_number(predicted.rms / scale)),
-            ("95th percentile", format_number(predicted.p95 / scale)),
-            ("maximum", format_number(predicted.max / scale)),
-            ("of which the model does not describe", format_number(predicted.structured / scale)))
+    figures_of = [("calibrated", predicted), ("nominal robot", predicted.nominal)]
+    box = predicted.box if predicted.box_differs else None
+    if box is not None:
+        figures_of += [("calibrated, whole box", box), ("nominal robot, whole box", box.nominal)]
+    shown = [(label, f) for label, f in figures_of if f is not None]
+
+    def row(name: str, value) -> tuple[str, ...]:
+        return (name, *(format_number(value(f) / scale) if value(f) is not None else "-"
+                        for _, f in shown))
+
+    rows: list[tuple[str, ...]] = [row("RMS", lambda f: f.rms),
+                                   row("95th percentile", lambda f: f.p95),
+                                   row("maximum", lambda f: f.max)]
+    rows.append(row("of which the model does not describe",
+                    lambda f: getattr(f, "structured", None)))
     if predicted.band is not None:  # where one robot's RMS lies (quantiles over robots)
-        low, high = (format_number(v / scale) for v in predicted.band)
-        rows = rows[:1] + ((f"RMS of one robot, {100 * BAND[0]:.0f}% of robots below", low),
-                           (f"RMS of one robot, {100 * BAND[1]:.0f}% of robots below",
-                            high)) + rows[1:]
+        for k, label in enumerate((f"RMS of one robot, {100 * BAND[0]:.0f}% of robots below",
+                                   f"RMS of one robot, {100 * BAND[1]:.0f}% of robots below")):
+            rows.insert(1 + k, row(label, lambda f, k=k: None if getattr(f, "band", None)
+                                   is None else f.band[k]))
     text = (f"The measured points say how well the model fits where the robot was measured. "
             f"Away from them, the error of robot_calibrated.yaml is predicted from the "
             f"uncertainty left in every parameter (the data and the tolerances together) and "
-            f"from what the model still lacks, at {predicted.samples} poses spread over "
-            f"{predicted.region_words}, after the robot's placement in the cell (a rigid "
-            f"motion of its base) is registered. Directions the data barely see keep the "
-            f"uncertainty of their tolerances: where this figure is well above the held-out "
-            f"error, the data determine the robot only near the measured region. The RMS is "
-            f"an average over robots calibrated like this one; one robot's RMS scatters about "
-            f"it, within the stated range for {predicted.band_words}, widely when one "
-            f"direction the data see poorly carries most of the uncertainty.")
-    blocks: list = [Paragraph(text), Table("predicted", f"Predicted tool-position error [{unit}]",
-                                           ("statistic", "value"), rows,
-                                           numeric=(False, True))]
+            f"from what the model still lacks (including what effects found in the data move "
+            f"that the geometry alone does not, under the loads of the data), at "
+            f"{predicted.samples} poses: {predicted.region_words}, after the robot's "
+            f"placement in the cell (a rigid motion of its base) is registered. The nominal "
+            f"robot's error over the same poses is beside it: the calibration's correction "
+            f"there plus what remains uncertain. The RMS is an average over robots "
+            f"calibrated like this one; one robot's RMS scatters about it, within the stated "
+            f"range for {predicted.band_words}.")
+    blocks: list = [Paragraph(text)]
+    if box is not None:
+        blocks.append(Paragraph(_box_words(predicted, scale, unit), "conclusion"))
+    elif predicted.held_out_differs and predicted.unseen and predicted.held_out is not None:
+        blocks.append(Paragraph(_held_out_words(predicted, scale, unit), "conclusion"))
+    header = ("statistic", *(label for label, _ in shown))
+    blocks.append(Table("predicted", f"Predicted tool-position error [{unit}]", header,
+                        tuple(rows), numeric=(False, *(True for _ in shown))))
     if len(predicted.errors):
-        blocks.append(Plot("predicted-error", "Predicted tool-position error over the poses "
-                           "sampled in the work cell.",
+        blocks.append(Plot("predicted-error", "Predicted tool-position error of "
+                           "robot_calibrated.yaml at the poses of the prediction.",
                            partial(figures.predicted_errors, predicted.errors, scale, unit,
                                    predicted.region_words)))
     return Section("work-cell", "Predicted accuracy over the work cell", tuple(blocks))
+
+
+def _held_out_words(predicted, scale: float, unit: str) -> str:
+    """Why the prediction is more than twice the held-out RMS: what carries it."""
+    named = "; ".join(f"{u.name}, {format_number(u.rms / scale)} {unit}: {u.remedy}"
+                      for u in predicted.unseen)
+    return (f"The prediction is more than twice the held-out RMS of robot_calibrated.yaml "
+            f"({format_number(predicted.held_out / scale)} {unit}): the held-out data "
+            f"measure what the instrument sees, the prediction the whole tool position. What "
+            f"carries it is the uncertainty these data leave in: {named}.")
+
+
+def _box_words(predicted, scale: float, unit: str) -> str:
+    """Why the whole box of joint ranges gives another figure, and what would change it."""
+    box = predicted.box
+    text = (f"Over the whole box of joint ranges the data cover (every combination of joint "
+            f"angles within the measured ranges, including orientations the data never "
+            f"visit) the prediction is {format_number(box.rms / scale)} {unit} RMS, "
+            f"{format_number(box.rms / predicted.rms, 2)} times the figure over "
+            f"{predicted.region_words}.")
+    if not predicted.unseen:
+        return text + (" The data determine the robot only near the measured poses: "
+                       "measure more of the work cell (other poses, another placement of "
+                       "the instrument) before sending it elsewhere.")
+    named = "; ".join(f"{u.name}, which carries {format_number(u.rms / scale)} {unit} of "
+                      f"it: {u.remedy}" for u in predicted.unseen)
+    return (text + f" What carries the difference is what these data do not see, so it "
+            f"keeps (nearly) the uncertainty of its tolerance: {named}. Declare the work "
+            f"cell (work_cell: in the dataset file) where the robot will work only as it "
+            f"was measured, or measure so as to see it.")
 
 
 _RELATION = re.compile(r"(\w+) (acts like|~) ([^);]*)")
@@ -382,7 +453,7 @@ def errors_section(result: CalibrationResult) -> Section:
         groups.append(("validation", result.validation_residuals))
     for role, residuals in groups:
         for r in residuals:
-            rows.append(_error_row(r.label, role, [errors_of(r, m) for m in
+            rows.append(_error_row(dataset_name(r), role, [errors_of(r, m) for m in
                                                    ("nominal", "geometric", "final")], units))
         if len(residuals) > 1:
             rows.append(_error_row(f"all {role} data", role, [pooled(residuals, m) for m in
@@ -414,10 +485,10 @@ def kind_blocks(result: CalibrationResult, role: str, residuals: tuple, units: U
     """The plots each kind of data in ``residuals`` calls for, before and after."""
     blocks: list = []
     mapped = [r for r in residuals if (np.asarray(r.rows) >= 0).any()]
-    names = mapped[0].label if len(mapped) == 1 else f"{role} data"
+    names = dataset_name(mapped[0]) if len(mapped) == 1 else f"{role} data"
     if kind_figures.has_kind(residuals, "position"):
         positioned = [r for r in residuals if kind_figures.has_kind((r,), "position")]
-        label = positioned[0].label if len(positioned) == 1 else f"{role} data"
+        label = dataset_name(positioned[0]) if len(positioned) == 1 else f"{role} data"
         blocks.append(Paragraph(f"Position errors, {label} ({role})", "heading"))
         blocks.append(Plot(f"axes-{role}", f"{label} ({role}): the x, y and z parts of the "
                            f"position error before and after; a mean away from zero is a "
@@ -547,9 +618,15 @@ DIAGNOSIS_HEADERS = {
     "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "held-out RMS before",
     "cv_rms_after": "held-out RMS with it", "decision": "decision",
     "estimate": "estimate (SI units, as in result.json)",
+    "extrapolation": "held-out squared error with it / without it, extrapolating folds",
+    "worst_region": "extrapolating split it helps least",
+    "label": "name in result.json",
 }
 NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
                 "cv_rms_before", "cv_rms_after"}
+# The short columns, side by side; the decision, the estimate and whatever else a
+# candidate records are set under its row (a page has no room for them side by side).
+DIAGNOSIS_SIDE_BY_SIDE = {"round", "effect", "joints", "parameters", "held"} | NUMERIC_KEYS
 
 
 def diagnosis_blocks(diagnosis: tuple[DiagnosisRecord, ...], units: Units) -> list:
@@ -624,7 +701,8 @@ def diagnosis_table(diagnosis: tuple[DiagnosisRecord, ...], units: Units, *,
                    else DIAGNOSIS_HEADERS.get(k, k) for k in keys)
     muted = tuple(entry.outcome is not Decision.ADDED for entry in diagnosis)
     return Table(name, caption, header, rows, muted,
-                 tuple(k in NUMERIC_KEYS for k in keys))
+                 tuple(k in NUMERIC_KEYS for k in keys),
+                 below=tuple(k not in DIAGNOSIS_SIDE_BY_SIDE for k in keys))
 
 
 def sphere_section(result: CalibrationResult) -> Section | None:
@@ -645,11 +723,12 @@ def sphere_section(result: CalibrationResult) -> Section | None:
     for r in spheres:
         centre = [(k, v, None) for k, v in result.placement.items() if _belongs(k, r.label)]
         if centre:
-            blocks.append(_values_table(f"sphere-{r.label}", f"Sphere centre, {r.label} (fitted)",
+            blocks.append(_values_table(f"sphere-{r.label}",
+                                        f"Sphere centre, {dataset_name(r)} (fitted)",
                                         centre, units))
         stats = ErrorStats.of(errors_of(r, "final"))
         blocks.append(Paragraph(
-            f"{r.label}: {stats.count} readings; distance from the sphere surface after "
+            f"{dataset_name(r)}: {stats.count} readings; distance from the sphere surface after "
             f"calibration {format_number(stats.rms / units.length_scale)} {units.length} RMS, "
             f"{format_number(stats.max / units.length_scale)} {units.length} at most."))
     return Section("sphere", "Sphere and laser", tuple(blocks))

@@ -1,0 +1,328 @@
+"""The fleet prior: the population estimator against simulated truth, the prior file, and
+its use by calibrate (a robot that belongs, one that does not)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from robocal_casadi.calibration.population import Evidence, conflict, estimate
+from robocal_casadi.calibration.prior import Prior, PriorProblem, tolerance_of
+from robocal_casadi.cli import main
+from robocal_casadi.instruments.simulate import simulate
+from robocal_casadi.model import examples
+from robocal_casadi.model.parameters import ParameterRegistry, perturbed_stems
+
+
+def _simulated_fleet(rng, mean, covariance, tolerance, robots, unseen=None, sharp=1.0,
+                     prefix="robot"):
+    """Robots drawn from ``N(mean, covariance)``, each looked at by a random linear
+    instrument (information ``H``), its calibration the Gaussian posterior under the
+    tolerance prior: (evidence, true deviations)."""
+    p = len(mean)
+    evidence, truths = [], []
+    tolerance_cov = np.diag(tolerance**2)
+    for i in range(robots):
+        theta = rng.multivariate_normal(mean, covariance)
+        design = sharp * rng.normal(size=(8, p)) * rng.uniform(0.5, 4.0, size=p) / tolerance
+        if unseen is not None and unseen(i):
+            design[:, unseen(i)] = 0.0
+        information = design.T @ design
+        noise = np.linalg.lstsq(design, rng.normal(size=8), rcond=None)[0]
+        seen_estimate = theta + noise  # the data-alone estimate (noise std 1 per row)
+        posterior = np.linalg.inv(np.linalg.inv(tolerance_cov) + information)
+        estimate_ = posterior @ (information @ seen_estimate)
+        evidence.append(Evidence.from_posterior(f"{prefix}-{i}", estimate_, posterior,
+                                                np.zeros(p), tolerance_cov))
+        truths.append(theta)
+    return evidence, np.array(truths)
+
+
+def test_the_estimator_recovers_a_known_population():
+    rng = np.random.default_rng(11)
+    tolerance = np.array([1e-3, 2e-3, 0.5 * math.pi / 180])
+    mean = np.array([0.6e-3, -1.2e-3, 0.3 * math.pi / 180])
+    correlation = np.array([[1.0, 0.6, -0.3], [0.6, 1.0, 0.2], [-0.3, 0.2, 1.0]])
+    spread = 0.3 * tolerance
+    covariance = correlation * np.outer(spread, spread)
+    robots = 300
+    evidence, _ = _simulated_fleet(rng, mean, covariance, tolerance, robots)
+    population = estimate(evidence, ("a", "b", "c"), tolerance, pseudo_robots=1e-3)
+    # the mean's standard error: the spread plus each robot's estimation noise, over N
+    noise = np.mean([np.diag(np.linalg.pinv(e.information)) for e in evidence], axis=0)
+    standard_error = np.sqrt((spread**2 + noise) / robots)
+    assert np.all(np.abs(population.mean - mean) < 4 * standard_error)
+    # a variance estimated from N draws: relative standard error ~ sqrt(2 / N), and more
+    # for the part estimation noise hides
+    relative = np.diag(population.covariance) / spread**2 - 1
+    assert np.all(np.abs(relative) < 4 * math.sqrt(2 / robots) * (1 + noise / spread**2))
+    estimated_correlation = population.covariance / np.outer(population.spread,
+                                                             population.spread)
+    assert np.all(np.abs(estimated_correlation - correlation) < 0.2)
+    assert not population.odd
+
+
+def test_a_parameter_a_robot_did_not_see_does_not_move_the_mean():
+    rng = np.random.default_rng(3)
+    tolerance = np.array([1e-3, 1e-3, 1e-3])
+    mean = np.array([0.8e-3, -0.5e-3, 0.6e-3])
+    covariance = np.diag((0.2 * tolerance) ** 2)
+    evidence, _ = _simulated_fleet(rng, mean, covariance, tolerance, 12)
+    before = estimate(evidence, ("a", "b", "c"), tolerance)
+    # a robot whose data carry nothing on parameter c: its calibration left c at nominal
+    # (0) with the tolerance as its uncertainty; a plain average would pull c's mean by
+    # mean_c / 13 toward zero. Its data on a and b sit at the fleet's mean, so that
+    # nothing but c could move c's mean.
+    design = np.array([[3.0, 1.0, 0.0], [1.0, -2.0, 0.0], [0.5, 0.5, 0.0]]) / tolerance
+    information = design.T @ design
+    tolerance_cov = np.diag(tolerance**2)
+    posterior = np.linalg.inv(np.linalg.inv(tolerance_cov) + information)
+    seen = np.array([before.mean[0], before.mean[1], 0.0])
+    blind = Evidence.from_posterior("blind", posterior @ (information @ seen), posterior,
+                                    np.zeros(3), tolerance_cov)
+    assert posterior[2, 2] == pytest.approx(tolerance[2] ** 2)
+    after = estimate(evidence + [blind], ("a", "b", "c"), tolerance)
+    naive_pull = abs(before.mean[2]) / 13
+    # what is left is the population's own readjustment, at the per cent level (one more
+    # robot narrows the spread of a and b and the correlations' shrinkage, and every
+    # robot's posterior of c with them)
+    assert abs(after.mean[2] - before.mean[2]) < 0.03 * naive_pull
+    assert after.seen_by[2] == before.seen_by[2]
+    assert after.seen_by[0] == before.seen_by[0] + 1
+    # nor widen its spread by the blind robot's own uncertainty
+    assert after.spread[2] < 1.05 * before.spread[2]
+
+
+def test_an_odd_robot_is_named_and_down_weighted():
+    rng = np.random.default_rng(5)
+    tolerance = np.array([1e-3, 1e-3, 1e-3, 1e-3])
+    mean = np.array([0.6e-3, -0.6e-3, 0.3e-3, 0.0])
+    spread = 0.15 * tolerance
+    covariance = np.diag(spread**2)
+    evidence, _ = _simulated_fleet(rng, mean, covariance, tolerance, 20, sharp=4.0)
+    # own errors five times the fleet's spread
+    odd_covariance = np.diag((5 * spread) ** 2)
+    odd, truth = _simulated_fleet(np.random.default_rng(8), mean, odd_covariance,
+                                  tolerance, 1, sharp=4.0, prefix="odd")
+    population = estimate(evidence + odd, tuple("abcd"), tolerance)
+    named = [m.robot for m in population.odd]
+    assert named == ["odd-0"]
+    member = population.odd[0]
+    assert member.weight < 0.5 and member.distance > member.threshold
+    without = estimate(evidence, tuple("abcd"), tolerance)
+    # down-weighted: it moves the mean by much less than one robot in 21 would
+    full_pull = np.abs(truth[0] - without.mean) / 21
+    assert np.all(np.abs(population.mean - without.mean) < 0.5 * full_pull + 1e-12)
+
+
+def test_the_conflict_statistic_is_chi_square_under_the_model():
+    """Robots drawn from the prior itself: d^2 averages to the directions seen."""
+    rng = np.random.default_rng(21)
+    p = 4
+    prior_covariance = np.diag([1.0, 2.0, 0.5, 1.5]) ** 2
+    values = []
+    for _ in range(400):
+        theta = rng.multivariate_normal(np.zeros(p), prior_covariance)
+        design = rng.normal(size=(3, p))  # sees three directions of four
+        y = design @ theta + rng.normal(size=3)
+        posterior = np.linalg.inv(np.linalg.inv(prior_covariance) + design.T @ design)
+        m = posterior @ design.T @ y
+        member = conflict("r", m, prior_covariance, posterior)
+        values.append((member.distance, member.seen))
+    distance, seen = np.array(values).T
+    assert np.all(seen <= 3)
+    # mean of chi^2 variables with seen dof, within 4 standard errors
+    assert abs(distance.mean() - seen.mean()) < 4 * math.sqrt(2 * seen.mean() / len(values))
+
+
+def test_a_correlated_prior_gives_the_closed_form_posterior_mean():
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(6, 3))
+    b = rng.normal(size=6)
+    sigma = 0.3
+    C = np.array([[1.0, 0.5, 0.2], [0.5, 2.0, -0.4], [0.2, -0.4, 0.8]])
+    c = np.array([0.1, -0.2, 0.3])
+
+    class Linear:
+        unknowns = ParameterRegistry(("p0", "p1", "p2"), ("length",) * 3)
+
+        def residual(self, x):
+            return A @ x - b
+
+        def jacobian(self, x, columns=None):
+            return A.copy()
+
+    prior = Prior.correlated(("p0", "p1", "p2"), np.arange(3), c, C, sigma)
+    problem = PriorProblem(Linear(), prior)
+    J = problem.jacobian(np.zeros(3))
+    x = np.linalg.lstsq(J, -problem.residual(np.zeros(3)), rcond=None)[0]
+    closed = np.linalg.solve(A.T @ A / sigma**2 + np.linalg.inv(C),
+                             A.T @ b / sigma**2 + np.linalg.solve(C, c))
+    assert np.allclose(x, closed, rtol=1e-10, atol=1e-12)
+    assert np.allclose(prior.covariance, C, rtol=1e-12)
+
+
+# ---------------------------------------------------------------- with calibrations
+
+
+def _errors(robot, rng, shared, scale, off=False):
+    """Shared errors plus the robot's own (normal, std ``scale`` tolerances; ``off``:
+    exactly ``scale`` tolerances on every parameter, signs at random)."""
+    registry = robot.parameters()
+    names = [f"{s}{i}" for i, j in enumerate(robot.joints, 1) for s in perturbed_stems(robot, j)]
+    tolerance = np.array([tolerance_of(n, registry.quantity(n), robot) for n in names])
+    own = rng.choice([-1.0, 1.0], size=len(names)) if off else rng.normal(size=len(names))
+    return {n: float(v) for n, v in zip(names, shared * tolerance + own * tolerance * scale)}
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    """Five calibrated robots of one small model (shared errors 2/3 of the tolerance plus
+    their own 1/5), and two more measured: one of the model, one whose own errors are
+    five times the fleet's spread."""
+    root = tmp_path_factory.mktemp("fleet")
+    robot = examples.prismatic_rrp()
+    rng = np.random.default_rng(4)
+    shared = rng.normal(size=16) * 2 / 3
+    folders = []
+    for k in range(5):
+        data = simulate(robot, "tracker_points", out_dir=root / f"data{k}", rows=25,
+                        noise=0.02e-3, geometric_errors=_errors(robot, rng, shared, 0.2),
+                        seed=40 + k, progress=False)
+        out = root / f"robot{k}"
+        assert main(["calibrate", str(data.dataset_path), "--no-diagnose", "--no-report",
+                     "--quiet", "--out", str(out)]) == 0
+        folders.append(out)
+    others = {}
+    for name, scale, seed in (("member", 0.2, 50), ("stranger", 1.0, 51)):
+        others[name] = simulate(robot, "tracker_points", out_dir=root / name, rows=12,
+                                noise=0.02e-3,
+                                geometric_errors=_errors(robot, rng, shared, scale,
+                                                         off=name == "stranger"),
+                                seed=seed, progress=False).dataset_path
+    return root, folders, others
+
+
+@pytest.mark.slow
+def test_result_folders_carry_the_geometry_posterior(fleet):
+    _, folders, _ = fleet
+    content = json.loads((folders[0] / "geometry_posterior.json").read_text())
+    result = json.loads((folders[0] / "result.json").read_text())
+    fitted = content["fitted"]
+    covariance = np.array(content["covariance"])
+    std = {p["name"]: p["std"] for p in result["parameters_geometric"]}
+    assert covariance.shape == (len(fitted), len(fitted))
+    # the diagonal is the square of the standard errors result.json gives (file units)
+    assert np.allclose(np.sqrt(np.diag(covariance)), [std[n] for n in fitted], rtol=1e-6)
+    assert content["prior"]["source"] == "tolerance"
+    assert result["prior"]["source"] == "tolerance" and result["prior"]["belongs"] is None
+
+
+@pytest.mark.slow
+def test_prior_verb_learns_and_calibrate_uses_it(fleet, capsys):
+    root, folders, others = fleet
+    prior_file = root / "fleet.yaml"
+    assert main(["prior", *map(str, folders), "--out", str(prior_file)]) == 0
+    content = yaml.safe_load(prior_file.read_text())
+    assert content["count"] == 5 and content["model"] == "rrp-scara"
+    assert content["robots"] == [str(f) for f in folders]
+    row = {p["name"]: p for p in content["parameters"]}
+    assert all(set(r) >= {"mean", "spread", "seen_by", "unit"} for r in row.values())
+    assert max(r["seen_by"] for r in row.values()) == 5
+    capsys.readouterr()
+    out = root / "member-fit"
+    assert main(["calibrate", str(others["member"]), "--no-diagnose", "--no-report",
+                 "--loss", "linear", "--prior", str(prior_file), "--out", str(out)]) == 0
+    used = json.loads((out / "result.json").read_text())["prior"]
+    assert used["source"] == str(prior_file) and used["belongs"] is True
+    assert "this robot belongs" in capsys.readouterr().out
+    posterior = json.loads((out / "geometry_posterior.json").read_text())
+    assert posterior["prior"]["source"] == str(prior_file)
+
+
+@pytest.mark.slow
+def test_a_robot_off_the_model_is_told_and_calibrated_with_the_tolerances(fleet, capsys):
+    root, folders, others = fleet
+    prior_file = root / "fleet-stranger.yaml"
+    assert main(["prior", *map(str, folders), "--out", str(prior_file), "--quiet"]) == 0
+    capsys.readouterr()
+    out, plain = root / "stranger-fit", root / "stranger-plain"
+    assert main(["calibrate", str(others["stranger"]), "--no-diagnose", "--no-report",
+                 "--loss", "linear", "--prior", str(prior_file), "--out", str(out)]) == 0
+    assert "THIS ROBOT DOES NOT BELONG" in capsys.readouterr().out
+    used = json.loads((out / "result.json").read_text())
+    assert used["prior"]["source"] == "tolerance" and used["prior"]["belongs"] is False
+    assert used["prior"]["conflict"]["distance"] > used["prior"]["conflict"]["threshold"]
+    assert main(["calibrate", str(others["stranger"]), "--no-diagnose", "--no-report",
+                 "--loss", "linear", "--quiet", "--out", str(plain)]) == 0
+    alone = json.loads((plain / "result.json").read_text())
+    # calibrated as before: the same estimates as without the fleet prior
+    for a, b in zip(used["parameters"], alone["parameters"]):
+        assert a["estimate"] == pytest.approx(b["estimate"], rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_prior_verb_refuses_robots_of_another_model(fleet, tmp_path, capsys):
+    root, folders, _ = fleet
+    robot = examples.prismatic_rrp()
+    other = simulate(robot.with_parameters(robot.parameter_vector() + 1e-3), "tracker_points",
+                     out_dir=tmp_path / "data", rows=25, noise=0.02e-3, seed=3,
+                     geometric_errors=(0.5e-3, 0.005), progress=False)
+    stranger = tmp_path / "other-model"
+    assert main(["calibrate", str(other.dataset_path), "--no-diagnose", "--no-report",
+                 "--quiet", "--out", str(stranger)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "p.yaml"
+    assert main(["prior", *map(str, folders), str(stranger), "--out", str(out)]) == 2
+    error = capsys.readouterr().err
+    assert str(stranger) in error and "nominal" in error
+    assert not out.exists()
+    assert main(["prior", str(folders[0]), str(tmp_path), "--out", str(out)]) == 2
+    assert "not a calibration result folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_calibrate_refuses_a_prior_of_another_model(fleet, tmp_path, capsys):
+    root, folders, _ = fleet
+    prior_file = tmp_path / "p.yaml"
+    assert main(["prior", *map(str, folders), "--out", str(prior_file), "--quiet"]) == 0
+    data = simulate(examples.ur_type(), "tracker_points", out_dir=tmp_path / "ur", rows=30,
+                    noise=0.02e-3, seed=1, progress=False)
+    capsys.readouterr()
+    assert main(["calibrate", str(data.dataset_path), "--no-report", "--prior", str(prior_file),
+                 "--out", str(tmp_path / "out")]) == 2
+    assert str(prior_file) in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_fleet_learns_a_leave_one_out_prior(fleet, capsys):
+    pytest.importorskip("distributed")
+    root, folders, _ = fleet
+    names = [f"r{k}" for k in range(len(folders))]
+    (root / "fleet.yaml").write_text("robots:\n" + "".join(
+        f"  - {{name: {n}, datasets: [data{k}/dataset.yaml]}}\n" for k, n in enumerate(names)))
+    out = root / "fleet-out"
+    assert main(["fleet", str(root / "fleet.yaml"), "--out", str(out), "--learn-prior",
+                 "--workers", "1", "--no-report", "--no-diagnose", "--loss", "linear"]) == 0
+    everyone = yaml.safe_load((out / "prior.yaml").read_text())
+    assert everyone["count"] == len(names)
+    summary = json.loads((out / "fleet.json").read_text())
+    rows = {row["robot"]: row for row in summary["fleet_prior"]["robots"]}
+    assert set(rows) == set(names)
+    for name in names:
+        own = yaml.safe_load((out / "priors" / f"{name}.yaml").read_text())
+        # leave one out: the robot's own prior never holds the robot itself
+        assert own["count"] == len(names) - 1
+        assert not any(Path(r).name == name for r in own["robots"])
+        used = json.loads((out / name / "result.json").read_text())["prior"]
+        expected = str((out / "priors" / f"{name}.yaml").resolve())
+        assert used["offered"] == expected
+        assert used["source"] == (expected if used["belongs"] else "tolerance")
+        assert rows[name]["belongs"] == used["belongs"]
+        assert (out / "tolerance-prior" / name / "result.json").is_file()
+    assert "What the fleet prior changed" in (out / "fleet.html").read_text()
