@@ -53,7 +53,7 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "jobs": ("jobs.py", "--demo"),
         "sphere_laser": ("sphere_laser.py",),
         "diagnosis": ("diagnosis.py", "--quick"),
-        "design_bound": ("design_bound.py", "--quick"),
+        "design_bound": ("design_bound.py",),
         "scan": ("scan.py",),
         "tracking": ("tracking.py",),
         "ik": ("ik.py",),
@@ -61,7 +61,7 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "fleet": ("fleet.py", "--robots", "20", "--rows", "200"),
         "fleet_memory": ("fleet_memory.py", "--robots", "1000"),
         "table_memory": ("table_memory.py",),
-        "delivered": ("delivered.py", "--seeds", "2")}
+        "delivered": ("delivered.py", "--seeds", "5")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
