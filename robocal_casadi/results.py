@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .common.units import Units
+from .common.units import Units, to_file_units
 from .model.robot import Robot
 
 if TYPE_CHECKING:
@@ -81,7 +81,7 @@ class ParameterEstimate:
 
     def to_json(self, units: Units) -> dict:
         scale = units.scale(self.quantity)
-        entry = {"name": self.name, "nominal": self.nominal / scale,
+        entry = {"name": self.name, "nominal": to_file_units(self.nominal, scale),  # as typed
                  "estimate": self.estimate / scale,
                  "std": None if self.std is None else self.std / scale,
                  "unit": units.unit_name(self.quantity), "identifiable": self.identifiable}
