@@ -1,7 +1,7 @@
 """The ``robocal`` command line: one module per verb in ``robocal_casadi.commands``.
 
 Each verb module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and a
-module docstring whose first line is the verb's help. Any ``InputError`` (or other
+module docstring whose first paragraph (one sentence) is the verb's help. Any ``InputError`` (or other
 ``RobocalError``), and any file that cannot be read or written (``OSError``), ends the
 program with status 2 and one line on standard error.
 
@@ -62,12 +62,18 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue  # a verb whose module is not installed is not offered
         doc = (module.__doc__ or "").strip()
-        sub = verbs.add_parser(verb, help=doc.splitlines()[0] if doc else None, description=doc,
+        sub = verbs.add_parser(verb, help=summary(doc) or None, description=doc,
                                formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(sub)
         add_output_options(sub)
         sub.set_defaults(_module=module, _parser=sub)
     return parser
+
+
+def summary(doc: str) -> str:
+    """A verb's one-sentence help: its docstring's first paragraph on one line (a first
+    line alone may stop mid-sentence)."""
+    return " ".join(doc.split("\n\n", 1)[0].split())
 
 
 def add_output_options(parser: argparse.ArgumentParser) -> None:
