@@ -192,7 +192,8 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
             f"{needed} {what} of this kind", file=setup.path)
-    with Progress("plan: exchange", total=None, stream=stream) as progress:
+    starts = STARTS_CONDITION if index == "O2" else STARTS
+    with Progress("plan: exchange, start", total=starts, stream=stream) as progress:
         chosen, swaps = _best_exchange(info, len(candidates), count, index, rng, progress)
     chosen_candidates = tuple(candidates[i] for i in chosen)
     spectrum = info.spectrum(chosen, scaling(index))
@@ -228,7 +229,7 @@ def _best_exchange(info: Information, pool: int, count: int, index: str,
             initial = greedy(info, count, rng)
         else:
             initial = list(rng.choice(pool, size=count, replace=False))
-        chosen, swaps = exchange(info, initial, index, progress=progress)
+        chosen, swaps = exchange(info, initial, index, progress=progress, start=start + 1)
         value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
         if best is None or value > best[0]:
             best = (value, chosen, swaps)
