@@ -411,9 +411,9 @@ def test_exported_urdf_carries_the_robot_files_masses_with_valid_inertias(tmp_pa
         com = [float(v) for v in inertial.find("origin").get("xyz").split()]
         np.testing.assert_allclose(com, np.array(joint["com"]) * 1e-3, rtol=1e-15, atol=1e-15)
         tensor = inertial.find("inertia")
-        I = np.array([[float(tensor.get(f"i{min(a, b)}{max(a, b)}")) for b in "xyz"]
-                      for a in "xyz"])
-        principal = np.linalg.eigvalsh(I)
+        inertia = np.array([[float(tensor.get(f"i{min(a, b)}{max(a, b)}")) for b in "xyz"]
+                            for a in "xyz"])
+        principal = np.linalg.eigvalsh(inertia)
         assert principal.min() > 0
         for k in range(3):
             assert principal[k] <= principal[k - 1] + principal[k - 2]
