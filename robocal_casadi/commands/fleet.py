@@ -236,13 +236,16 @@ def run(args: argparse.Namespace) -> int:
           f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
     for outcome in summary.failed:
         print(f"failed: {outcome.name}: {outcome.error}")
+    if summary.note:
+        print(f"not compared: {summary.note}")
     for reason in summary.reasons():
         print(f"stands out: {reason['robot']}: {reason['reason']}")
     print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
     summarise(args, robots=len(outcomes), calibrated=summary.count("calibrated"),
               unchanged=summary.count("unchanged"), failed=summary.count("failed"),
               failures={o.name: o.error for o in summary.failed},
-              stand_out=[dict(r) for r in summary.reasons()], out=str(args.out))
+              standing_out=[dict(r) for r in summary.reasons()], judged=summary.judged,
+              note=summary.note, out=str(args.out))
     sys.stdout.flush()
     return 1 if summary.failed else 0
 

@@ -115,10 +115,14 @@ def render(summary: FleetSummary, extra: str = "") -> str:
         parts += [f"<tr class='out'><td><a href='{_e(r['robot'])}/'>{_e(r['robot'])}"
                   f"</a></td><td>{_e(r['reason'])}</td></tr>" for r in reasons]
         parts.append("</table>")
+    elif not summary.judged:
+        parts.append(f"<p>None judged: {_e(summary.note)}.</p>")
     else:
         parts.append("<p>None: no robot lies far above the fleet on any quantity compared"
                      + (", and no joint offset moved since the previous run" if summary.previous
                         else "") + ".</p>")
+    if reasons and not summary.judged:
+        parts.append(f"<p>{_e(summary.note[0].upper() + summary.note[1:])}.</p>")
     data = summary.to_json()
     parts.append(f"<p><small>Rule: {_e(data['rule']['text'])}.</small></p>")
     if summary.quantities:
