@@ -24,6 +24,7 @@ from ..effects.effect_model import delivered_lines
 from ..errors import InputError
 from ..formats import profiles
 from ..instruments.datasets import load_dataset
+from ..instruments.held_truth import held_out_truth_note
 from ..job.run import JobOptions, ReportOptions, run_job
 from ..results import (
     CalibrationResult,
@@ -309,18 +310,22 @@ def run(args: argparse.Namespace) -> int:
     not_replacing_inputs(args.out, [*read_options(args), *(p for d in datasets + validation
                                                            for p in (d.path, d.data_path,
                                                                      d.robot_path))])
+    other_robot = held_out_truth_note(datasets, validation)
     options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                          select_growth=args.select_growth, max_iterations=args.max_iterations,
                          rule=args.rule, profile=args.profile, progress=sys.stderr.isatty(),
-                         fleet_prior=fleet_prior_option(args))
+                         fleet_prior=fleet_prior_option(args),
+                         notes=(other_robot,) if other_robot else ())
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
     outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate",
                       progress=options.progress)
     result = outcome.result
     print(summary(result, diagnosed=not args.no_diagnose))
+    if other_robot:  # after the summary, whose first line may say the run was refused
+        print(f"NOTE: {other_robot}")
     written = [name for name in outcome.written if not name.startswith(".")]
     print(f"wrote {args.out}/: {', '.join(written)}")
     summarise(args, **summary_fields(result, diagnosed=not args.no_diagnose),
-              out=str(args.out), written=written)
+              out=str(args.out), written=written, notes=list(result.notes))
     return outcome.exit_status

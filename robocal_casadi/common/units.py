@@ -108,17 +108,31 @@ def to_file_units(value: float, scale: float) -> float:
     """
     if scale == 1.0:
         return float(value)
-    plain = value / scale
-    exact = plain
-    for digits in range(1, 18):
-        candidate = float(f"{plain:.{digits}g}")
-        if candidate * scale == value:
-            exact = candidate
-            break
+    exact = exact_file_units(value, scale)
     if scale not in DECIMAL_SCALE or not math.isfinite(value):
         return exact
     shifted = float(Decimal(repr(float(value))) / DECIMAL_SCALE[scale])
     return shifted if _digits(shifted) < _digits(exact) else exact
+
+
+def exact_file_units(value: float, scale: float) -> float:
+    """``value / scale`` as the shortest decimal that converts back to exactly ``value``
+    [SI] (``value / scale`` itself where none does): what a file that must read back bit
+    for bit holds (a simulated truth)."""
+    plain = value / scale
+    if scale == 1.0:
+        return float(value)
+    for digits in range(1, 18):
+        candidate = float(f"{plain:.{digits}g}")
+        if candidate * scale == value:
+            return candidate
+    return plain
+
+
+def snapped(value: float, scale: float) -> float:
+    """``value`` [SI] moved (by at most a unit in the last place) to what its decimal in a
+    file of ``scale`` reads back as (``exact_file_units``): a value a file states exactly."""
+    return float(value) if scale == 1.0 else exact_file_units(float(value), scale) * scale
 
 
 def _digits(number: float) -> int:
