@@ -56,6 +56,13 @@ class Units:
 SI = Units("m", "rad")
 
 
+def display_units(units: Units) -> Units:
+    """The units people read (terminal lines, reports): lengths in mm whatever the file uses
+    (errors and corrections are millimetre-sized; one unit on every page and in every
+    terminal block), angles in the file's angle unit."""
+    return Units("mm", units.angle)
+
+
 def parse_units(value: Any, *, file: str | Path | None, key: str = "units") -> Units:
     """Read a ``units`` mapping; missing or unknown names are an ``InputError``."""
     if not isinstance(value, dict):
