@@ -202,6 +202,16 @@ def rms_standard_error(errors: np.ndarray) -> float | None:
                  / (2.0 * np.sqrt(squares.mean())))
 
 
+def _rms_noise(residuals) -> dict | None:
+    """Per stage (``rms_nominal``, ...), the standard error [m] of the RMS of ``residuals``'
+    errors pooled (``rms_standard_error``); None without residuals."""
+    if not residuals:
+        return None
+    return {f"rms_{stage}": rms_standard_error(np.concatenate(
+        [getattr(r, f"errors_{stage}") for r in residuals]))
+        for stage in ("nominal", "geometric", "final")}
+
+
 def robot_summary(result) -> dict:
     """The numbers the fleet compares, SI: RMS errors [m] before and after (fit and
     validation) with their standard errors (``fit_std``, ``validation_std``, from the
@@ -214,13 +224,6 @@ def robot_summary(result) -> dict:
             return None
         return {"rms_nominal": summary.rms_nominal, "rms_geometric": summary.rms_geometric,
                 "rms_final": summary.rms_final}
-
-    def noise(residuals):
-        if not residuals:
-            return None
-        return {f"rms_{stage}": rms_standard_error(np.concatenate(
-            [getattr(r, f"errors_{stage}") for r in residuals]))
-            for stage in ("nominal", "geometric", "final")}
 
     effects = []
     compliance = {}
@@ -253,8 +256,8 @@ def robot_summary(result) -> dict:
     rejected = {"units": sum(e.role == "fit" for e in result.rejected), "readings": aside,
                 "share": aside / max(kept + aside, 1)}
     return {"units": result.units.as_dict(), "fit": rms(result.fit), "rejected": rejected,
-            "validation": rms(result.validation), "fit_std": noise(result.residuals),
-            "validation_std": noise(result.validation_residuals), "effects": effects,
+            "validation": rms(result.validation), "fit_std": _rms_noise(result.residuals),
+            "validation_std": _rms_noise(result.validation_residuals), "effects": effects,
             "compliance": compliance, "joint_offsets": offsets,
             "recommended": result.recommended,
             "delivered_model": None if result.delivered is None else result.delivered.model,

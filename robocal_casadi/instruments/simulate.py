@@ -462,8 +462,7 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     ``robot``: the nominal robot (a ``Robot`` or a robot file). ``rows``: the
     measurement model's units (``unit_name``): readings for the tracker and the laser;
     placements of the bar or artifact for touches. ``noise`` [m] (module docstring).
-    ``geometric_errors``: see
-    ``true_parameters`` (None, ``(length_std [m], angle_std [rad])`` or ``{name: error}``).
+    ``geometric_errors``: as ``true_parameters`` takes them (None, stds or by name).
     ``effects``: see ``parse_effects`` (SI). ``seed``: everything random follows from it.
     ``units``: of the dataset file and table (default the robot file's). ``mounted_error``
     [m]: std of the instrument's true offset from the dataset's nominal value (default the
@@ -476,8 +475,7 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     ``socket_distance`` [m], ``sockets``, ``touches`` (per socket and placement) and
     ``sphere_radius`` [m] shape the artifacts. ``out_dir`` is replaced as a whole: a
     non-empty folder that is no earlier output is refused unless ``force``. ``held``: a
-    truth read back (``simulate_again``) whose robot, effects and mounted instrument are
-    kept; the seed then draws only the run (placement, readings, noise).
+    truth read back whose robot is kept (``simulate_again``).
     """
     kind, readings, rows, noise, sockets, touches = _checked_sizes(
         kind, readings, rows, noise, sockets, touches)
@@ -487,21 +485,11 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     out_dir = Path(out_dir)
     _check_out_dir(out_dir, force)
     rng = np.random.default_rng(seed)
-    drawn = geometric_errors is not None and not isinstance(geometric_errors, Mapping)
-    p_true, errors = true_parameters(nominal, geometric_errors, rng)
-    true_robot = nominal.with_parameters(p_true)
+    true_robot, errors, true_effects, drawn = _the_truth(nominal, geometric_errors, effects,
+                                                         kind, rng, held, units)
     length_std, angle_std = _error_stds(geometric_errors)
     mounted_error = length_std if mounted_error is None else mounted_error
-    true_effects = _true_effects(effects, nominal, kind)
-    if held is not None:
-        true_robot, errors, true_effects, drawn = _held(held, nominal, kind, rng)
-    # The run uses the truth exactly as truth.yaml states it (each value snapped to its
-    # decimal there), so a truth read back (simulate --truth) is the same robot to the bit.
-    true_robot, errors = _as_stated(true_robot, errors, units)
-    noise = snapped(noise, units.length_scale)
-    payload_com = None if payload_com is None else [snapped(v, units.length_scale)
-                                                    for v in payload_com]
-    com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
+    noise, com = _stated_lengths(noise, payload_com, units)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
     temperature = _temperature_span(temperature, true_effects, reference_temperature)
     setup = Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
@@ -512,14 +500,39 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
                    held_mounted={} if held is None else dict(held.mounted),
                    length_scale=units.length_scale)
     generated = _simulator(kind)(setup)
-
     truth = Truth(kind=kind, robot=true_robot, nominal=nominal, parameter_errors=errors,
                   mounted=generated.mounted, placement=generated.placement,
                   effects=true_effects, noise=float(noise), seed=int(seed),
                   reference_temperature=float(reference_temperature), errors_drawn=drawn)
-    _write_dataset(out_dir, generated, truth, units,
-                   None if payload is None or payload_com is None else com, payload_com)
+    stated = None if payload_com is None else com
+    _write_dataset(out_dir, generated, truth, units, None if payload is None else stated, stated)
     return _simulated(out_dir, truth, generated)
+
+
+def _stated_lengths(noise: float, payload_com, units: Units) -> tuple[float, np.ndarray]:
+    """``noise`` [m] and the payload's centre of mass [m] (zero where None) as truth.yaml
+    in ``units`` states them (``snapped``)."""
+    com = np.zeros(3) if payload_com is None else np.array(
+        [snapped(float(v), units.length_scale) for v in payload_com])
+    return snapped(noise, units.length_scale), com
+
+
+def _the_truth(nominal: Robot, geometric_errors, effects: Mapping | None, kind: str,
+               rng: np.random.Generator, held: HeldTruth | None, units: Units
+               ) -> tuple[Robot, dict[str, float], TrueEffects, bool]:
+    """The true robot, its errors [SI], its effects and whether the errors were drawn at
+    random: from ``held`` where given (the stream advanced as the original run advanced
+    it), else drawn from ``rng``. Either way as truth.yaml in ``units`` states them (each
+    value snapped to its decimal there), so a truth read back is the same robot to the bit."""
+    if held is not None:
+        true_robot, errors, true_effects, drawn = _held(held, nominal, kind, rng)
+    else:
+        drawn = geometric_errors is not None and not isinstance(geometric_errors, Mapping)
+        p_true, errors = true_parameters(nominal, geometric_errors, rng)
+        true_robot = nominal.with_parameters(p_true)
+        true_effects = _true_effects(effects, nominal, kind)
+    true_robot, errors = _as_stated(true_robot, errors, units)
+    return true_robot, errors, true_effects, drawn
 
 
 def simulate_again(truth: str | Path, *, out_dir: str | Path, rows: int = 100, seed: int = 0,
