@@ -152,7 +152,7 @@ def test_values_typed_in_metres_are_written_in_mm_as_typed(tmp_path, typed_m, wr
     """A length typed in metres reads as the same decimal in mm (robot file written in mm,
     result.json's nominal), not as the last-bit neighbour ``-572.3000000000001``."""
     from robocal_casadi.common.units import Units
-    from robocal_casadi.delivery.results import ParameterEstimate
+    from robocal_casadi.results import ParameterEstimate
 
     text = ("convention: dh\nunits: {length: m, angle: rad}\njoints:\n"
             f"  - {{type: revolute, theta: 0, d: {typed_m!r}, a: 0, alpha: 0}}\n")

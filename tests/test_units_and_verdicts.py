@@ -44,9 +44,9 @@ def run(tmp_path_factory) -> tuple[Path, str, dict, tuple[int, ...]]:
 
 def test_the_terminal_block_of_a_metre_file_is_in_mm(run, capsys):
     out, _, result, _ = run
-    from robocal_casadi.calibration.job import calibrate_job
     from robocal_casadi.commands.calibrate import summary
     from robocal_casadi.instruments.datasets import load_dataset
+    from robocal_casadi.job.run import calibrate_job
 
     assert result["fit"]["unit"] == "m"  # result.json keeps the file's unit
     fit = load_dataset(out.parent / "fit" / "dataset.yaml")
@@ -88,8 +88,8 @@ def test_a_disagreement_of_folds_and_held_out_data_says_which_decides():
     and the conclusion name the held-out set as the judge and say why."""
     from dataclasses import replace
 
-    from robocal_casadi.delivery.results import HELD_OUT_DECIDE, EffectFinding, RmsSummary
     from robocal_casadi.report.conclusion import conclusion_paragraphs
+    from robocal_casadi.results import HELD_OUT_DECIDE, EffectFinding, RmsSummary
 
     result = _small_result()
     effect = EffectFinding("joint_scale", (2,), {"s2": 1e-4}, "1",
@@ -105,8 +105,8 @@ def test_a_disagreement_of_folds_and_held_out_data_says_which_decides():
 def test_a_lumped_compliance_term_carries_its_own_unit():
     """``c6_m7`` is a compliance times a link mass: [rad kg/Nm], in result.json and the
     report's table, not the compliance's [rad/Nm]."""
-    from robocal_casadi.delivery.results import EffectFinding
     from robocal_casadi.effects.compliance import JointCompliance
+    from robocal_casadi.results import EffectFinding
 
     effect = JointCompliance((6,))
     finding = EffectFinding("joint_compliance", (6,), {"c6": 1e-5, "c6_m7": 2.17e-3},
