@@ -44,7 +44,7 @@ from typing import Any
 
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
-from ..common.output import MARKER, Marker, atomic_file, read_marker
+from ..common.output import MARKER, Marker, atomic_file, read_marker, remove_stale_staging
 from ..common.progress import Progress
 from ..errors import InputError
 from .arguments import add_allow_outside_data, positive_count
@@ -230,6 +230,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         outcomes, summary = _run_locked(args, fleet, settings, previous)
     except BaseException:
+        # The workers are gone with the cluster: a robot one of them was writing when the
+        # run stopped (Ctrl-C) leaves no half-written staging behind.
+        for folder in (args.out, *(args.out / robot.name for robot in fleet.robots)):
+            remove_stale_staging(folder)
         _undo(args.out, created)
         raise
     print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
