@@ -192,7 +192,7 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
             f"{needed} {what} of this kind", file=setup.path)
-    with Progress("plan: exchange", total=None, stream=stream) as progress:
+    with Progress("plan: exchange, start", total=_starts(index), stream=stream) as progress:
         chosen, swaps = _best_exchange(info, len(candidates), count, index, rng, progress)
     chosen_candidates = tuple(candidates[i] for i in chosen)
     spectrum = info.spectrum(chosen, scaling(index))
@@ -217,18 +217,23 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
                 travel, bound, random_condition)
 
 
+def _starts(index: str) -> int:
+    """How many exchange searches (a greedy start, then random ones): more for the
+    condition number, whose landscape is rougher."""
+    return STARTS_CONDITION if index == "O2" else STARTS
+
+
 def _best_exchange(info: Information, pool: int, count: int, index: str,
                    rng: np.random.Generator, progress: Progress) -> tuple[list[int], int]:
     """``(chosen candidates, swaps)``: the best exchange search of a greedy start and
     random ones (more for the condition number, whose landscape is rougher)."""
     best: tuple[float, list[int], int] | None = None
-    starts = STARTS_CONDITION if index == "O2" else STARTS
-    for start in range(starts):  # a greedy start, then random ones: keep the best
+    for start in range(_starts(index)):  # a greedy start, then random ones: keep the best
         if start == 0:
             initial = greedy(info, count, rng)
         else:
             initial = list(rng.choice(pool, size=count, replace=False))
-        chosen, swaps = exchange(info, initial, index, progress=progress)
+        chosen, swaps = exchange(info, initial, index, progress=progress, start=start + 1)
         value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
         if best is None or value > best[0]:
             best = (value, chosen, swaps)

@@ -44,8 +44,11 @@ def values(info: Information, index: str, matrices: np.ndarray) -> np.ndarray:
 
 
 def exchange(info: Information, chosen: list[int], index: str, *, max_passes: int = 20,
-             progress=None) -> tuple[list[int], int]:
-    """Improve ``chosen`` by one-for-one swaps; returns the design and the swaps made."""
+             progress=None, start: int = 1) -> tuple[list[int], int]:
+    """Improve ``chosen`` by one-for-one swaps; returns the design and the swaps made.
+
+    ``progress`` (a ``Progress`` counting starts) is told after every pass which start this
+    is (``start``, 1-based), which pass of it and how many swaps it made so far."""
     chosen = list(chosen)
     A = info.matrices
     total = A[chosen].sum(axis=0)
@@ -66,7 +69,7 @@ def exchange(info: Information, chosen: list[int], index: str, *, max_passes: in
                 swaps += 1
                 improved = True
         if progress is not None:
-            progress.update(done + 1, f"exchange passes ({swaps} swaps)")
+            progress.update(start, f"pass {done + 1} ({swaps} swaps)")
         if not improved:
             break
     return chosen, swaps

@@ -1,13 +1,20 @@
 """The ``robocal`` command line: one module per verb in ``robocal_casadi.commands``.
 
-Each verb module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and a
-module docstring whose first line is the verb's help. Any ``InputError`` (or other
-``RobocalError``), and any file that cannot be read or written (``OSError``), ends the
-program with status 2 and one line on standard error.
+Each verb module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and a module
+docstring whose first paragraph (one sentence) is the verb's help. Any ``InputError`` (or
+other ``RobocalError``), and any file that cannot be read or written (``OSError``), ends
+the program with status 2 and one line on standard error.
 
 Every verb takes ``--quiet`` (nothing on standard output, and on standard error nothing
 but an error) and ``--json`` (standard output is one JSON object and nothing else: the
 verb's summary, see ``commands.console``).
+
+Ctrl-C ends any verb with one line, ``robocal VERB: interrupted; ...``, and status 130,
+however early it comes: this module and the package's ``__init__`` import nothing slow
+(the verbs' modules, which do, are imported while the handler is in place), the verb is
+read from the command line before anything else, and when this module is loaded as the
+``robocal`` command an interruption that arrives before ``main`` runs is remembered and
+answered by ``main`` first.
 """
 
 from __future__ import annotations
@@ -21,13 +28,29 @@ import threading
 from . import __version__
 from .commands.console import Console
 from .common.output import clear_interrupt, interrupted, note_interrupt
-from .common.workers import command_started
+from .common.workers import command_started, started_under_a_command
 from .errors import RobocalError
 
 VERBS = ("calibrate", "plan", "track", "fk", "simulate", "compensate", "export", "demo",
          "fleet", "prior")
 MAX_MESSAGE = 1000  # characters of an error line
 INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT, as shells report it)
+_EARLY = {"interrupted": False}  # Ctrl-C before ``main`` ran (the command only)
+
+
+def _remember_early_interrupt(signum, frame) -> None:
+    _EARLY["interrupted"] = True
+
+
+def _loaded_as_the_command() -> bool:
+    """Whether this process is the ``robocal`` command (its script, or ``python -m``)."""
+    script = sys.argv[0].rsplit("/", 1)[-1].removesuffix(".exe") if sys.argv else ""
+    return (script == "robocal" or __name__ == "__main__") and not started_under_a_command() and (
+        threading.current_thread() is threading.main_thread())
+
+
+if _loaded_as_the_command():
+    signal.signal(signal.SIGINT, _remember_early_interrupt)
 
 
 class _Refused(Exception):
@@ -62,12 +85,18 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue  # a verb whose module is not installed is not offered
         doc = (module.__doc__ or "").strip()
-        sub = verbs.add_parser(verb, help=doc.splitlines()[0] if doc else None, description=doc,
+        sub = verbs.add_parser(verb, help=summary(doc) or None, description=doc,
                                formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(sub)
         add_output_options(sub)
         sub.set_defaults(_module=module, _parser=sub)
     return parser
+
+
+def summary(doc: str) -> str:
+    """A verb's one-sentence help: its docstring's first paragraph on one line (a first
+    line alone may stop mid-sentence)."""
+    return " ".join(doc.split("\n\n", 1)[0].split())
 
 
 def add_output_options(parser: argparse.ArgumentParser) -> None:
@@ -109,13 +138,17 @@ def _on_interrupt(signum, frame) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run one verb; the exit status is 0, 1 (a robot of a fleet failed), 2 (bad input),
     3 (a calibration no better than doing nothing) or 130 (interrupted)."""
-    verb = "robocal"
+    words = sys.argv[1:] if argv is None else list(argv)
+    verb = verb_named(words)
     clear_interrupt()
     handler = None
     if threading.current_thread() is threading.main_thread():
         handler = signal.signal(signal.SIGINT, _on_interrupt)
     try:
-        args = parse(argv)
+        if _EARLY["interrupted"]:  # Ctrl-C while the program was still loading
+            _EARLY["interrupted"] = False
+            raise KeyboardInterrupt
+        args = parse(words)
         verb = f"robocal {args.verb}"
         console = Console(args.verb, quiet=args.quiet, json=args.json)
         args.console = console
@@ -134,6 +167,13 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if handler is not None:
             signal.signal(signal.SIGINT, handler)
+
+
+def verb_named(words: list[str]) -> str:
+    """``robocal VERB`` for the verb the command line names (its first word that is not an
+    option), else ``robocal``: known before any verb's module is imported."""
+    first = next((w for w in words if not w.startswith("-")), None)
+    return f"robocal {first}" if first in VERBS else "robocal"
 
 
 def _interrupted(verb: str) -> int:

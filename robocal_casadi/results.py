@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .common.units import Units
+from .common.units import Units, display_units, to_file_units
 from .model.robot import Robot
 
 if TYPE_CHECKING:
@@ -81,7 +81,7 @@ class ParameterEstimate:
 
     def to_json(self, units: Units) -> dict:
         scale = units.scale(self.quantity)
-        entry = {"name": self.name, "nominal": self.nominal / scale,
+        entry = {"name": self.name, "nominal": to_file_units(self.nominal, scale),  # as typed
                  "estimate": self.estimate / scale,
                  "std": None if self.std is None else self.std / scale,
                  "unit": units.unit_name(self.quantity), "identifiable": self.identifiable}
@@ -123,9 +123,18 @@ class Identifiability:
                 f"condition_number={self.condition_number:.4g})")
 
 
+# Why the held-out set outweighs the fit data's own cross-validation where they disagree.
+HELD_OUT_DECIDE = ("The held-out data decide over the cross-validation of the fit data (which "
+                   "favoured the effects): they were measured apart from the fit and took no "
+                   "part in choosing or fitting the model, while the folds come from the same "
+                   "readings the diagnosis chose the effects on")
+
+
 @dataclass(frozen=True)
 class EffectFinding:
-    """An effect added by diagnosis: parameters in ``unit``, evidence as numbers."""
+    """An effect added by diagnosis: parameters in ``unit`` (the effect's own; ``units``
+    names a parameter's unit where it differs, as a lumped term ``c6_m7`` [rad kg/Nm]
+    does), evidence as numbers."""
 
     name: str
     joints: tuple[int, ...]
@@ -134,6 +143,11 @@ class EffectFinding:
     evidence: dict[str, float]
     std: dict[str, float | None] = field(default_factory=dict)
     summary: str = ""
+    units: dict[str, str] = field(default_factory=dict)
+
+    def unit_of(self, parameter: str) -> str:
+        """The unit ``parameter``'s value really has."""
+        return self.units.get(parameter, self.unit)
 
     def to_json(self, units: Units | None = None) -> dict:
         """The ``result.json`` entry; evidence lengths (``cv_rms_*``, [m] inside) in ``units``."""
@@ -144,7 +158,9 @@ class EffectFinding:
                 "parameters": {k: float(v) for k, v in self.parameters.items()},
                 "std": {k: None if v is None or not np.isfinite(v) else float(v)
                         for k, v in self.std.items()},
-                "unit": self.unit, "evidence": evidence}
+                "unit": self.unit,
+                "units": {k: self.unit_of(k) for k in self.parameters},
+                "evidence": evidence}
 
 
 @dataclass(frozen=True)
@@ -776,11 +792,20 @@ class CalibrationResult:
         """The first thing a person must read, or '' (held-out data reject the effects)."""
         if self.recommended != "geometric" or self.validation is None:
             return ""
-        s, unit = self.units.length_scale, self.units.length
+        shown = display_units(self.units)
+        s, unit = shown.length_scale, shown.length
         v = self.validation
+        aside = self.held_out_set_aside
+        kept = f", without the {aside} set aside as gross errors" if aside else ""
         return (f"the held-out data show the model with effects WORSE than the geometric one "
-                f"(validation RMS {v.rms_final / s:.4g} vs {v.rms_geometric / s:.4g} {unit}): "
-                f"the geometric model is recommended and is what robot_calibrated.yaml holds")
+                f"(validation RMS {v.rms_final / s:.4g} vs {v.rms_geometric / s:.4g} {unit}"
+                f"{kept}): the geometric model is recommended and is what "
+                f"robot_calibrated.yaml holds. {HELD_OUT_DECIDE}")
+
+    @property
+    def held_out_set_aside(self) -> int:
+        """Held-out readings set aside as gross errors (0 without held-out data)."""
+        return sum(len(e.lines) for e in self.rejected if e.role == "validation")
 
     @property
     def units(self) -> Units:

@@ -95,3 +95,29 @@ def test_a_plan_predicted_worse_than_random_says_so(tracker):
     assert plan.warning == "" and "warning" not in plan.summary()
     worse = replace(plan, tool_error=3.0 * plan.random_tool_median)
     assert "3 times less accurately than the median random plan" in worse.summary()
+
+
+def test_exchange_progress_says_which_start_and_which_pass():
+    """Every progress note of an exchange search names its start (the count of the line)
+    and its own pass number, so several starts do not read as the same pass repeated."""
+    from planning.selection import exchange
+
+    x = np.linspace(-1.0, 1.0, 41)
+    info = Information([Block(np.array([[1.0, v, v * v]])) for v in x], ("a", "b", "c"), 0,
+                       np.eye(3))
+
+    class Recorder:
+        def __init__(self):
+            self.notes: list[tuple[int, str]] = []
+
+        def update(self, done: int, note: str = "") -> None:
+            self.notes.append((done, note))
+
+    seen = Recorder()
+    for start, initial in enumerate(([18, 19, 20, 21], [0, 1, 2, 3]), start=1):
+        exchange(info, initial, "O1", progress=seen, start=start)
+    assert {done for done, _ in seen.notes} == {1, 2}
+    for start in (1, 2):
+        passes = [note.split()[1] for done, note in seen.notes if done == start]
+        assert passes == [str(k) for k in range(1, len(passes) + 1)] and len(passes) >= 2
+        assert all(note.startswith("pass ") and "swaps" in note for _, note in seen.notes)

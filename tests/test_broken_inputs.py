@@ -935,6 +935,27 @@ def test_a_read_only_output_folder_is_found_before_the_work(templates, tmp_path,
     _one_line(capsys, "--out", "not writable")
 
 
+def test_a_folder_that_refuses_new_entries_is_found_before_the_work(templates, tmp_path,
+                                                                   capsys, monkeypatch):
+    """/proc passes a permission check (root may write anywhere, and its bits say so) yet
+    takes no new entry: the output is refused at once, not after the calibration."""
+    from robocal_casadi.commands import calibrate as calibrate_verb
+
+    if not (Path("/proc").is_dir() and os.access("/proc", os.W_OK)):
+        pytest.skip("no /proc that a permission check passes")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the calibration ran although its output cannot be written")
+
+    monkeypatch.setattr(calibrate_verb, "run_job", no_work)
+    folder = Path(shutil.copytree(templates / "bar", tmp_path / "bar"))
+    assert main(argv("calibrate", folder, Path("/proc/robocal-result"))) == 2
+    _one_line(capsys, "--out", "not writable")
+    assert main(argv("fk", folder, Path("/proc/robocal-poses.csv"))) == 2
+    _one_line(capsys, "--out", "not writable")
+    assert not [p for p in tmp_path.rglob("*") if "probe" in p.name]
+
+
 def test_leftovers_of_killed_runs_are_removed_and_live_ones_kept(templates, tmp_path, capsys):
     """A run killed mid-way leaves its staging file or folder; the next run beside it
     removes those whose process is gone, and keeps those of a live run."""

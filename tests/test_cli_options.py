@@ -53,6 +53,20 @@ def test_an_unknown_option_is_refused_in_the_verbs_name(verb, capsys):
     assert err[0].startswith(f"robocal {verb}: error: unrecognized arguments: --no-such-option")
 
 
+def test_top_level_help_gives_every_verb_a_whole_sentence(capsys):
+    """``robocal --help`` lists each verb with its summary, never cut mid-sentence."""
+    import importlib
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for verb in VERBS:
+        doc = importlib.import_module(f"robocal_casadi.commands.{verb}").__doc__
+        first = " ".join(doc.strip().split("\n\n")[0].split())
+        assert first.endswith("."), f"{verb}: {first!r} is not a whole sentence"
+        assert f" {verb} {first} " in f"{text} ", verb
+
+
 @pytest.mark.parametrize("verb", VERBS)
 def test_every_verb_takes_quiet_and_json(verb):
     parser = build_parser()

@@ -222,3 +222,45 @@ def test_build_folders_of_killed_runs_are_removed(cache):
     live.mkdir()
     codegen.compiled(_fresh_function("cleaning_square"))
     assert not stale.exists() and live.is_dir()
+
+
+@needs_compiler
+def test_a_cache_under_a_folder_others_may_write_is_not_used(tmp_path, monkeypatch):
+    """A private cache folder inside a world-writable (not sticky) folder could be renamed
+    away and replaced by anyone: its libraries are not loaded; the code is built again in a
+    private folder, with a warning naming the open folder."""
+    shared = tmp_path / "shared"
+    cache = shared / "cache"
+    monkeypatch.setenv("ROBOCAL_CACHE", str(cache))
+    _compile_in_another_process(cache, ("exposed_square", "ca.dot(x, x) + 1"))
+    (library,) = cache.glob("*.so")
+    monkeypatch.setattr(codegen, "_private_warned", set())
+    shared.chmod(0o777)
+    try:
+        with pytest.warns(codegen.CompilationWarning, match=f"under {shared}, which others"):
+            compiled = codegen.compiled(_fresh_function("exposed_square"))
+        assert compiled.is_a("External") and float(compiled([1, 2])) == 6.0
+        assert (codegen._private_folder() / library.name).is_file()  # built again there
+        shared.chmod(0o1777)  # sticky, as /tmp: others cannot move our folder
+        assert codegen.exposed_ancestor(cache) is None
+    finally:
+        shared.chmod(0o700)
+    assert library.is_file()
+
+
+def test_ancestors_are_judged_by_owner_mode_and_sticky_bit(tmp_path):
+    folder = tmp_path / "a" / "b"
+    folder.mkdir(parents=True)
+    assert codegen.exposed_ancestor(folder / "cache") is None
+    (tmp_path / "a").chmod(0o775)  # group may write: as open as others for compiled code
+    try:
+        assert codegen.exposed_ancestor(folder / "cache") == tmp_path / "a"
+    finally:
+        (tmp_path / "a").chmod(0o755)
+    link = tmp_path / "link"
+    link.symlink_to(folder)
+    (tmp_path / "a").chmod(0o777)
+    try:  # the folder reached through a link is judged where it really is
+        assert codegen.exposed_ancestor(link / "cache") == tmp_path / "a"
+    finally:
+        (tmp_path / "a").chmod(0o755)

@@ -165,6 +165,51 @@ def test_ctrl_c_is_one_line_exit_130_and_writes_nothing(tmp_path, delay):
     assert not out.exists() and not [p for p in tmp_path.iterdir() if "robocal" in p.name]
 
 
+def test_the_command_loads_nothing_slow_before_its_handler():
+    """``import robocal_casadi.cli`` (what the ``robocal`` script does before ``main``)
+    loads none of the numerical libraries, so Ctrl-C meets the command's handler early."""
+    run = subprocess.run([sys.executable, "-c", "import sys, robocal_casadi.cli; print(sorted("
+                          "m for m in ('numpy', 'scipy', 'casadi', 'pinocchio', 'yaml') "
+                          "if m in sys.modules))"], capture_output=True, text=True, timeout=120,
+                         cwd=REPOSITORY)
+    assert run.returncode == 0 and run.stdout.strip() == "[]", run.stdout + run.stderr
+
+
+EARLY = textwrap.dedent("""
+    import os, signal, sys
+    sys.argv[0] = "/usr/local/bin/robocal"  # as the installed script
+    from robocal_casadi.cli import main
+    os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C before main has run
+    sys.exit(main(sys.argv[1:]))
+""")
+
+
+def test_ctrl_c_before_main_runs_is_one_line_in_the_verbs_name(tmp_path):
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-c", EARLY, "calibrate",
+                          str(UR10 / "series_D_fit.yaml"), "--out", str(out)],
+                         capture_output=True, text=True, timeout=300, cwd=REPOSITORY)
+    assert run.returncode == 130, run.stderr[-2000:]
+    assert run.stderr.strip().splitlines() == [
+        "robocal calibrate: interrupted; no output was left half-written"], run.stderr[-2000:]
+    assert not out.exists()
+
+
+def test_ctrl_c_while_the_verbs_are_loaded_names_the_verb(monkeypatch, capsys, tmp_path):
+    """Under load, the verbs' modules may still be importing when Ctrl-C comes: the line
+    names the verb all the same (read from the command line before anything slow)."""
+    from robocal_casadi import cli
+
+    def loading(*args, **kwargs):
+        raise KeyboardInterrupt  # as the handler raises it in the middle of an import
+
+    monkeypatch.setattr(cli, "build_parser", loading)
+    status = main(["--quiet", "simulate", "--example", "ur_type", "--out", str(tmp_path / "o")])
+    assert status == 130
+    assert _one_line(capsys) == "robocal simulate: interrupted; no output was left half-written"
+    assert not (tmp_path / "o").exists()
+
+
 def test_an_interruption_a_library_swallowed_still_stops_the_output(tmp_path, monkeypatch,
                                                                      capsys):
     """The handler notes the interruption; a run that carries on writes nothing."""

@@ -133,11 +133,13 @@ def read_rows(path: Path) -> tuple[list[str], list[list[str]]]:
 
 def check_poses(out: Path, spec: dict, Q: np.ndarray, length_tolerance: float) -> None:
     header, rows = read_rows(out)
-    assert header == ["time", "note", "x", "y", "z", "qw", "qx", "qy", "qz"]
+    names = [f"q{i}" for i in range(1, Q.shape[1] + 1)]
+    assert header == ["time", *names, "note", "x", "y", "z", "qw", "qx", "qy", "qz"]
     assert len(rows) == len(Q)
     for k, (row, q) in enumerate(zip(rows, Q)):
-        assert row[0] == f"{0.5 * k:.3f}" and row[1] == f"row {k}"
-        x, y, z, w, qx, qy, qz = map(float, row[2:])
+        assert row[0] == f"{0.5 * k:.3f}" and row[len(q) + 1] == f"row {k}"
+        assert row[1:len(q) + 1] == [repr(float(v)) for v in q]  # the reading, as written
+        x, y, z, w, qx, qy, qz = map(float, row[len(q) + 2:])
         expected = reference_tool_pose(spec, q)
         np.testing.assert_allclose([x, y, z], expected[:3, 3], rtol=0, atol=length_tolerance)
         assert abs(w * w + qx * qx + qy * qy + qz * qz - 1) < 1e-14

@@ -1,10 +1,11 @@
 """Fleet calibration on the real engine: a local Dask cluster of two worker processes.
 
-Four simulated robots (one with a compliance four times the others') and one whose table
-is broken go through ``robocal fleet``; results are compared with ``calibrate`` run
-directly, reruns skip what is unchanged, an offset moved between runs is flagged, a bad
-fleet file is refused before anything runs, and concurrent processes never compile one
-library at the same time.
+Five simulated robots (one with a compliance four times the others': five are the fewest
+the fleet judges) and one whose table is broken go through ``robocal fleet``; results are
+compared with ``calibrate`` run directly, reruns skip what is unchanged, an offset moved
+between runs is flagged, a bad fleet file is refused before anything runs, and concurrent
+processes never compile one library at the same time. Robots calibrated by the library
+alone show what the outlier rule judges and what it leaves alone.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def _simulate(folder: Path, seed: int, c3: float, theta2_error: float = 0.0) -> 
 @pytest.fixture(scope="module")
 def fleet_files(tmp_path_factory):
     root = tmp_path_factory.mktemp("fleet")
-    for k in range(4):
+    for k in range(5):
         _simulate(root / f"r{k}", seed=k, c3=(4.0 if f"r{k}" == COMPLIANT else 1.0 + 0.1 * k)
                   * 1e-6)
     _simulate(root / "broken", seed=9, c3=1e-6)
@@ -56,7 +57,7 @@ def fleet_files(tmp_path_factory):
     table.write_text("\n".join(lines) + "\n")
     (root / "fleet.yaml").write_text("robots:\n" + "".join(
         f"  - {{name: {n}, datasets: [{n}/dataset.yaml]}}\n"
-        for n in ("r0", "r1", "r2", "r3", "broken")))
+        for n in ("r0", "r1", "r2", "r3", "r4", "broken")))
     return root
 
 
@@ -85,13 +86,13 @@ def test_fleet_calibrates_each_robot_and_fails_the_broken_one_alone(first_run, f
     assert status == 1  # a robot failed; the fleet file was fine
     statuses = {r["name"]: r["status"] for r in summary["robots"]}
     assert statuses == {"r0": "calibrated", "r1": "calibrated", "r2": "calibrated",
-                        "r3": "calibrated", "broken": "failed"}
+                        "r3": "calibrated", "r4": "calibrated", "broken": "failed"}
     [failure] = summary["failed"]
     assert failure["robot"] == "broken"
     assert "points.csv" in failure["error"] and "line 6" in failure["error"]
     assert "\n" not in failure["error"]
     assert not (out / "broken").exists()
-    for name in ("r0", "r1", "r2", "r3"):
+    for name in ("r0", "r1", "r2", "r3", "r4"):
         assert {p.name for p in (out / name).iterdir()} >= {"result.json",
                                                            "robot_calibrated.yaml",
                                                            "fleet_robot.json"}
@@ -163,7 +164,7 @@ def test_rerun_skips_unchanged_robots_and_redoes_changed_ones(first_run, fleet_f
     summary = json.loads((out / "fleet.json").read_text())
     statuses = {r["name"]: r["status"] for r in summary["robots"]}
     assert statuses == {"r0": "unchanged", "r1": "unchanged", "r2": "unchanged",
-                        "r3": "calibrated", "broken": "failed"}
+                        "r3": "calibrated", "r4": "unchanged", "broken": "failed"}
     assert (out / "r0" / "result.json").stat().st_mtime_ns == before
     # A result made incomplete (its file removed) is computed again.
     (out / "r1" / "robot_calibrated.yaml").unlink()
@@ -329,3 +330,79 @@ def test_summary_of_an_effect_without_a_standard_error(tmp_path):
     summary = robot_summary(replace(result, effects=(learned,)))
     assert summary["effects"][0]["std"] == {"map_gain": None}
     assert json.loads(json.dumps(summary))["effects"][0]["parameters"] == {"map_gain": 1.0}
+
+
+@pytest.fixture(scope="module")
+def alike(tmp_path_factory):
+    """Robot outcomes from the library's own calibration (no cluster needed): seven robots
+    simulated alike (tracker data, 0.02 mm noise per coordinate) and one with five times
+    that noise, a genuinely worse fit."""
+    from robocal_casadi.fleet.robot_task import RobotOutcome, robot_summary
+
+    root = tmp_path_factory.mktemp("alike")
+    outcomes = {}
+    for k, noise in enumerate([2e-5] * 7 + [1e-4]):
+        name = f"a{k}" if noise == 2e-5 else "worse"
+        data = simulate(examples.industrial_6r(), "tracker_points", out_dir=root / name,
+                        rows=60, noise=noise, geometric_errors={"a2": 3e-4, "d4": -2e-4},
+                        seed=40 + k, progress=False).load()
+        outcomes[name] = RobotOutcome(name, "calibrated",
+                                      summary=robot_summary(calibrate([data], diagnose=False)))
+    return root, outcomes
+
+
+def _fleet_of(root: Path, names, outcomes):
+    from robocal_casadi.fleet import summarise
+    from robocal_casadi.fleet.spec import Fleet, FleetRobot
+
+    fleet = Fleet(root / "fleet.yaml", tuple(FleetRobot(n, (root / n / "dataset.yaml",))
+                                             for n in names))
+    return summarise(fleet, [outcomes[n] for n in names])
+
+
+def test_three_robots_simulated_alike_are_not_judged(alike):
+    """Three robots give no spread to judge by: none is flagged, and the fleet says why."""
+    from robocal_casadi.fleet.outliers import MIN_ROBOTS
+
+    root, outcomes = alike
+    summary = _fleet_of(root, ["a0", "a1", "a2"], outcomes)
+    assert summary.standing_out == [] and not summary.judged
+    data = summary.to_json()
+    assert data["standing_out"] == [] and data["rule"]["judged"] is False
+    assert f"at least {MIN_ROBOTS}" in data["rule"]["note"] and "3 robots" in data["rule"]["note"]
+    assert all(not q["judged"] for q in data["quantities"])
+    # Even a worse robot among three is not judged: there is no spread to judge it by.
+    assert _fleet_of(root, ["a0", "a1", "worse"], outcomes).standing_out == []
+
+
+def test_a_worse_fit_stands_out_of_a_bigger_fleet_and_noise_does_not(alike):
+    """With eight robots the spread is estimated: the robot with five times the noise is
+    flagged on its fit RMS; the seven alike, whatever their MADs, are not, since no
+    difference between them exceeds what each fit's own noise explains."""
+    root, outcomes = alike
+    names = [f"a{k}" for k in range(7)]
+    summary = _fleet_of(root, [*names, "worse"], outcomes)
+    assert summary.judged and summary.standing_out == ["worse"]
+    flagged = {r["quantity"] for r in summary.reasons()}
+    assert "fit.rms_final" in flagged
+    alike_only = _fleet_of(root, names, outcomes)
+    assert alike_only.judged and alike_only.standing_out == []
+    fit = next(q for q in alike_only.to_json()["quantities"] if q["key"] == "fit.rms_final")
+    # every robot's RMS carries the standard error its own errors imply: about
+    # RMS / sqrt(2 n) for n near-Gaussian errors (here 60 3-D errors, so less)
+    for entry in fit["values"].values():
+        assert 0 < entry["std"] < entry["value"] / np.sqrt(2 * 60) * 1.5
+    assert fit["noise"] > 0
+
+
+def test_rms_standard_error_against_the_sampling_spread():
+    """The standard error of an RMS from one sample matches the spread of RMS values over
+    many samples (Gaussian errors, 400 per sample), within the spread of the estimate."""
+    from robocal_casadi.fleet.robot_task import rms_standard_error
+
+    rng = np.random.default_rng(5)
+    samples = rng.normal(0.0, 2e-5, size=(2000, 400))
+    spread_of_rms = np.std(np.sqrt(np.mean(samples ** 2, axis=1)))
+    estimates = [rms_standard_error(s) for s in samples[:200]]
+    assert np.median(estimates) == pytest.approx(spread_of_rms, rel=0.1)
+    assert rms_standard_error(np.array([1e-5])) is None

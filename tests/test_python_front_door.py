@@ -101,12 +101,14 @@ def test_fk_gives_the_poses_robocal_fk_writes(cell, tmp_path):
     joints = write(tmp_path / "joints.csv", [f"q{i}" for i in range(1, 7)], q)
     run("fk", cell["robot"], joints, "--out", tmp_path / "poses.csv")
     header, written = read(tmp_path / "poses.csv")
-    assert header == ["x", "y", "z", "qw", "qx", "qy", "qz"]
-    assert np.array_equal(rc.fk(cell["robot"], q), written)
+    # every input column is copied through, the readings included, then the pose
+    assert header == [*(f"q{i}" for i in range(1, 7)), "x", "y", "z", "qw", "qx", "qy", "qz"]
+    assert np.array_equal(written[:, :6], q)
+    assert np.array_equal(rc.fk(cell["robot"], q), written[:, 6:])
     run("fk", cell["robot"], joints, "--calibrated", cell["cli"], "--out",
         tmp_path / "calibrated.csv")
     assert np.array_equal(rc.fk(rc.load_robot(cell["robot"]), q, calibrated=cell["cli"]),
-                          read(tmp_path / "calibrated.csv")[1])
+                          read(tmp_path / "calibrated.csv")[1][:, 6:])
 
 
 def test_fk_with_effects_gives_what_robocal_fk_writes(cell, tmp_path):
@@ -119,7 +121,7 @@ def test_fk_with_effects_gives_what_robocal_fk_writes(cell, tmp_path):
         tmp_path / "poses.csv")
     _, written = read(tmp_path / "poses.csv")
     poses = rc.fk(cell["robot"], q, calibrated=cell["cli"], with_effects=True, payload=payload)
-    assert np.array_equal(poses, written[:, 1:])  # payload copied through first
+    assert np.array_equal(poses, written[:, 7:])  # q1..q6 and payload copied through first
     geometric = rc.fk(cell["robot"], q, calibrated=cell["cli"])
     # The payload bends the arm: the effects move the tool by far more than rounding.
     assert np.abs(poses[-1, :3] - geometric[-1, :3]).max() > 1e-3  # mm

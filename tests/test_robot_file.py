@@ -144,3 +144,23 @@ def test_missing_robot_file(tmp_path):
     path = tmp_path / "absent.yaml"
     with pytest.raises(InputError, match="absent.yaml: robot file not found"):
         load_robot(path)
+
+
+@pytest.mark.parametrize("typed_m, written_mm", [(-0.5723, -572.3), (0.1157, 115.7),
+                                                 (0.163941, 163.941), (1e-3, 1.0)])
+def test_values_typed_in_metres_are_written_in_mm_as_typed(tmp_path, typed_m, written_mm):
+    """A length typed in metres reads as the same decimal in mm (robot file written in mm,
+    result.json's nominal), not as the last-bit neighbour ``-572.3000000000001``."""
+    from robocal_casadi.common.units import Units
+    from robocal_casadi.results import ParameterEstimate
+
+    text = ("convention: dh\nunits: {length: m, angle: rad}\njoints:\n"
+            f"  - {{type: revolute, theta: 0, d: {typed_m!r}, a: 0, alpha: 0}}\n")
+    robot = load_robot(write(tmp_path, text))
+    mm = Units("mm", "deg")
+    save_robot(robot, tmp_path / "mm.yaml", units=mm)
+    assert yaml.safe_load((tmp_path / "mm.yaml").read_text())["joints"][0]["d"] == written_mm
+    row = ParameterEstimate("d1", "length", robot.joints[0].d, robot.joints[0].d, None, False)
+    assert row.to_json(mm)["nominal"] == written_mm
+    again = load_robot(tmp_path / "mm.yaml")  # within one unit in the last place
+    np.testing.assert_array_max_ulp(again.joints[0].d, robot.joints[0].d, maxulp=1)

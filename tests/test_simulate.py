@@ -392,3 +392,177 @@ def test_backlash_holds_for_touches_in_the_order_written(tmp_path):
         misses.append(np.linalg.norm(flange_point(sim.truth.robot, sim.joints[i], probe)
                                      - socket))
     assert max(misses) > 1e-4
+
+
+# ----------------------------------------------------------------------------- held truths
+
+HAND_ROBOT = """\
+name: hand-6r
+convention: dh
+units: {length: mm, angle: deg}
+joints:
+  - {type: revolute, theta: 0, d: 400, a: 150, alpha: -90, limits: [-170, 170]}
+  - {type: revolute, theta: -90, d: 0, a: 600, alpha: 0, limits: [-120, 60]}
+  - {type: revolute, theta: 0, d: 0, a: 120, alpha: -90, limits: [-100, 150]}
+  - {type: revolute, theta: 0, d: 620, a: 0, alpha: 90, limits: [-180, 180]}
+  - {type: revolute, theta: 0, d: 0, a: 0, alpha: -90, limits: [-120, 120]}
+  - {type: revolute, theta: 0, d: 100, a: 0, alpha: 0, limits: [-350, 350]}
+"""
+HAND_ERRORS = {"a2": 0.4, "d4": -0.3, "theta3": 0.02, "alpha2": -0.015}  # mm, deg
+HAND_TARGET = [1.5, -2.0, 80.0]  # mm, flange frame
+
+
+def _hand_truth(folder) -> None:
+    """A robot file and a truth file written here by hand (not by the simulator): the
+    nominal 6R above with the errors ``HAND_ERRORS``, a target at ``HAND_TARGET``."""
+    from robocal_casadi.model.robot import load_robot
+
+    folder.mkdir(parents=True)
+    (folder / "robot.yaml").write_text(HAND_ROBOT)
+    nominal = load_robot(folder / "robot.yaml")
+    registry = nominal.parameters()
+    vector = registry.vector_of(nominal)
+    true = {}
+    for name, value in zip(registry.names, vector):
+        scale = nominal.units.scale(registry.quantity(name))
+        true[name] = float(round(value / scale, 9) + HAND_ERRORS.get(name, 0.0))
+    content = {"kind": "tracker_points", "seed": 0, "units": {"length": "mm", "angle": "deg"},
+               "noise": 0.0, "reference_temperature": 20.0, "robot": true,
+               "parameter_errors": HAND_ERRORS, "mounted": {"target": HAND_TARGET},
+               "placement": {}, "effects": {}}
+    (folder / "truth.yaml").write_text(yaml.safe_dump(content, sort_keys=False))
+
+
+def _dh_tool(joints_deg_mm: list[dict], q_deg) -> np.ndarray:
+    """Standard DH flange pose [mm] from the table (deg, mm), written out here."""
+    T = np.eye(4)
+    for joint, q in zip(joints_deg_mm, q_deg):
+        th, al = np.radians(joint["theta"] + q), np.radians(joint["alpha"])
+        ct, st, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)
+        T = T @ np.array([[ct, -st * ca, st * sa, joint["a"] * ct],
+                          [st, ct * ca, -ct * sa, joint["a"] * st],
+                          [0, sa, ca, joint["d"]], [0, 0, 0, 1]])
+    return T
+
+
+def test_a_hand_written_truth_gets_new_readings_of_its_robot(tmp_path):
+    """``simulate --truth`` on a truth the simulator did not write: the tracker points of the
+    new run are those of the hand-written true robot (its DH table, target and the tracker
+    pose the new truth file states), computed here from the plain DH formula."""
+    _hand_truth(tmp_path / "hand")
+    out = tmp_path / "new"
+    assert main(["simulate", "--truth", str(tmp_path / "hand" / "truth.yaml"), "--rows", "25",
+                 "--seed", "3", "--out", str(out)]) == 0
+    truth = yaml.safe_load((out / "truth.yaml").read_text())
+    written = yaml.safe_load((tmp_path / "hand" / "truth.yaml").read_text())
+    assert truth["robot"] == pytest.approx(written["robot"], rel=1e-15, abs=1e-12)
+    assert truth["mounted"]["target"] == pytest.approx(HAND_TARGET, rel=1e-15)
+    assert truth["seed"] == 3 and truth["kind"] == "tracker_points"
+    joints = [{"theta": truth["robot"][f"theta{i}"], "d": truth["robot"][f"d{i}"],
+               "a": truth["robot"][f"a{i}"], "alpha": truth["robot"][f"alpha{i}"]}
+              for i in range(1, 7)]
+    instrument = truth["placement"]["instrument"]
+    r, p, y = np.radians(instrument["rpy"])
+    Rx = np.array([[1, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+    Ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+    Rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
+    R, t = Rz @ Ry @ Rx, np.array(instrument["xyz"])
+    table = np.loadtxt(out / "points.csv", delimiter=",", skiprows=1)
+    for row in table:
+        T = _dh_tool(joints, row[:6])
+        world = T[:3, :3] @ HAND_TARGET + T[:3, 3]
+        np.testing.assert_allclose(row[6:9], R.T @ (world - t), rtol=0, atol=1e-8)  # mm
+    # ... and not those of the nominal robot (the errors move the target by about 1 mm)
+    nominal = [dict(j, **{k: j[k] - HAND_ERRORS.get(f"{k}{i}", 0.0) for k in j})
+               for i, j in enumerate(joints, start=1)]
+    T = _dh_tool(nominal, table[0, :6])
+    assert np.linalg.norm(R.T @ (T[:3, :3] @ HAND_TARGET + T[:3, 3] - t) - table[0, 6:9]) > 0.1
+
+
+@pytest.mark.parametrize("kind, options", [
+    ("tracker_points", ["--errors", "0.5,0.05", "--effect", "joint_compliance:2,3",
+                        "--payload", "0,5", "--payload-com", "0,0,50", "--noise", "0.01"]),
+    ("artifact_touches", ["--error", "a2=0.3", "--noise", "0.005"]),
+    ("sphere_laser", ["--errors", "0.2,0.02", "--noise", "0.002"]),
+])
+def test_the_truths_own_seed_writes_the_truth_again(tmp_path, kind, options):
+    rows = ["--rows", str(ROWS[kind])]
+    first = tmp_path / "first"
+    assert main(["simulate", "--example", "industrial_6r", "--kind", kind, *rows, *options,
+                 "--seed", "4", "--out", str(first)]) == 0
+    run = [o for o in ("--payload", "0,5") if "--payload" in options]
+    again = tmp_path / "again"
+    assert main(["simulate", "--truth", str(first / "truth.yaml"), *rows, *run, "--seed", "4",
+                 "--out", str(again)]) == 0
+    assert (again / "truth.yaml").read_bytes() == (first / "truth.yaml").read_bytes()
+    other = tmp_path / "other"
+    assert main(["simulate", "--truth", str(first / "truth.yaml"), *rows, *run, "--seed", "5",
+                 "--out", str(other)]) == 0
+    old, new = (yaml.safe_load((f / "truth.yaml").read_text()) for f in (first, other))
+    assert new["seed"] == 5 and new["placement"] != old["placement"]
+    for key in ("robot", "parameter_errors", "mounted", "effects", "noise", "kind", "units"):
+        assert new[key] == old[key], key
+    assert (other / "points.csv").exists() or kind != "tracker_points"
+
+
+def test_every_effect_reads_back_from_the_truth_file(tmp_path):
+    """Each registered effect (its simulator's defaults) survives truth.yaml: the effects
+    rebuilt from the file write the same entries."""
+    from robocal_casadi.effects import EFFECTS
+    from robocal_casadi.instruments.held_truth import read_truth, true_effects_of
+    from robocal_casadi.instruments.simulate import TrueEffects
+
+    robot = ROBOTS["industrial_6r"]()
+    for name, cls in EFFECTS.items():
+        if cls.per == "column" and not cls.simulation_default:
+            continue  # learned: nothing to simulate
+        default = cls.simulation_default
+        values = default[0] if len(default) == 1 else default
+        spec = values if cls.per == "column" else (
+            {"5@6": values} if cls.per == "pair" else {3: values})
+        sim = simulate(robot, "tracker_points", rows=6, seed=1, out_dir=tmp_path / name,
+                       effects={name: spec}, progress=False)
+        held = read_truth(sim.truth_path)
+        rebuilt = TrueEffects(true_effects_of(held, held.nominal()))
+        assert rebuilt.as_dict() == sim.truth.effects.as_dict(), name
+
+
+def test_simulate_truth_refuses_what_would_change_the_robot(tmp_path, capsys):
+    _hand_truth(tmp_path / "hand")
+    truth = str(tmp_path / "hand" / "truth.yaml")
+    for extra in (["--errors", "0.1,0.01"], ["--effect", "joint_compliance:2"],
+                  ["--noise", "0.1"], ["--kind", "cross_bar"]):
+        assert main(["simulate", "--truth", truth, *extra, "--out", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and ("--truth" in err[0] or "--kind" in err[0]), err
+    assert not (tmp_path / "x").exists()
+    (tmp_path / "hand" / "robot.yaml").unlink()
+    assert main(["simulate", "--truth", truth, "--out", str(tmp_path / "x")]) == 2
+    assert "robot.yaml" in capsys.readouterr().err
+
+
+def test_validation_from_another_simulated_robot_is_said(tmp_path, capsys):
+    """Held-out data of the same truth (``--truth``) pass silently; held-out data simulated
+    with another seed (another robot) get one line, and a note in result.json."""
+    import json
+
+    base = ["simulate", "--example", "industrial_6r", "--kind", "tracker_points", "--rows", "40",
+            "--noise", "0.01", "--errors", "0.3,0.03"]
+    assert main([*base, "--seed", "1", "--out", str(tmp_path / "fit")]) == 0
+    assert main([*base, "--seed", "2", "--out", str(tmp_path / "other")]) == 0
+    assert main(["simulate", "--truth", str(tmp_path / "fit" / "truth.yaml"), "--rows", "40",
+                 "--seed", "2", "--out", str(tmp_path / "same")]) == 0
+    capsys.readouterr()
+    runs = {}
+    for name in ("same", "other"):
+        out = tmp_path / f"result-{name}"
+        assert main(["calibrate", str(tmp_path / "fit" / "dataset.yaml"), "--validate",
+                     str(tmp_path / name / "dataset.yaml"), "--out", str(out), "--no-report",
+                     "--no-diagnose"]) == 0
+        lines = [line for line in capsys.readouterr().out.splitlines()
+                 if "another robot" in line]
+        runs[name] = (lines, json.loads((out / "result.json").read_text()).get("notes", []))
+    assert runs["same"] == ([], [])
+    lines, notes = runs["other"]
+    assert len(lines) == 1 and lines[0].startswith("NOTE: the held-out data")
+    assert "--truth" in lines[0] and any("another robot" in n for n in notes)

@@ -389,3 +389,37 @@ def test_ur_calibration_export_refuses_other_arms(tmp_path, capsys):
     out = tmp_path / "ur.yaml"
     assert main(["export", str(ur), "--ur-calibration", str(out)]) == 0
     assert set(yaml.safe_load(out.read_text())["kinematics"]) >= {"shoulder", "wrist_3"}
+
+
+def test_exported_urdf_carries_the_robot_files_masses_with_valid_inertias(tmp_path):
+    """The shipped UR10 file gives each link a mass [kg] and a centre of mass [mm]: the URDF
+    written from it holds those (in SI), an inertia tensor a physics engine accepts
+    (positive definite, the triangle inequalities) and says which values are stand-ins."""
+    import xml.etree.ElementTree as ET
+
+    from robocal_casadi.model.pinocchio_model import LINK_DENSITY, urdf_text
+
+    given = yaml.safe_load(UR10_DH.read_text())
+    assert given["units"]["length"] == "mm"
+    text = urdf_text(load_robot(UR10_DH))
+    assert "stand-in" in text
+    root = ET.fromstring(text)
+    links = {link.get("name"): link for link in root.iter("link")}
+    for i, joint in enumerate(given["joints"], start=1):
+        inertial = links[f"frame_{i}"].find("inertial")
+        assert float(inertial.find("mass").get("value")) == joint["mass"]
+        com = [float(v) for v in inertial.find("origin").get("xyz").split()]
+        np.testing.assert_allclose(com, np.array(joint["com"]) * 1e-3, rtol=1e-15, atol=1e-15)
+        tensor = inertial.find("inertia")
+        inertia = np.array([[float(tensor.get(f"i{min(a, b)}{max(a, b)}")) for b in "xyz"]
+                            for a in "xyz"])
+        principal = np.linalg.eigvalsh(inertia)
+        assert principal.min() > 0
+        for k in range(3):
+            assert principal[k] <= principal[k - 1] + principal[k - 2]
+        # a solid sphere of the stated density: I = 2/5 m r^2, m = 4/3 pi r^3 rho
+        radius = np.sqrt(2.5 * principal[0] / joint["mass"])
+        assert 4.0 / 3.0 * np.pi * radius**3 * LINK_DENSITY == pytest.approx(joint["mass"])
+    model = pin.buildModelFromXML(text)
+    assert sum(inertia.mass for inertia in model.inertias) == pytest.approx(
+        sum(j["mass"] for j in given["joints"]))

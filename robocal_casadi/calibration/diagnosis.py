@@ -66,6 +66,7 @@ import numpy as np
 
 from ..common.memory import release_freed
 from ..common.progress import note, reports_stages, stage
+from ..common.units import display_units
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
 from ..results import Decision, EffectFinding, Identifiability
@@ -895,7 +896,7 @@ def _evidence(final: Problem, solution: Solution, groups: dict, schemes,
 
 def _findings(problem: Problem, solution: Solution, groups: dict,
               evidence: dict) -> list[EffectFinding]:
-    units = problem.robot.units
+    units = display_units(problem.robot.units)  # the sentence is read: lengths in mm
     std = solution.std
     findings = []
     for key, group in groups.items():
@@ -912,10 +913,12 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
         scale = units.length_scale
         numbers = evidence[key]
         held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
-        summary = (f"{text}{held_text}; adding it lowers the held-out RMS from "
+        summary = (f"{text}{held_text}; adding it lowers the cross-validated RMS of the fit "
+                   f"data (folds of the fit readings held out in turn) from "
                    f"{numbers['cv_rms_before'] / scale:.3g} {units.length} to "
                    f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")
         findings.append(EffectFinding(name=name, joints=joints, parameters=values,
                                       unit=effect.unit, evidence=dict(numbers), std=errors,
-                                      summary=summary))
+                                      summary=summary,
+                                      units={n: effect.parameter_unit(n) for n in values}))
     return findings

@@ -958,7 +958,8 @@ def recommend(fit: RmsSummary, validation: RmsSummary | None,
                          "no held-out data were given to confirm them")
     if validation.rms_final > validation.rms_geometric:
         return "geometric", ("the held-out data show the model with effects worse than the "
-                             "geometric one")
+                             "geometric one; they decide over the cross-validation of the fit "
+                             "data, having taken no part in choosing or fitting the model")
     return "final", "the held-out data confirm the added effects"
 
 

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
 from ..common.memory import release_freed
-from ..common.units import Units
+from ..common.units import Units, display_units
 from ..effects.residual_map import (
     FADE,
     GAIN,
@@ -353,8 +353,10 @@ def finding(learned: LearnedMap, fit_rms: tuple[float, float], units: Units) -> 
     and angles in ``units``); ``fit_rms`` [m] the fit RMS without and with it."""
     effect = learned.effect
     assert effect is not None
+    units = display_units(units)  # the sentence is read: lengths in mm
     scale, length = units.length_scale, units.length
-    summary = (f"{effect.describe({}, units)}; it lowers the held-out RMS from "
+    summary = (f"{effect.describe({}, units)}; it lowers the cross-validated RMS of the fit "
+               f"data (folds of the fit readings held out in turn) from "
                f"{learned.cv_before / scale:.3g} {length} to {learned.cv_after / scale:.3g} "
                f"{length}")
     evidence = {"rms_drop": 1.0 - fit_rms[1] / fit_rms[0], "fit_rms_without": fit_rms[0],

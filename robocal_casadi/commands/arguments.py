@@ -6,7 +6,8 @@ a long computation:
 
 * a file output must be a new name or a regular file (never a device, a pipe or a
   socket, which replacing would destroy), not one of the run's inputs, in a folder
-  that can be written;
+  that can be written (tried: an entry is made there and removed, as permission bits
+  alone miss root, /proc and file systems that refuse writes their own way);
 * a folder output is replaced as a whole: it must not be the current folder or hold
   it, nor hold or be any file the run reads; when it exists and is not empty, it must be
   a folder the same verb wrote, holding only the files it wrote, unchanged (its marker
@@ -21,6 +22,7 @@ import argparse
 import errno
 import os
 import stat
+import tempfile
 from pathlib import Path
 
 from ..common.output import not_replacing_inputs, replace_refusal
@@ -46,6 +48,13 @@ def _parent_usable(path: Path, option: str) -> None:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"the folder {parent} is not writable, so {path} cannot be written",
                          where=option)
+    # Permission bits do not tell everything (root ignores them; /proc and some network
+    # or FUSE file systems refuse new entries all the same): make and remove a probe.
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".robocal-probe-", dir=parent))
+    except OSError as error:
+        raise InputError(f"the folder {parent} is not writable ({error.strerror or error}), "
+                         f"so {path} cannot be written", where=option) from None
 
 
 def _kind_of(mode: int) -> str:

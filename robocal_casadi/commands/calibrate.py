@@ -19,11 +19,13 @@ from pathlib import Path
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
 from ..calibration.outliers import rejected_lines
+from ..common.units import Units, display_units
 from ..effects import is_learned
 from ..effects.effect_model import delivered_lines
 from ..errors import InputError
 from ..formats import profiles
 from ..instruments.datasets import load_dataset
+from ..instruments.held_truth import held_out_truth_note
 from ..job.run import JobOptions, ReportOptions, run_job
 from ..results import (
     CalibrationResult,
@@ -105,7 +107,7 @@ def add_report_options(parser: argparse.ArgumentParser) -> None:
 def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     """A few lines for the terminal: what was identified and the error before and after
     (``diagnosed``: whether the residual was tested for effects the model lacks)."""
-    units = result.units
+    units = display_units(result.units)  # one length unit, mm, in the whole block
     s = units.length_scale
     ident = result.identifiability
     rows = sum(len(r.errors_final) for r in result.residuals)
@@ -122,10 +124,7 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     fit = result.fit
     lines.append(f"fit RMS [{units.length}]: nominal {fit.rms_nominal / s:.4g}, geometric "
                  f"{fit.rms_geometric / s:.4g}, final {fit.rms_final / s:.4g}")
-    if result.validation is not None:
-        v = result.validation
-        lines.append(f"validation RMS [{units.length}]: nominal {v.rms_nominal / s:.4g}, geometric "
-                     f"{v.rms_geometric / s:.4g}, final {v.rms_final / s:.4g}")
+    lines += validation_lines(result, units)
     lines += rejected_lines(result.rejected, units)
     for label, dropped in result.selection.items():
         if dropped:
@@ -143,7 +142,8 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if profile is not None:
         lines.append(profile.sentence(units, result.fit, result.validation))
     if result.delivered is not None:
-        lines += delivered_lines(result.delivered, s, units.length)
+        lines += delivered_lines(result.delivered, s, units.length,
+                                 kept=bool(result.held_out_set_aside))
     if result.predicted_accuracy is not None:
         lines += result.predicted_accuracy.sentence(s, units.length).splitlines()
     lines += _refusal_lines(result)
@@ -155,6 +155,28 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     elif diagnosed:
         lines.append("unexplained: none (what remains is consistent with noise)")
     return "\n".join(lines)
+
+
+def validation_lines(result: CalibrationResult, units: Units) -> list[str]:
+    """The held-out RMS over every held-out reading first; then, where gross errors were
+    set aside, the same over the readings kept, with their count."""
+    if result.validation is None:
+        return []
+    s = units.length_scale
+
+    def figures(v) -> str:
+        return (f"nominal {v.rms_nominal / s:.4g}, geometric {v.rms_geometric / s:.4g}, "
+                f"final {v.rms_final / s:.4g}")
+
+    aside = result.held_out_set_aside
+    if not aside or result.validation_all is None:
+        return [f"validation RMS [{units.length}]: {figures(result.validation)}"]
+    kept = sum(len(r.joints) if r.joints is not None else len(r.errors_final)
+               for r in result.validation_residuals)
+    return [f"validation RMS [{units.length}] over all {kept + aside} held-out readings: "
+            f"{figures(result.validation_all)}",
+            f"validation RMS [{units.length}] over the {kept} kept ({aside} set aside as gross "
+            f"errors): {figures(result.validation)}"]
 
 
 def _effect_lines(result: CalibrationResult) -> list[str]:
@@ -309,18 +331,22 @@ def run(args: argparse.Namespace) -> int:
     not_replacing_inputs(args.out, [*read_options(args), *(p for d in datasets + validation
                                                            for p in (d.path, d.data_path,
                                                                      d.robot_path))])
+    other_robot = held_out_truth_note(datasets, validation)
     options = JobOptions(diagnose=not args.no_diagnose, method=args.method, loss=args.loss,
                          select_growth=args.select_growth, max_iterations=args.max_iterations,
                          rule=args.rule, profile=args.profile, progress=sys.stderr.isatty(),
-                         fleet_prior=fleet_prior_option(args))
+                         fleet_prior=fleet_prior_option(args),
+                         notes=(other_robot,) if other_robot else ())
     report = ReportOptions(report=not args.no_report, pdf=args.pdf, info=info,
                            templates=args.report_templates)
     outcome = run_job(datasets, validation, options, args.out, report, verb="calibrate",
                       progress=options.progress)
     result = outcome.result
     print(summary(result, diagnosed=not args.no_diagnose))
+    if other_robot:  # after the summary, whose first line may say the run was refused
+        print(f"NOTE: {other_robot}")
     written = [name for name in outcome.written if not name.startswith(".")]
     print(f"wrote {args.out}/: {', '.join(written)}")
     summarise(args, **summary_fields(result, diagnosed=not args.no_diagnose),
-              out=str(args.out), written=written)
+              out=str(args.out), written=written, notes=list(result.notes))
     return outcome.exit_status

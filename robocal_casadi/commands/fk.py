@@ -2,8 +2,10 @@
 
 For each row of q1..qn in JOINTS.csv (in the robot file's units) writes the tool pose
 x,y,z,qw,qx,qy,qz in the world frame (lengths in the robot file's unit, quaternion with
-qw >= 0) to POSES.csv. Columns other than q1..qn (time, temperature, ...) are copied
-through, before the pose columns. Readings outside the robot's joint limits are refused.
+qw >= 0) to POSES.csv. Every input column (q1..qn and the others: time, payload,
+temperature, ...) is copied through as written, in its order, before the pose columns, so
+each output row holds the reading it came from. Readings outside the robot's joint limits
+are refused.
 
 With --calibrated DIR the geometry comes from DIR/robot_calibrated.yaml (a result of
 `robocal calibrate`); the readings and the output keep ROBOT.yaml's units. Only the
@@ -45,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "joint readings and the poses)")
     parser.add_argument("joints", metavar="JOINTS.csv", help="table with columns q1..qn")
     parser.add_argument("--out", metavar="POSES.csv", required=True,
-                        help="output table: extra input columns, then x,y,z,qw,qx,qy,qz")
+                        help="output table: the input columns as written, then x,y,z,qw,qx,qy,qz")
     parser.add_argument("--calibrated", metavar="DIR",
                         help="use DIR/robot_calibrated.yaml (geometry only unless "
                         "--with-effects)")
@@ -75,12 +77,11 @@ def run(args: argparse.Namespace) -> int:
     if args.calibrated is not None:
         robot = calibrated_robot(Path(args.calibrated), robot, robot_path)
     table = read_table(args.joints)
-    joint_columns = {f"q{i}" for i in range(1, robot.dof + 1)}
     used: set[str] = set()
     readings_robot = Path(args.calibrated) / CALIBRATED_ROBOT if args.calibrated else robot_path
     Q = checked_joint_readings(table, robot, robot.units, used, readings_robot)
-    extras = [c for c in table.columns if c not in joint_columns]
-    clashes = [c for c in extras if c in POSE_COLUMNS]
+    kept_columns = list(table.columns)  # the reading itself, then what it gives
+    clashes = [c for c in kept_columns if c in POSE_COLUMNS]
     if clashes:
         raise InputError(f"column(s) {clashes} would clash with the pose columns "
                          f"{list(POSE_COLUMNS)} of the output; rename them", file=table.path)
@@ -95,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
         poses = pose_rows(model.tool_poses(Q, values), robot)
     else:
         poses = tool_pose_rows(robot, Q)
-    copied = [[row[table.columns.index(c)] for c in extras] for row in table.rows]
+    copied = [list(row) for row in table.rows]
     with atomic_file(args.out) as staging:
-        write_table(staging, [*extras, *POSE_COLUMNS],
+        write_table(staging, [*kept_columns, *POSE_COLUMNS],
                     [[*kept, *pose] for kept, pose in zip(copied, poses)])
     print(f"wrote {len(poses)} tool poses to {args.out}")
     summarise(args, rows=len(poses), out=str(args.out), unit=robot.units.length,

@@ -44,7 +44,7 @@ from typing import Any
 
 from ..calibration import METHODS
 from ..calibration.identification import CALIBRATION_LOSSES
-from ..common.output import MARKER, Marker, atomic_file, read_marker
+from ..common.output import MARKER, Marker, atomic_file, read_marker, remove_stale_staging
 from ..common.progress import Progress
 from ..errors import InputError
 from .arguments import add_allow_outside_data, positive_count
@@ -230,19 +230,26 @@ def run(args: argparse.Namespace) -> int:
     try:
         outcomes, summary = _run_locked(args, fleet, settings, previous)
     except BaseException:
+        # The workers are gone with the cluster: a robot one of them was writing when the
+        # run stopped (Ctrl-C) leaves no half-written staging behind.
+        for folder in (args.out, *(args.out / robot.name for robot in fleet.robots)):
+            remove_stale_staging(folder)
         _undo(args.out, created)
         raise
     print(f"{len(outcomes)} robots: {summary.count('calibrated')} calibrated, "
           f"{summary.count('unchanged')} unchanged (skipped), {summary.count('failed')} failed")
     for outcome in summary.failed:
         print(f"failed: {outcome.name}: {outcome.error}")
+    if summary.note:
+        print(f"not compared: {summary.note}")
     for reason in summary.reasons():
         print(f"stands out: {reason['robot']}: {reason['reason']}")
     print(f"wrote {args.out / 'fleet.json'}, {args.out / 'fleet.html'} and a folder per robot")
     summarise(args, robots=len(outcomes), calibrated=summary.count("calibrated"),
               unchanged=summary.count("unchanged"), failed=summary.count("failed"),
               failures={o.name: o.error for o in summary.failed},
-              stand_out=[dict(r) for r in summary.reasons()], out=str(args.out))
+              standing_out=[dict(r) for r in summary.reasons()], judged=summary.judged,
+              note=summary.note, out=str(args.out))
     sys.stdout.flush()
     return 1 if summary.failed else 0
 

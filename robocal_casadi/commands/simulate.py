@@ -11,6 +11,13 @@ controller reports; the measurements come from the true robot at the true joints
 Lengths and angles on the command line are in the robot file's units (the example
 robots: industrial_6r, ur_type, prismatic_rrp in mm/deg, panda_7dof in m/rad).
 
+--truth TRUTH.yaml (a truth.yaml that simulate wrote, with its robot.yaml beside it) keeps
+that true robot: its parameters, effects and mounted instrument, the kind, the noise, the
+units, the reference temperature and the payload's centre of mass; --seed then draws only
+the new run (where the instrument or artifact stands, the configurations, the noise), so
+the new folder is held-out data of the same robot. With the truth's own seed, --rows and
+set-up options, the truth file is written again as it was.
+
 --rows N counts readings (tracker, laser) or placements of the bar or artifact (the
 cross bar: 4 touches each; an artifact plate: --sockets x --touches each).
 --noise STD: tracker, per measured coordinate; touches, per coordinate of the probe's
@@ -25,6 +32,7 @@ Example:
       --noise 0.01 --errors 0.5,0.05 --effect joint_compliance:2,3 --seed 1 --out sim
   robocal simulate --example industrial_6r --kind {tracker} --rows 400 \\
       --effect joint_coupling:5@6=2e-4/1e-4 --effect backlash:2=5e-4 --out sim2
+  robocal simulate --truth sim/truth.yaml --rows 200 --seed 2 --out sim-validation
 """
 
 from __future__ import annotations
@@ -56,11 +64,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--robot", metavar="ROBOT.yaml", help="nominal robot file")
     source.add_argument("--example", choices=sorted(ROBOTS), help="a built-in example robot")
-    parser.add_argument("--kind", required=True, choices=KIND_CHOICES, help="dataset kind")
+    source.add_argument("--truth", metavar="TRUTH.yaml",
+                        help="the true robot of an earlier simulation (its truth.yaml, with "
+                        "robot.yaml beside it): new readings of that robot")
+    parser.add_argument("--kind", choices=KIND_CHOICES,
+                        help="dataset kind (required, unless --truth gives it)")
     parser.add_argument("--rows", "--count", dest="rows", type=int, default=100, metavar="N",
                         help="readings, or bar/artifact placements (default 100)")
-    parser.add_argument("--noise", type=float, default=0.0, metavar="STD",
-                        help="measurement noise std, robot length unit (default 0)")
+    parser.add_argument("--noise", type=float, metavar="STD",
+                        help="measurement noise std, robot length unit (default 0; with "
+                        "--truth, the truth's)")
     errors = parser.add_mutually_exclusive_group()
     errors.add_argument("--errors", metavar="LENGTH,ANGLE",
                         help="random geometric errors: std of theta/d/a/alpha (and beta where "
@@ -181,20 +194,26 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
     return effects
 
 
+HELD = ("--noise", "--errors", "--error", "--mounted-error", "--effect", "--payload-com",
+        "--reference-temperature")  # what a held truth gives: refused beside --truth
+
+
 def run(args: argparse.Namespace) -> int:
-    output_folder(args.out, verb="simulate", force=args.force, inputs=[args.robot])
+    output_folder(args.out, verb="simulate", force=args.force,
+                  inputs=[args.robot, args.truth,
+                          None if args.truth is None else Path(args.truth).parent / "robot.yaml"])
+    if args.truth is not None:
+        return _run_again(args)
+    if args.kind is None:
+        raise InputError("name the dataset kind (or give --truth)", where="--kind")
+    if args.noise is None:
+        args.noise = 0.0
     robot = load_robot(Path(args.robot)) if args.robot else ROBOTS[args.example]()
     _check_options(args, robot)
     L = robot.units.length_scale
     mounted_error = None if args.mounted_error is None else args.mounted_error * L
     geometric_errors = _geometric_errors(args, robot)
-    payload = None
-    if args.payload:
-        values = _floats(args.payload, None, "--payload")
-        if len(values) not in (1, 2) or min(values) < 0:
-            raise InputError(f"expected KG or LOW,HIGH (non-negative), got {args.payload!r}",
-                             where="--payload")
-        payload = values[0] if len(values) == 1 else (values[0], values[1])
+    payload = _payload(args)
     payload_com = None
     if args.payload_com:
         payload_com = [v * L for v in _floats(args.payload_com, 3, "--payload-com")]
@@ -221,12 +240,69 @@ def run(args: argparse.Namespace) -> int:
         readings=args.readings, sockets=args.sockets, touches=args.touches, force=args.force,
         bar_length=options["bar_length"], socket_distance=options["socket_distance"],
         sphere_radius=options["sphere_radius"])
-    print(f"wrote {result.rows} rows of {args.kind} to {Path(args.out)}/ "
+    return _written(args, result)
+
+
+def _written(args: argparse.Namespace, result) -> int:
+    kind = result.truth.kind
+    print(f"wrote {result.rows} rows of {kind} to {Path(args.out)}/ "
           f"({result.table_path.name}, dataset.yaml, robot.yaml, truth.yaml)")
-    summarise(args, kind=args.kind, rows=result.rows, out=str(args.out),
+    summarise(args, kind=kind, rows=result.rows, out=str(args.out),
               dataset=str(result.dataset_path), table=str(result.table_path),
-              truth=str(result.truth_path))
+              truth=str(result.truth_path), held_truth=args.truth)
     return 0
+
+
+def _run_again(args: argparse.Namespace) -> int:
+    """``--truth``: new readings of a held truth (``simulate_again``)."""
+    from ..instruments.held_truth import read_truth
+    from ..instruments.simulate import simulate_again
+    from .arguments import input_file
+
+    given = {"--noise": args.noise is not None, "--errors": bool(args.errors),
+             "--error": bool(args.error), "--mounted-error": args.mounted_error is not None,
+             "--effect": bool(args.effect), "--payload-com": bool(args.payload_com),
+             "--reference-temperature": args.reference_temperature != 20.0}
+    clash = [option for option in HELD if given[option]]
+    if clash:
+        raise InputError(f"{', '.join(clash)} would change the true robot the truth file "
+                         "holds; leave it out (or simulate a new robot without --truth)",
+                         where="--truth")
+    held = read_truth(input_file(args.truth, "truth file"))
+    if args.kind is not None and args.kind != held.kind:
+        raise InputError(f"the truth file is of kind {held.kind}, not {args.kind}",
+                         where="--kind")
+    args.kind = held.kind
+    robot = held.nominal()
+    args.noise = held.noise / robot.units.length_scale
+    _check_options(args, robot)
+    L = robot.units.length_scale
+    units = None
+    if args.units:
+        length, _, angle = args.units.partition(",")
+        units = parse_units({"length": length.strip(), "angle": angle.strip()}, file=None,
+                            key="--units")
+    result = simulate_again(
+        args.truth, out_dir=Path(args.out), rows=args.rows, seed=args.seed,
+        units=units if isinstance(units, Units) else None, payload=_payload(args),
+        temperature=None if not args.temperature else tuple(
+            _floats(args.temperature, 2, "--temperature")),
+        readings=args.readings, sockets=args.sockets, touches=args.touches, force=args.force,
+        bar_length=0.4 if args.bar_length is None else args.bar_length * L,
+        socket_distance=0.05 if args.socket_distance is None else args.socket_distance * L,
+        sphere_radius=0.025 if args.sphere_radius is None else args.sphere_radius * L)
+    return _written(args, result)
+
+
+def _payload(args: argparse.Namespace):
+    """``--payload`` as a constant [kg], a ``(low, high)`` range or None."""
+    if not args.payload:
+        return None
+    values = _floats(args.payload, None, "--payload")
+    if len(values) not in (1, 2) or min(values) < 0:
+        raise InputError(f"expected KG or LOW,HIGH (non-negative), got {args.payload!r}",
+                         where="--payload")
+    return values[0] if len(values) == 1 else (values[0], values[1])
 
 
 def _geometric_errors(args: argparse.Namespace, robot: Robot

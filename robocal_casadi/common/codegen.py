@@ -13,8 +13,9 @@ compiler being present.
 
 A library is machine code run with the caller's rights, so the cache is private: the
 folder is created 0700, and a folder or library that belongs to another user or that
-others may write is never used (the function is compiled into a private temporary
-folder instead, with a warning). A library that does not load (truncated, corrupt) is
+others may write is never used, nor a folder under one that others may write (where they
+could swap the whole folder): the function is compiled into a private temporary folder
+instead, with a warning. A library that does not load (truncated, corrupt) is
 compiled again. Build folders of killed runs (``robocal_build_<pid>_*``) are removed
 once their process is gone.
 
@@ -183,15 +184,41 @@ def safe_cache_folder() -> Path:
             pass  # made by a concurrent process a moment ago: checked below
         else:
             os.chmod(folder, 0o700)  # whatever the umask
-    if _owned_privately(folder, folder=True):
-        return folder
+    if not _owned_privately(folder, folder=True):
+        problem = (f"the cache folder {folder} belongs to another user or others may write "
+                   "it")
+    else:
+        exposed = exposed_ancestor(folder)
+        if exposed is None:
+            return folder
+        problem = (f"the cache folder {folder} lies under {exposed}, which others may write "
+                   "(they could swap the folder and its compiled code)")
     if folder not in _private_warned:
         _private_warned.add(folder)
-        warnings.warn(f"the cache folder {folder} belongs to another user or others may write "
-                      "it; compiled code goes to a private temporary folder instead (make it "
-                      "yours with mode 0700, or set ROBOCAL_CACHE)", CompilationWarning,
-                      stacklevel=3)
+        warnings.warn(f"{problem}; compiled code goes to a private temporary folder instead "
+                      "and is built again (make the folder yours with mode 0700 under folders "
+                      "only you or the system may write, or set ROBOCAL_CACHE)",
+                      CompilationWarning, stacklevel=3)
     return _private_folder()
+
+
+def exposed_ancestor(folder: Path) -> Path | None:
+    """The first folder above ``folder`` (as given and with links resolved) in which
+    someone else could rename or replace entries, or None. A folder is safe when it
+    belongs to this user or to root and neither its group nor others may write it, or
+    when it is sticky (``/tmp``: others may add entries but not move ours)."""
+    folder = Path(os.path.abspath(folder))
+    for chain in (folder.parents, folder.resolve().parents):
+        for parent in chain:
+            try:
+                info = parent.stat()
+            except OSError:
+                return parent
+            owner_ok = info.st_uid in (0, os.getuid())
+            open_to_others = info.st_mode & 0o022 and not info.st_mode & stat.S_ISVTX
+            if not owner_ok or open_to_others:
+                return parent
+    return None
 
 
 _private_warned: set[Path] = set()

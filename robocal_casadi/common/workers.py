@@ -33,10 +33,15 @@ def command_started() -> Iterator[None]:
             os.environ[MARK] = previous
 
 
+def started_under_a_command() -> bool:
+    """Whether this process was started by a running command (a worker, not the command)."""
+    mark = os.environ.get(MARK)
+    return mark is not None and mark != str(os.getpid())
+
+
 def ignore_interrupts_in_workers() -> None:
     """Ignore Ctrl-C in a process started under a command (not in the command itself)."""
-    mark = os.environ.get(MARK)
-    if mark is not None and mark != str(os.getpid()):
+    if started_under_a_command():
         with contextlib.suppress(ValueError):  # not the main thread: nothing to change
             signal.signal(signal.SIGINT, signal.SIG_IGN)
 

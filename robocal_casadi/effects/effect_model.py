@@ -189,10 +189,16 @@ def _with_geometry(robot: Robot, geometry, path: Path) -> Robot:
     return robot.with_parameters(vector)
 
 
-def delivered_lines(delivered: Delivered, length_scale: float, unit: str) -> list[str]:
-    """Terminal lines: the accuracy each output delivers."""
+def delivered_lines(delivered: Delivered, length_scale: float, unit: str, *,
+                    kept: bool = False) -> list[str]:
+    """Terminal lines: the accuracy each output delivers (``kept``: held-out readings were
+    set aside as gross errors, and the validation figure is over the others)."""
+    def label(role: str) -> str:
+        return f"{role} RMS over the kept readings" if kept and role == "validation" else \
+            f"{role} RMS"
+
     def text(block):
-        return ", ".join(f"{role} RMS {value / length_scale:.4g} {unit}"
+        return ", ".join(f"{label(role)} {value / length_scale:.4g} {unit}"
                          for role, value in block.items())
 
     model = delivered.model.replace("_", " ")

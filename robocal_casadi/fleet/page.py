@@ -92,6 +92,27 @@ def _effects(summary: dict | None) -> str:
     return "; ".join(parts)
 
 
+def _standing_out(summary: FleetSummary) -> list[str]:
+    """The section of the robots that stand out, or why none does (none judged when the
+    fleet is too small to estimate its spread)."""
+    parts = ["<h2 id='standing-out'>Robots that stand out</h2>"]
+    reasons = summary.reasons()
+    if reasons:
+        parts.append("<table><tr><th>robot</th><th>why</th></tr>")
+        parts += [f"<tr class='out'><td><a href='{_e(r['robot'])}/'>{_e(r['robot'])}"
+                  f"</a></td><td>{_e(r['reason'])}</td></tr>" for r in reasons]
+        parts.append("</table>")
+    elif not summary.judged:
+        parts.append(f"<p>None judged: {_e(summary.note)}.</p>")
+    else:
+        parts.append("<p>None: no robot lies far above the fleet on any quantity compared"
+                     + (", and no joint offset moved since the previous run" if summary.previous
+                        else "") + ".</p>")
+    if reasons and not summary.judged:
+        parts.append(f"<p>{_e(summary.note[0].upper() + summary.note[1:])}.</p>")
+    return parts
+
+
 def render(summary: FleetSummary, extra: str = "") -> str:
     """The page's HTML; ``extra`` (HTML) is a section added at the end."""
     length = summary.units.length
@@ -108,17 +129,7 @@ def render(summary: FleetSummary, extra: str = "") -> str:
         parts += [f"<tr class='failed'><td>{_e(o.name)}</td><td>{_e(o.error)}</td></tr>"
                   for o in summary.failed]
         parts.append("</table>")
-    parts.append("<h2 id='standing-out'>Robots that stand out</h2>")
-    reasons = summary.reasons()
-    if reasons:
-        parts.append("<table><tr><th>robot</th><th>why</th></tr>")
-        parts += [f"<tr class='out'><td><a href='{_e(r['robot'])}/'>{_e(r['robot'])}"
-                  f"</a></td><td>{_e(r['reason'])}</td></tr>" for r in reasons]
-        parts.append("</table>")
-    else:
-        parts.append("<p>None: no robot lies far above the fleet on any quantity compared"
-                     + (", and no joint offset moved since the previous run" if summary.previous
-                        else "") + ".</p>")
+    parts += _standing_out(summary)
     data = summary.to_json()
     parts.append(f"<p><small>Rule: {_e(data['rule']['text'])}.</small></p>")
     if summary.quantities:

@@ -26,6 +26,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from ..common.output import atomic_file, not_replacing_inputs, replace_refusal, written_by_robocal
 from ..effects import EFFECTS
 from ..errors import InputError, RobocalError
@@ -186,11 +188,37 @@ def complete_record(folder: Path, digest: str) -> dict | None:
     return record
 
 
+def rms_standard_error(errors: np.ndarray) -> float | None:
+    """[m] The standard error of the RMS of ``errors`` [m] that the scatter of the errors
+    themselves implies: the mean square's standard error ``sd(e^2) / sqrt(n)``, carried to
+    the RMS by its derivative ``1 / (2 RMS)``. What the noise of one robot's fit leaves
+    uncertain in its RMS (None for fewer than two errors or a zero RMS)."""
+    errors = np.asarray(errors, dtype=float)
+    errors = errors[np.isfinite(errors)]
+    squares = errors ** 2
+    if len(squares) < 2 or not squares.mean() > 0:
+        return None
+    return float(np.std(squares, ddof=1) / np.sqrt(len(squares))
+                 / (2.0 * np.sqrt(squares.mean())))
+
+
+def _rms_noise(residuals) -> dict | None:
+    """Per stage (``rms_nominal``, ...), the standard error [m] of the RMS of ``residuals``'
+    errors pooled (``rms_standard_error``); None without residuals."""
+    if not residuals:
+        return None
+    return {f"rms_{stage}": rms_standard_error(np.concatenate(
+        [getattr(r, f"errors_{stage}") for r in residuals]))
+        for stage in ("nominal", "geometric", "final")}
+
+
 def robot_summary(result) -> dict:
     """The numbers the fleet compares, SI: RMS errors [m] before and after (fit and
-    validation), the effects added (parameters and standard errors in their unit), the
-    gravity compliance per joint [rad/Nm] and each joint's offset (``theta_i`` [rad] of
-    a revolute joint, ``d_i`` [m] of a prismatic one) with its standard error."""
+    validation) with their standard errors (``fit_std``, ``validation_std``, from the
+    scatter of each robot's own errors: ``rms_standard_error``), the effects added
+    (parameters and standard errors in their unit), the gravity compliance per joint
+    [rad/Nm] and each joint's offset (``theta_i`` [rad] of a revolute joint, ``d_i`` [m]
+    of a prismatic one) with its standard error."""
     def rms(summary):
         if summary is None:
             return None
@@ -228,7 +256,8 @@ def robot_summary(result) -> dict:
     rejected = {"units": sum(e.role == "fit" for e in result.rejected), "readings": aside,
                 "share": aside / max(kept + aside, 1)}
     return {"units": result.units.as_dict(), "fit": rms(result.fit), "rejected": rejected,
-            "validation": rms(result.validation), "effects": effects,
+            "validation": rms(result.validation), "fit_std": _rms_noise(result.residuals),
+            "validation_std": _rms_noise(result.validation_residuals), "effects": effects,
             "compliance": compliance, "joint_offsets": offsets,
             "recommended": result.recommended,
             "delivered_model": None if result.delivered is None else result.delivered.model,

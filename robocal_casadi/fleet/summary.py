@@ -72,6 +72,22 @@ class FleetSummary:
         return [m for m in self.moves if m.moved]
 
     @property
+    def judged(self) -> bool:
+        """Whether the fleet had enough robots to estimate its spread (``MIN_ROBOTS``)."""
+        return sum(o.summary is not None for o in self.outcomes) >= MIN_ROBOTS
+
+    @property
+    def note(self) -> str:
+        """What a reader must know about the comparison ('' when the robots were judged)."""
+        if self.judged:
+            return ""
+        count = sum(o.summary is not None for o in self.outcomes)
+        return (f"{count} robot{'s' if count != 1 else ''} with results: at least {MIN_ROBOTS} "
+                "are needed to estimate the fleet's spread, so no robot is judged against the "
+                "others" + ("; joint offsets are still compared with the previous run"
+                            if self.previous else ""))
+
+    @property
     def standing_out(self) -> list[str]:
         """Names of the robots that stand out on any quantity or moved, in fleet order."""
         names = {f.robot for f in self.findings} | {m.robot for m in self.moved}
@@ -102,8 +118,10 @@ class FleetSummary:
                 "value": finding.value / s, "median": finding.median / s,
                 "robust_sd": finding.robust_sd / s, "score": finding.score, "unit": unit,
                 "reason": (f"{quantity.label} {_number(finding.value / s)} {unit} is "
-                           f"{_score(finding.score)} robust standard deviations above the "
-                           f"fleet median {_number(finding.median / s)} {unit}")})
+                           f"{_score(finding.score)} standard deviations above the fleet "
+                           f"median {_number(finding.median / s)} {unit} (the fleet's robust "
+                           f"spread {_number(finding.robust_sd / s)} {unit} combined with "
+                           "the noise of the robots' own values)")})
         for move in self.moved:
             s, unit = self.scale(move.quantity), self.unit(move.quantity)
             out.append({
@@ -131,13 +149,16 @@ class FleetSummary:
                        "unchanged": self.count("unchanged"), "failed": self.count("failed"),
                        "standing_out": len(self.standing_out)},
             "rule": {"limit": LIMIT, "robust_sd_per_mad": MAD_TO_SD, "relative_floor": FLOOR,
-                     "min_robots": MIN_ROBOTS,
-                     "text": (f"a robot stands out on a quantity when it lies more than {LIMIT:g} "
-                              "robust standard deviations (1.4826 x the median absolute "
-                              "deviation over the fleet, combined with the robot's own standard "
-                              "error) above the fleet median; a joint offset moved when it "
-                              f"changed by more than {LIMIT:g} combined standard errors since "
-                              "the previous run")},
+                     "min_robots": MIN_ROBOTS, "judged": self.judged, "note": self.note,
+                     "text": (f"with at least {MIN_ROBOTS} robots, a robot stands out on a "
+                              f"quantity when it lies more than {LIMIT:g} standard deviations "
+                              "above the fleet median: the robust spread (1.4826 x the median "
+                              "absolute deviation over the fleet) combined with the standard "
+                              "error of the robot's own value and the fleet's typical one (for "
+                              "an RMS error, what the noise of the robot's own fit leaves "
+                              "uncertain), so no difference the noise explains is flagged; a "
+                              f"joint offset moved when it changed by more than {LIMIT:g} "
+                              "combined standard errors since the previous run")},
             "previous": self.previous,
             "failed": [{"robot": o.name, "error": o.error} for o in self.failed],
             "standing_out": reasons,
@@ -155,7 +176,9 @@ class FleetSummary:
         if quantity.spread is not None:
             entry.update(median=quantity.spread.median / s,
                          robust_sd=quantity.spread.robust_sd / s,
+                         noise=quantity.spread.noise / s,
                          threshold=quantity.spread.threshold / s, count=quantity.spread.count)
+            entry["judged"] = entry["judged"] and (quantity.spread.judged or quantity.changes)
         return entry
 
     def _robot_json(self, outcome: RobotOutcome, flags: list[str]) -> dict:
@@ -165,7 +188,7 @@ class FleetSummary:
             "folder": outcome.name + "/",
             "datasets": [str(p) for p in robot.datasets],
             "validate": [str(p) for p in robot.validate],
-            "stands_out": flags, "warnings": list(outcome.warnings),
+            "standing_out": flags, "warnings": list(outcome.warnings),
             "seconds": outcome.seconds, "cpu_seconds": outcome.cpu_seconds,
             "worker": outcome.worker, "memory": outcome.memory,
             "peak_memory": outcome.peak_memory, "finished": outcome.finished}
@@ -275,8 +298,8 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
     summaries = {o.name: o.summary for o in outcomes if o.summary is not None}
     quantities: list[Quantity] = []
     for block, key, label, judged in RMS_QUANTITIES:
-        values = {name: (summary[block][key], None) for name, summary in summaries.items()
-                  if summary.get(block) is not None}
+        values = {name: (summary[block][key], (summary.get(f"{block}_std") or {}).get(key))
+                  for name, summary in summaries.items() if summary.get(block) is not None}
         if values:
             quantities.append(_judged(f"{block}.{key}", label, "length", values, judged))
     shares = {name: (summary["rejected"]["share"], None) for name, summary in summaries.items()

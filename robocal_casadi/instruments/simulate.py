@@ -73,7 +73,7 @@ import numpy as np
 from ..common.checks import choice, count, path_argument, positive
 from ..common.output import atomic_directory, replace_refusal
 from ..common.table import read_table, write_table
-from ..common.units import Units
+from ..common.units import Units, exact_file_units, snapped
 from ..effects import EFFECTS, Effect, TrueWorld
 from ..effects.motion import direction_column, is_direction_column, travel_column
 from ..errors import ArgumentError, InputError
@@ -82,6 +82,7 @@ from ..model.parameters import perturbed_stems
 from ..model.robot import Robot, dump_yaml, load_robot, save_robot
 from . import instrument, kinds
 from .datasets import Dataset, load_dataset
+from .held_truth import HeldTruth
 from .laser.simulator import ray_sphere_distance
 from .simulation import Generated, Setup
 
@@ -152,6 +153,7 @@ class Truth:
     noise: float
     seed: int
     reference_temperature: float
+    errors_drawn: bool = False  # geometric errors drawn from the seed's stream, before the run
 
     def __repr__(self) -> str:
         effects = ", ".join(self.effects.as_dict()) or "none"
@@ -453,15 +455,14 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
              reference_temperature: float = 20.0, readings: str = "joints",
              bar_length: float = 0.4, socket_distance: float = 0.05, sockets: int = 2,
              touches: int = 5, sphere_radius: float = 0.025, progress: bool = True,
-             force: bool = False
+             force: bool = False, held: HeldTruth | None = None
              ) -> SimulatedDataset:
     """Write a simulated dataset of ``kind`` into ``out_dir``; return its paths and truth.
 
     ``robot``: the nominal robot (a ``Robot`` or a robot file). ``rows``: the
     measurement model's units (``unit_name``): readings for the tracker and the laser;
     placements of the bar or artifact for touches. ``noise`` [m] (module docstring).
-    ``geometric_errors``: see
-    ``true_parameters`` (None, ``(length_std [m], angle_std [rad])`` or ``{name: error}``).
+    ``geometric_errors``: as ``true_parameters`` takes them (None, stds or by name).
     ``effects``: see ``parse_effects`` (SI). ``seed``: everything random follows from it.
     ``units``: of the dataset file and table (default the robot file's). ``mounted_error``
     [m]: std of the instrument's true offset from the dataset's nominal value (default the
@@ -473,7 +474,8 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     controller's nominal flange pose at the readings, world frame). ``bar_length``,
     ``socket_distance`` [m], ``sockets``, ``touches`` (per socket and placement) and
     ``sphere_radius`` [m] shape the artifacts. ``out_dir`` is replaced as a whole: a
-    non-empty folder that is no earlier output is refused unless ``force``.
+    non-empty folder that is no earlier output is refused unless ``force``. ``held``: a
+    truth read back whose robot is kept (``simulate_again``).
     """
     kind, readings, rows, noise, sockets, touches = _checked_sizes(
         kind, readings, rows, noise, sockets, touches)
@@ -483,28 +485,102 @@ def simulate(robot: Robot | str | Path, kind: str, *, out_dir: str | Path, rows:
     out_dir = Path(out_dir)
     _check_out_dir(out_dir, force)
     rng = np.random.default_rng(seed)
-    p_true, errors = true_parameters(nominal, geometric_errors, rng)
-    true_robot = nominal.with_parameters(p_true)
+    true_robot, errors, true_effects, drawn = _the_truth(nominal, geometric_errors, effects,
+                                                         kind, rng, held, units)
     length_std, angle_std = _error_stds(geometric_errors)
     mounted_error = length_std if mounted_error is None else mounted_error
-    true_effects = _true_effects(effects, nominal, kind)
-    com = np.zeros(3) if payload_com is None else np.asarray(payload_com, dtype=float)
+    noise, com = _stated_lengths(noise, payload_com, units)
     world = TrueRobot(true_robot, true_effects, reference_temperature, com)
     temperature = _temperature_span(temperature, true_effects, reference_temperature)
     setup = Setup(kind=kind, nominal=nominal, world=world, rng=rng, rows=int(rows),
                    noise=float(noise), mounted_error=float(mounted_error), angle_std=angle_std,
                    payload=payload, temperature=temperature, readings=readings,
                    bar_length=bar_length, socket_distance=socket_distance, sockets=int(sockets),
-                   touches=int(touches), sphere_radius=sphere_radius, progress=progress)
+                   touches=int(touches), sphere_radius=sphere_radius, progress=progress,
+                   held_mounted={} if held is None else dict(held.mounted),
+                   length_scale=units.length_scale)
     generated = _simulator(kind)(setup)
-
     truth = Truth(kind=kind, robot=true_robot, nominal=nominal, parameter_errors=errors,
                   mounted=generated.mounted, placement=generated.placement,
                   effects=true_effects, noise=float(noise), seed=int(seed),
-                  reference_temperature=float(reference_temperature))
-    _write_dataset(out_dir, generated, truth, units,
-                   None if payload is None or payload_com is None else com, payload_com)
+                  reference_temperature=float(reference_temperature), errors_drawn=drawn)
+    stated = None if payload_com is None else com
+    _write_dataset(out_dir, generated, truth, units, None if payload is None else stated, stated)
     return _simulated(out_dir, truth, generated)
+
+
+def _stated_lengths(noise: float, payload_com, units: Units) -> tuple[float, np.ndarray]:
+    """``noise`` [m] and the payload's centre of mass [m] (zero where None) as truth.yaml
+    in ``units`` states them (``snapped``)."""
+    com = np.zeros(3) if payload_com is None else np.array(
+        [snapped(float(v), units.length_scale) for v in payload_com])
+    return snapped(noise, units.length_scale), com
+
+
+def _the_truth(nominal: Robot, geometric_errors, effects: Mapping | None, kind: str,
+               rng: np.random.Generator, held: HeldTruth | None, units: Units
+               ) -> tuple[Robot, dict[str, float], TrueEffects, bool]:
+    """The true robot, its errors [SI], its effects and whether the errors were drawn at
+    random: from ``held`` where given (the stream advanced as the original run advanced
+    it), else drawn from ``rng``. Either way as truth.yaml in ``units`` states them (each
+    value snapped to its decimal there), so a truth read back is the same robot to the bit."""
+    if held is not None:
+        true_robot, errors, true_effects, drawn = _held(held, nominal, kind, rng)
+    else:
+        drawn = geometric_errors is not None and not isinstance(geometric_errors, Mapping)
+        p_true, errors = true_parameters(nominal, geometric_errors, rng)
+        true_robot = nominal.with_parameters(p_true)
+        true_effects = _true_effects(effects, nominal, kind)
+    true_robot, errors = _as_stated(true_robot, errors, units)
+    return true_robot, errors, true_effects, drawn
+
+
+def simulate_again(truth: str | Path, *, out_dir: str | Path, rows: int = 100, seed: int = 0,
+                   units: Units | None = None, **options) -> SimulatedDataset:
+    """New readings of the robot a ``truth.yaml`` describes, written as ``simulate`` does.
+
+    The true robot (its parameters, effects and mounted instrument), the kind, the noise,
+    the reference temperature and the payload's centre of mass come from the truth file;
+    the nominal robot is the ``robot.yaml`` beside it. ``seed`` draws the run: where the
+    instrument or artifact stands, the configurations and the noise; with the truth's own
+    seed (and the same ``rows`` and set-up ``options``) the truth file is reproduced.
+    ``units`` default to the truth file's; ``options`` are ``simulate``'s set-up options
+    (payload, temperature, readings, bar, artifact and sphere sizes, progress, force).
+    """
+    from .held_truth import read_truth
+
+    held = read_truth(path_argument(truth, "truth", what="a truth file"))
+    return simulate(held.nominal(), held.kind, out_dir=out_dir, rows=rows, noise=held.noise,
+                    seed=seed, units=units or held.units, held=held,
+                    reference_temperature=held.reference_temperature,
+                    payload_com=held.payload_com, **options)
+
+
+def _as_stated(robot: Robot, errors: Mapping[str, float], units: Units
+               ) -> tuple[Robot, dict[str, float]]:
+    """``robot`` and ``errors`` [SI] as a truth file in ``units`` states them (``snapped``)."""
+    registry = robot.parameters()
+    scale = [units.scale(q) for q in registry.quantities]
+    vector = registry.vector_of(robot)
+    stated = np.array([snapped(v, s) for v, s in zip(vector, scale)])
+    return (robot.with_parameters(stated),
+            {n: snapped(e, units.scale(registry.quantity(n))) for n, e in errors.items()})
+
+
+def _held(held: HeldTruth, nominal: Robot, kind: str, rng: np.random.Generator
+          ) -> tuple[Robot, dict[str, float], TrueEffects, bool]:
+    """The held truth's robot, errors [SI] and effects; the seed's stream advanced past
+    the random geometric errors the original run drew, so the run draws as it did."""
+    from .held_truth import true_effects_of
+
+    if held.kind != kind:
+        raise InputError(f"the truth is of kind {held.kind}, not {kind}", file=held.path,
+                         where="kind")
+    if held.errors_drawn:
+        true_parameters(nominal, (0.0, 0.0), rng)  # the same draws, values unused
+    errors = held.si(held.parameter_errors, nominal.parameters())
+    effects = _checked_effects(TrueEffects(true_effects_of(held, nominal)), kind)
+    return held.true_robot(nominal), errors, effects, held.errors_drawn
 
 
 def _simulator(kind: str) -> Callable[[Setup], Generated]:
@@ -566,7 +642,11 @@ def _simulated(out_dir: Path, truth: Truth, generated) -> SimulatedDataset:
 def _true_effects(effects: Mapping | None, nominal: Robot, kind: str):
     """The effects of the true robot (``parse_effects``), refused where ``kind``'s data
     cannot show them."""
-    true_effects = parse_effects(effects, nominal)
+    return _checked_effects(parse_effects(effects, nominal), kind)
+
+
+def _checked_effects(true_effects: TrueEffects, kind: str) -> TrueEffects:
+    """``true_effects``, refused where ``kind``'s data cannot show them."""
     for effect, _ in true_effects.entries:
         if effect.tracker_only and not instrument(kind).any_configuration:
             raise InputError(f"{effect.name} is simulated only for data taken at any "
@@ -615,31 +695,34 @@ def _truth_dict(truth: Truth, units: Units, payload_com, generated: Generated) -
     registry = truth.robot.parameters()
     true_vector = registry.vector_of(truth.robot)
 
+    # the shortest decimals that read back to the same SI values: read again (simulate
+    # --truth), the truth writes the same file
     def value(name: str, v: float) -> float:
-        return float(v) / units.scale(registry.quantity(name))
+        return exact_file_units(float(v), units.scale(registry.quantity(name)))
 
     def length3(v) -> list[float]:
-        return [float(x) / L for x in v]
+        return [exact_file_units(float(x), L) for x in v]
 
     mounted, placement = generated.truth_entries(units)
     content: dict[str, Any] = {
         "kind": truth.kind,
         "seed": truth.seed,
         "units": units.as_dict(),
-        "noise": truth.noise / L,
+        "noise": exact_file_units(truth.noise, L),
         "reference_temperature": truth.reference_temperature,
         "robot": {n: value(n, v) for n, v in zip(registry.names, true_vector)},
         "parameter_errors": {n: value(n, v) for n, v in truth.parameter_errors.items()},
         "mounted": mounted,
         "placement": placement,
         "effects": truth.effects.as_dict(),
+        "errors_drawn": truth.errors_drawn,
     }
     if payload_com is not None:
         content["payload_com"] = length3(payload_com)
     return content
 
 
-__all__ = ["SimulatedDataset", "Truth", "TrueEffects", "TrueRobot", "simulate",
+__all__ = ["SimulatedDataset", "Truth", "TrueEffects", "TrueRobot", "simulate", "simulate_again",
            "parse_effects", "true_parameters", "ray_sphere_distance"]
 
 

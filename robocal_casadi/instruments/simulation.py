@@ -18,7 +18,7 @@ import numpy as np
 
 from ..common import exact
 from ..common.progress import Progress
-from ..common.units import Units
+from ..common.units import Units, exact_file_units, snapped
 from ..errors import InputError
 from ..model.ik import random_joints
 from ..model.robot import Robot
@@ -64,6 +64,9 @@ class Setup:
     touches: int
     sphere_radius: float
     progress: bool
+    # the mounted instrument of a held truth (``simulate --truth``), name -> value [m] or unit
+    held_mounted: dict[str, np.ndarray] = field(default_factory=dict)
+    length_scale: float = 1.0  # [m] per length unit of the truth file
 
     def payload_value(self) -> float:
         if self.payload is None:
@@ -93,7 +96,17 @@ class Setup:
         return RandomRun(Q_read, payloads, temperatures, Q_true, poses)
 
     def mounted(self, nominal) -> np.ndarray:
-        return np.asarray(nominal, dtype=float) + self.rng.normal(0.0, self.mounted_error, 3)
+        """The true mounted point [m]: ``nominal`` plus a random error, as the truth file
+        will state it (``snapped`` to its length unit)."""
+        drawn = np.asarray(nominal, dtype=float) + self.rng.normal(0.0, self.mounted_error, 3)
+        return np.array([snapped(v, self.length_scale) for v in drawn])
+
+    def keep(self, name: str, drawn: np.ndarray) -> np.ndarray:
+        """The true mounted value ``name`` of a held truth (``simulate --truth``), else
+        ``drawn``. Drawn either way, so the random stream runs as in the original run."""
+        if name in self.held_mounted:
+            return np.asarray(self.held_mounted[name], dtype=float).copy()
+        return drawn
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint limits shrunk by 1e-6 of the range: readings after effects stay inside."""
@@ -172,8 +185,9 @@ class Generated:
 
 
 def in_units(units: Units, xyz) -> list[float]:
-    """A position [m] as a list in ``units``."""
-    return [float(v) / units.length_scale for v in xyz]
+    """A position [m] as a list in ``units``, each the shortest decimal that reads back to
+    the same metres (a truth file read again gives the same truth)."""
+    return [exact_file_units(float(v), units.length_scale) for v in xyz]
 
 
 def run_extras(payloads: list[float], temperatures: list, setup: Setup) -> dict[str, np.ndarray]:

@@ -76,6 +76,7 @@ class JobOptions:
     effects: Sequence = ()
     parameters: Sequence[str] | str | None = None
     fleet_prior: PopulationPrior | None = None  # in place of the tolerance prior
+    notes: tuple[str, ...] = ()  # what a reader must know about the inputs (result.json)
 
     def calibrate_options(self) -> dict:
         return dict(diagnose=self.diagnose, method=self.method, loss=self.loss,
@@ -136,6 +137,8 @@ def calibrate_job(datasets: Sequence, validation: Sequence = (),
                             **options.calibrate_options())
     else:
         result = _profiled(datasets, validation, options)
+    if options.notes:
+        result = replace(result, notes=tuple(options.notes) + tuple(result.notes))
     return deliver(result, datasets, validation)
 
 

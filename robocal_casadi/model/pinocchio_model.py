@@ -39,6 +39,12 @@ from .robot import Robot
 from .transforms import product, rot_x, rot_y, rot_z, rpy_from_matrix, translation
 
 LIMITLESS = 1.0e3  # [rad] or [m]: URDF limits written for a joint the robot file leaves unlimited
+# URDF requires a joint's effort [N m or N] and velocity [rad/s or m/s] limits, which a robot
+# file does not give: these stand-ins constrain nothing (the file says so in a comment).
+UNRATED = 1.0e6
+# [kg/m^3] aluminium alloy, the usual material of an arm's castings: the density of the solid
+# sphere whose rotational inertia stands in for a link's where the robot file gives only a mass.
+LINK_DENSITY = 2700.0
 
 
 def link_parts(robot: Robot) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -190,14 +196,31 @@ def _origin(T: np.ndarray) -> str:
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
+def sphere_moment(mass: float) -> float:
+    """[kg m^2] The moment of inertia ``2/5 m r^2`` about any axis through the centre of a
+    solid sphere of ``mass`` [kg] and density ``LINK_DENSITY``: a positive-definite tensor
+    that satisfies the triangle inequalities, where the robot file gives no inertia."""
+    radius = (3.0 * mass / (4.0 * np.pi * LINK_DENSITY)) ** (1.0 / 3.0)
+    return 0.4 * mass * radius**2
+
+
 def urdf_text(robot: Robot) -> str:
     """URDF of ``robot``: DH frames as links, ``A_i`` as joint origins, ``B_i`` as fixed joints.
 
     Links ``world``, ``frame_0`` (base), ``link_i`` (joint i's moving frame), ``frame_i``
-    (DH frame i, carrying the link's point mass at ``com``), ``tool``. Lengths [m],
-    angles [rad]. URDF has no gravity: ``robot.gravity`` is not exported.
+    (DH frame i, carrying the link's ``mass`` at ``com`` as the robot file gives them, with
+    the rotational inertia of a solid aluminium sphere of that mass, ``sphere_moment``,
+    since the robot file gives none), ``tool``. Lengths [m], angles [rad], masses [kg],
+    inertias [kg m^2]. Effort and velocity limits, which URDF requires and the robot file
+    does not give, are ``UNRATED`` stand-ins. URDF has no gravity: ``robot.gravity`` is not
+    exported.
     """
     lines = ['<?xml version="1.0"?>', f"<robot name={quoteattr(robot.name)}>",
+             "  <!-- Written by robocal from a robot file. Each link's mass [kg] and centre of "
+             "mass are the robot file's; its rotational inertia is that of a solid aluminium "
+             f"sphere of the same mass ({LINK_DENSITY:g} kg/m^3), as the robot file gives none. "
+             f"Joint effort and velocity limits ({UNRATED:g}) are stand-ins that constrain "
+             "nothing: the robot file gives no ratings. -->",
              '  <link name="world"/>', '  <link name="frame_0"/>',
              '  <joint name="base_joint" type="fixed"><parent link="world"/><child link="frame_0"/>'
              f"{_origin(robot.base.matrix())}</joint>"]
@@ -208,14 +231,17 @@ def urdf_text(robot: Robot) -> str:
         lines.append(
             f'  <joint name="joint_{i}" type="{joint.type}"><parent link="frame_{i - 1}"/>'
             f'<child link="link_{i}"/>{_origin(A)}<axis xyz="0 0 1"/>'
-            f'<limit lower="{lower!r}" upper="{upper!r}" effort="1e6" velocity="1e6"/></joint>')
+            f'<limit lower="{lower!r}" upper="{upper!r}" effort="{UNRATED!r}" '
+            f'velocity="{UNRATED!r}"/></joint>')
         if joint.mass is not None and joint.mass > 0:
             com = (0.0, 0.0, 0.0) if joint.com is None else joint.com
             xyz = " ".join(repr(float(v)) for v in com)
+            moment = repr(sphere_moment(float(joint.mass)))
             lines.append(
                 f'  <link name="frame_{i}"><inertial><origin xyz="{xyz}" rpy="0 0 0"/>'
                 f'<mass value="{float(joint.mass)!r}"/>'
-                '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>')
+                f'<inertia ixx="{moment}" ixy="0" ixz="0" iyy="{moment}" iyz="0" '
+                f'izz="{moment}"/></inertial></link>')
         else:
             lines.append(f'  <link name="frame_{i}"/>')
         lines.append(f'  <joint name="dh_{i}" type="fixed"><parent link="link_{i}"/>'

@@ -42,7 +42,7 @@ from ..common.fields import (
     require,
     vector,
 )
-from ..common.units import SI, Units, units_of
+from ..common.units import SI, Units, to_file_units, units_of
 from ..errors import InputError
 from .parameters import ParameterRegistry
 from .transforms import pose_from_xyz_rpy
@@ -544,22 +544,6 @@ def _frame_from_dict(raw: Any, units: Units, *, file, where: str) -> Frame:
 
 
 # ----------------------------------------------------------------------------- writing
-
-
-def to_file_units(value: float, scale: float) -> float:
-    """``value / scale`` as the shortest decimal that converts back to exactly ``value``.
-
-    A file written in mm or deg then reads back to the same SI floats, and a value the
-    user typed (``7.25``) is written as typed, not as ``7.250000000000001``.
-    """
-    if scale == 1.0:
-        return float(value)
-    plain = value / scale
-    for digits in range(1, 18):
-        candidate = float(f"{plain:.{digits}g}")
-        if candidate * scale == value:
-            return candidate
-    return plain
 
 
 def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:

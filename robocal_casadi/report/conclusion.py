@@ -9,7 +9,7 @@ that did not converge).
 
 from __future__ import annotations
 
-from ..results import CalibrationResult
+from ..results import HELD_OUT_DECIDE, CalibrationResult
 from .accuracy import recommended
 from .effect_views import effect_title
 from .numbers import ErrorStats, error_noun, format_number, pooled
@@ -27,7 +27,7 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     result's ``recommended`` is ``"geometric"``), that comes first.
     """
     held_out = result.validation is not None
-    summary = result.validation if result.validation is not None else result.fit
+    summary = _headline_figures(result)
     paragraphs = _opening(result)
     predicted = _predicted_paragraph(result)
     if predicted:
@@ -62,22 +62,39 @@ def _length(value_si: float) -> str:
     return f"{format_number(value_si / 1e-3, 3)} mm"
 
 
+def _headline_figures(result: CalibrationResult):
+    """The RMS figures the conclusion leads with: held-out data over every reading (the
+    customer's evidence, gross errors included), else the fit."""
+    if result.validation is None:
+        return result.fit
+    return result.validation_all or result.validation
+
+
 def _opening(result: CalibrationResult) -> list[str]:
     """The headline (error before and after), preceded by what not to load when the
-    effects or the whole calibration should not be used."""
+    effects or the whole calibration should not be used. On held-out data the headline
+    covers every reading; the figure without readings set aside as gross errors follows,
+    with their count."""
     held_out = result.validation is not None
-    summary = result.validation if result.validation is not None else result.fit
+    summary = _headline_figures(result)
     residuals = result.validation_residuals if held_out else result.residuals
     noun = error_noun(residuals) if residuals else "error"
-    where = "on held-out data" if held_out else "on the data used for fitting"
+    aside = result.held_out_set_aside if held_out else 0
+    where = ("on the data used for fitting" if not held_out else
+             "on every held-out reading" if aside else "on held-out data")
     verb = "fell" if summary.rms_final < summary.rms_nominal else "rose"
     headline = (f"After calibration the {noun} {where} {verb} from {_length(summary.rms_nominal)} "
                 f"to {_length(summary.rms_final)} RMS")
+    if aside and result.validation is not None:
+        headline += (f"; without the {aside} held-out reading{'s' if aside > 1 else ''} set "
+                     f"aside as gross errors, from {_length(result.validation.rms_nominal)} to "
+                     f"{_length(result.validation.rms_final)}")
     if residuals:
         before = ErrorStats.of(pooled(residuals, "nominal"))
         after = ErrorStats.of(pooled(residuals, "final"))
+        kept = " kept" if aside else ""
         headline += (f" (99th percentile from {_length(before.p99)} to {_length(after.p99)}, "
-                     f"over {after.count} measurements)")
+                     f"over {after.count}{kept} measurements)")
     paragraphs = [headline + "."]
     if result.effects and recommended(result) == "geometric":
         worse = ""
@@ -87,7 +104,8 @@ def _opening(result: CalibrationResult) -> list[str]:
         paragraphs.insert(0, f"Use the geometric calibration alone: on held-out data the "
                              f"model with the effects diagnosis found predicts worse than "
                              f"the geometry without them{worse}. robot_calibrated.yaml "
-                             f"carries that geometry; do not apply the effects.")
+                             f"carries that geometry; do not apply the effects. "
+                             f"{HELD_OUT_DECIDE}.")
         paragraphs[1] = paragraphs[1].replace(
             f"to {_length(summary.rms_final)} RMS",
             f"to {_length(summary.rms_final)} RMS with the effects, "

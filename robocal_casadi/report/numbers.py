@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..common.units import Units
+from ..common.units import Units, display_units  # noqa: F401  (the report imports it from here)
 from ..instruments import INSTRUMENTS
 from ..model.robot import Robot
 from ..results import DatasetResiduals
@@ -129,12 +129,6 @@ def quantity_of_placement(name: str) -> str:
     if last in ("nx", "ny", "nz") or "direction" in name.lower():
         return "none"
     return "length"
-
-
-def display_units(units: Units) -> Units:
-    """The units the report shows: lengths in mm whatever the file uses (errors and
-    corrections are millimetre-sized), angles in the file's angle unit."""
-    return Units("mm", units.angle)
 
 
 def format_at_resolution(value: float, resolution: float, *, sign: bool = False) -> str:

@@ -598,12 +598,15 @@ def _effect_parameters(result: CalibrationResult, effect) -> Table:
     for model, _ in effect_models_of(result, effect):
         order += [n for n in model.parameter_names() if n in effect.parameters]
     names = order + [n for n in effect.parameters if n not in order]
-    scale, unit = 1.0, effect.unit
-    if effect.unit == "rad" and result.units.angle != "rad":
-        scale, unit = result.units.angle_scale, result.units.angle
-    rows = tuple((name, format_number(effect.parameters[name] / scale, 4),
+    def shown(name: str) -> tuple[float, str]:
+        unit = effect.unit_of(name)  # a lumped term has its own (rad kg/Nm, not rad/Nm)
+        if unit == "rad" and result.units.angle != "rad":
+            return result.units.angle_scale, result.units.angle
+        return 1.0, unit
+
+    rows = tuple((name, format_number(effect.parameters[name] / shown(name)[0], 4),
                   format_number(None if effect.std.get(name) is None
-                                else effect.std[name] / scale, 3), unit)
+                                else effect.std[name] / shown(name)[0], 3), shown(name)[1])
                  for name in names)
     return Table(f"effect-{effect.name}", f"{effect_title(effect.name)}: fitted parameters "
                  f"({effect.name} in result.json)",
@@ -615,8 +618,8 @@ DIAGNOSIS_SHOWN = 5  # rejected candidates shown in the main text, strongest fir
 DIAGNOSIS_HEADERS = {
     "round": "round", "effect": "effect", "joints": "joints", "parameters": "parameters",
     "held": "held at zero", "remaining_norm": "independence",
-    "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "held-out RMS before",
-    "cv_rms_after": "held-out RMS with it", "decision": "decision",
+    "rss_drop": "RSS drop", "bic_drop": "BIC drop", "cv_rms_before": "fold RMS before",
+    "cv_rms_after": "fold RMS with it", "decision": "decision",
     "estimate": "estimate (SI units, as in result.json)",
     "extrapolation": "held-out squared error with it / without it, extrapolating folds",
     "worst_region": "extrapolating split it helps least",
@@ -654,8 +657,10 @@ def diagnosis_blocks(diagnosis: tuple[DiagnosisRecord, ...], units: Units) -> li
                                     caption="Candidates added and the strongest rejected"),
                     Paragraph("RSS drop: relative fall of the sum of squared errors with the "
                               "candidate; BIC drop: that fall weighed against the parameters "
-                              "it adds (positive favours the candidate); held-out RMS: "
-                              "cross-validated RMS of the errors before and with it; "
+                              "it adds (positive favours the candidate); fold RMS: "
+                              "cross-validated RMS of the fit data's errors before and with "
+                              "it (folds of the fit readings held out in turn; the held-out "
+                              "data set, where given, is a separate test and decides); "
                               "independence: 1 when the candidate acts unlike "
                               "any geometric parameter, 0 when the geometry already absorbs "
                               "it.", "note")]
@@ -778,10 +783,10 @@ def _values_table(name: str, caption: str, entries: Sequence[tuple[str, float, f
 EVIDENCE_TITLES = {
     "rms_drop": "fall of the RMS on the fit data",
     "bic_drop": "BIC drop (positive favours the effect)",
-    "cv_rms_before": "held-out RMS without it",
-    "cv_rms_after": "held-out RMS with it",
+    "cv_rms_before": "fold RMS of the fit data without it (cross-validated)",
+    "cv_rms_after": "fold RMS of the fit data with it (cross-validated)",
     "fit_rms_without": "fit RMS without it",
-    "extrapolation": "held-out squared error with / without it, extrapolating folds",
+    "extrapolation": "fold squared error with / without it, extrapolating folds",
     "length_scale": "length scale, of the trained span",
     "smoothing": "smoothing (against the kernel's unit diagonal)",
 }

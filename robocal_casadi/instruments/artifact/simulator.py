@@ -39,7 +39,7 @@ def touches(setup: Setup, cross: bool) -> Generated:
     """The cross bar (``cross``: four sockets A, C and B, D at the ends of two arms of
     ``setup.bar_length``, touched once each) or an artifact: place it, seat the probe in
     each socket."""
-    probe = setup.mounted(DEFAULT_PROBE)
+    probe = setup.keep("probe", setup.mounted(DEFAULT_PROBE))
     names, local, distances, _ = _socket_layout(setup, cross)
     per_socket = 1 if cross else max(1, setup.touches)
     ik = inverse_kinematics(setup.world.kinematics, "point")

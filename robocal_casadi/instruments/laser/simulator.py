@@ -53,9 +53,9 @@ def simulate(setup: Setup) -> Generated:
     """A laser on the flange scanning a sphere placed where its beam points."""
     rng, world, robot = setup.rng, setup.world, setup.nominal
     radius = float(setup.sphere_radius)
-    origin = setup.mounted(DEFAULT_LASER_ORIGIN)
+    origin = setup.keep("laser_origin", setup.mounted(DEFAULT_LASER_ORIGIN))
     direction = exact.matmul(np.asarray(DEFAULT_LASER_DIRECTION), tilt(rng, 2 * setup.angle_std).T)
-    direction = direction / exact.norm(direction)
+    direction = setup.keep("laser_direction", direction / exact.norm(direction))
     ik = inverse_kinematics(world.kinematics, "flange_pose")
     bounds = setup.bounds()
     standoff = (0.08, 0.2)  # [m] laser distances

@@ -17,7 +17,7 @@ DEFAULT_TARGET = (0.0, 0.0, 0.10)  # [m]
 
 def simulate(setup: Setup) -> Generated:
     rng, world = setup.rng, setup.world
-    target = setup.mounted(DEFAULT_TARGET)
+    target = setup.keep("target", setup.mounted(DEFAULT_TARGET))
     yaw = rng.uniform(-math.pi, math.pi)
     direction = rng.uniform(-math.pi, math.pi)
     T_world_instrument = pose_from_xyz_rpy(
