@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from robocal_casadi.common import exact
 from robocal_casadi.instruments import instrument
 
 from .reach import Workspace
@@ -86,7 +87,8 @@ def tool_weights(setup: PlanSetup, workspace: Workspace, parameters: tuple[str, 
         columns.append(J_offset)  # probe, reflector or laser origin x, y, z
     if len(mounted) == 5:  # the laser's two beam directions: the spot moves by R t_k
         rotations = kin.flange_poses(Q, workspace.p)[:, :3, :3]
-        columns.append(np.stack([rotations @ t1, rotations @ t2], axis=2))
+        columns.append(np.stack([exact.matmul(rotations, t1), exact.matmul(rotations, t2)],
+                                axis=2))
     J = np.concatenate(columns, axis=2)  # N x 3 x parameters
     if J.shape[2] != len(parameters):
         raise ValueError(f"tool Jacobian has {J.shape[2]} columns for {len(parameters)} "
@@ -94,7 +96,9 @@ def tool_weights(setup: PlanSetup, workspace: Workspace, parameters: tuple[str, 
     J = J.reshape(-1, J.shape[2])
     if not rigid_motion:
         J = without_rigid_motion(J, kin.points(Q, offset, workspace.p))
-    return J.T @ J / len(Q)
+    # common.exact: the planner's search and refinement start from these weights, and
+    # must not start from processor-dependent last bits
+    return exact.gram(J) / len(Q)
 
 
 def without_rigid_motion(J: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -110,9 +114,7 @@ def without_rigid_motion(J: np.ndarray, points: np.ndarray) -> np.ndarray:
     rigid[:, 0, 4], rigid[:, 0, 5] = z, -y
     rigid[:, 1, 3], rigid[:, 1, 5] = -z, x
     rigid[:, 2, 3], rigid[:, 2, 4] = y, -x
-    U, s, _ = np.linalg.svd(rigid.reshape(-1, 6), full_matrices=False)
-    U = U[:, s > 1e-12 * s.max()]
-    return J - U @ (U.T @ J)
+    return exact.project_out(J, rigid.reshape(-1, 6), 1e-12)
 
 
 def tool_transform(weights: np.ndarray) -> np.ndarray:
@@ -120,8 +122,7 @@ def tool_transform(weights: np.ndarray) -> np.ndarray:
     invertible: its error then counts as nothing, not as infinite)."""
     W = np.asarray(weights, float)
     ridge = 1e-12 * max(np.trace(W) / len(W), 1e-300)
-    L = np.linalg.cholesky(W + ridge * np.eye(len(W)))
-    return np.linalg.inv(L)
+    return exact.lower_inverse(exact.cholesky(W + ridge * np.eye(len(W))))
 
 
 def tool_error(spectrum_tool: np.ndarray, noise: float) -> float:

@@ -26,6 +26,7 @@ from robocal_casadi.instruments.datasets import Dataset
 from .accuracy import tool_error, tool_weights
 from .approximate import optimal_approximate
 from .candidates import Candidate, generate
+from .compare import clearly_greater
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling, score
 from .information import EXACT_TOLERANCE, Information, exact_condition
 from .order import Travel, order_candidates
@@ -170,11 +171,13 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ArgumentError(f"expected a whole number >= 1, got {count!r}", argument="count")
     setup, kinematics, workspace = runnable_setup(setup_from_dataset(dataset))
-    rng = np.random.default_rng(seed)
+    # one stream draws the candidates, another the search's starts and the random plans:
+    # how many draws finding the candidates took does not move the search's
+    draws, rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     size = pool or pool_size_for(count, setup.kind)
     stream = io.StringIO() if quiet else None  # Progress stays silent on a non-terminal
     with Progress("plan: candidates", total=size, stream=stream) as progress:
-        candidates = generate(setup, workspace, size, rng, progress)
+        candidates = generate(setup, workspace, size, draws, progress)
     if len(candidates) < count:
         raise InputError(f"only {len(candidates)} feasible candidates found; ask for at most "
                          f"that many (--count {count})", file=setup.path)
@@ -235,7 +238,7 @@ def _best_exchange(info: Information, pool: int, count: int, index: str,
             initial = list(rng.choice(pool, size=count, replace=False))
         chosen, swaps = exchange(info, initial, index, progress=progress, start=start + 1)
         value = score(index, index_value(index, info.spectrum(chosen, scaling(index))))
-        if best is None or value > best[0]:
+        if best is None or clearly_greater(value, best[0]):
             best = (value, chosen, swaps)
     assert best is not None  # both start counts are positive
     return best[1], best[2]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from robocal_casadi.calibration.identifiability import EXACT_TOLERANCE, analyse
+from robocal_casadi.common import exact
 
 from .accuracy import tool_transform
 from .rows import Block
@@ -36,7 +37,9 @@ class Information:
         self.parameters = parameters
         self.shared = shared
         n_par = len(parameters)
-        full = np.array([b.X.T @ b.X for b in blocks])  # C x n x n
+        # common.exact (rows summed in order): the search's choices and the refinement
+        # start from these sums
+        full = np.array([exact.gram(b.X) for b in blocks])  # C x n x n
         X = np.vstack([b.X for b in blocks])
         # Touches reach their sockets to the IK tolerance (1e-9 m) only, so a column that
         # the local socket unknowns absorb keeps a remainder of that order: treat columns
@@ -56,7 +59,7 @@ class Information:
         self.blocks = [b.X[:, keep] for b in blocks]
         self.matrices = full[:, keep][:, :, keep]
         self.m = len(self.identifiable)
-        pool = _schur(self.matrices.sum(axis=0)[None], self.m, shared)[0]
+        pool = _schur_exact(self.matrices.sum(axis=0), self.m, shared)
         self.reference = np.sqrt(np.clip(np.diag(pool), 1e-300, None) / len(blocks))
         """Fixed column scales: RMS column norm per candidate over the pool."""
         self.tool_weights = None
@@ -136,6 +139,16 @@ def _schur(A: np.ndarray, m: int, shared: int) -> np.ndarray:
     App, Aps, Ass = A[:, :m, :m], A[:, :m, m:], A[:, m:, m:]
     ridge = 1e-12 * np.einsum("bii->b", Ass)[:, None, None] * np.eye(shared) + 1e-300
     return App - Aps @ np.linalg.solve(Ass + ridge, np.swapaxes(Aps, 1, 2))
+
+
+def _schur_exact(A: np.ndarray, m: int, shared: int) -> np.ndarray:
+    """``_schur`` of one matrix on ``common.exact`` (the same bits on every processor)."""
+    if shared == 0:
+        return A[:m, :m].copy()
+    App, Aps, Ass = A[:m, :m], A[:m, m:], A[m:, m:]
+    ridge = 1e-12 * np.trace(Ass) * np.eye(shared) + 1e-300
+    columns = [exact.solve(Ass + ridge, Aps[i]) for i in range(m)]  # rows of Ass^-1 A_sp^T
+    return App - exact.matmul(Aps, np.array(columns).T)
 
 
 def _project_shared(J: np.ndarray, S: np.ndarray) -> np.ndarray:

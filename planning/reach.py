@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from robocal_casadi.common import exact
 from robocal_casadi.model.kinematics import Kinematics
 
 CHUNK = 64  # targets solved together (one mapped CasADi call)
@@ -159,7 +160,7 @@ class Workspace:
                 # Direction error scaled by 0.1 m so that 1 rad weighs like 0.1 m.
                 e = np.concatenate([e, 0.1 * (_pad(directions) - d)], axis=1)
                 J = np.concatenate([Jo, 0.1 * Jd], axis=1)
-            error = np.linalg.norm(e, axis=1)
+            error = exact.norm(e, axis=1)
             active = error[:k] >= self.tolerance * 1e-2
             if not active.any():
                 break
@@ -167,16 +168,18 @@ class Workspace:
             if iteration >= 15 and np.all(progress[active] < 1e-2):
                 break  # the rest are stuck (unreachable from their seeds)
             previous = error
-            JJt = J @ J.transpose(0, 2, 1) + damping * np.eye(J.shape[1])
-            weights = np.linalg.solve(JJt, e[..., None])[..., 0]
-            step = np.einsum("nij,nj->ni", J.transpose(0, 2, 1), weights)
+            # common.exact, not BLAS: whether a target counts as reached decides which
+            # candidates exist, and must not depend on the processor
+            JJt = exact.matmul(J, J.transpose(0, 2, 1)) + damping * np.eye(J.shape[1])
+            weights = exact.solve_stack(JJt, e)
+            step = (J * weights[:, :, None]).sum(axis=1)  # J^T w, summed in order
             largest = np.max(np.abs(step), axis=1, keepdims=True)
             step *= np.minimum(1.0, 0.5 / np.maximum(largest, 1e-300))
             Q = np.clip(Q + step, lo, hi)
         o, d, _, _ = self._evaluate(Q, origin, axis)
-        error = np.linalg.norm(_pad(targets) - o, axis=1)
+        error = exact.norm(_pad(targets) - o, axis=1)
         if directions is not None:
-            error = np.maximum(error, 0.1 * np.linalg.norm(_pad(directions) - d, axis=1))
+            error = np.maximum(error, 0.1 * exact.norm(_pad(directions) - d, axis=1))
         return Q[:k], error[:k]
 
 

@@ -40,7 +40,8 @@ from robocal_casadi.instruments.planning import MARGIN
 
 from .best_iterate import BestFeasible
 from .candidates import Candidate
-from .indices import better, index_value, scaling
+from .compare import clearly_greater
+from .indices import index_value, scaling, score
 from .information import Information
 from .reach import Workspace
 from .rows import RowModel
@@ -65,7 +66,9 @@ def refine_plan(setup, workspace: Workspace, row_model: RowModel, info: Informat
     if refined is None:
         return None
     spectrum = info.spectrum_of([info.restrict(b) for b in row_model.blocks(refined)], mode)
-    if not better(index, index_value(index, spectrum), before):
+    # better by more than rounding: a refinement that gains nothing must not be kept on
+    # one processor and dropped on another
+    if not clearly_greater(score(index, index_value(index, spectrum)), score(index, before)):
         return None
     return tuple(refined), spectrum
 

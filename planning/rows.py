@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from robocal_casadi.common import exact
 from robocal_casadi.instruments import MeasurementModel
 from robocal_casadi.model.kinematics import Kinematics
 
@@ -40,12 +41,11 @@ class Block:
 
 
 def _project_out(G: np.ndarray, L: np.ndarray) -> np.ndarray:
-    """``G`` with its component in the column space of ``L`` removed."""
+    """``G`` with its component in the column space of ``L`` removed (``common.exact``:
+    every later choice of the planner is made on these rows)."""
     if L.shape[1] == 0:
         return G
-    U, s, _ = np.linalg.svd(L, full_matrices=False)
-    U = U[:, s > 1e-12 * max(s.max(), 1e-300)]
-    return G - U @ (U.T @ G)
+    return exact.project_out(G, L, 1e-12)
 
 
 class RowModel:

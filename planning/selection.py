@@ -4,17 +4,20 @@ Greedy: add, one at a time, the candidate that most increases ``log det`` of the
 (pool-scaled, slightly regularised) information, which is defined even while the design
 is still too small to identify everything. Exchange: for each chosen candidate in turn,
 try every unchosen one in its place and keep the swap that most improves the user's
-index; repeat passes until none improves it.
+index; repeat passes until none improves it. Values that agree within rounding count as
+equal (``compare``): the first candidate wins, and a swap must gain more than that.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .compare import clearly_greater, first_best
 from .indices import index_value, scaling, score
 from .information import Information
 
 GREEDY_RIDGE = 1e-6
+LOG_DET_EQUAL = 1e-8  # log det values closer than this count as equal
 
 
 def greedy(info: Information, count: int, rng: np.random.Generator) -> list[int]:
@@ -32,7 +35,7 @@ def greedy(info: Information, count: int, rng: np.random.Generator) -> list[int]
         sign, logdet = np.linalg.slogdet(trial)
         logdet = np.where(sign > 0, logdet, -np.inf)
         logdet[chosen] = -np.inf
-        best = int(np.argmax(logdet))
+        best = first_best(logdet, 0.0, LOG_DET_EQUAL)
         chosen.append(best)
         current += As[best]
     return chosen
@@ -61,8 +64,8 @@ def exchange(info: Information, chosen: list[int], index: str, *, max_passes: in
             others = np.setdiff1d(np.arange(len(A)), chosen)
             trial = np.array([score(index, v)
                               for v in values(info, index, base[None] + A[others])])
-            best = int(np.argmax(trial))
-            if trial[best] > current + 1e-12 * max(abs(current), 1.0):
+            best = first_best(trial)
+            if clearly_greater(trial[best], current):
                 chosen[position] = int(others[best])
                 total = base + A[chosen[position]]
                 current = trial[best]

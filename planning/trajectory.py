@@ -50,6 +50,7 @@ import numpy as np
 from scipy import sparse
 from scipy.interpolate import BSpline
 
+from robocal_casadi.common import exact
 from robocal_casadi.common.progress import Progress
 from robocal_casadi.errors import ArgumentError, InputError
 from robocal_casadi.instruments import instrument
@@ -60,6 +61,7 @@ from .accuracy import tool_error, tool_weights
 from .best_iterate import BestFeasible
 from .candidates import generate
 from .collision import Body
+from .compare import clearly_greater
 from .indices import DEFAULT_INDEX, DESCRIPTIONS, canonical, index_value, scaling
 from .information import Information
 from .rows import Block, RowModel
@@ -75,6 +77,8 @@ MIN_SAMPLES = 20
 ANGLE_MARGIN = np.radians(1.0)  # [rad] kept inside the incidence limit by the solver
 RANGE_MARGIN = 0.01  # share of the laser's range kept inside its ends by the solver
 CENTRES = 4  # pool poses tried as the centre of the start sweep
+SINGULAR = 1e-10  # relative singular value below which a start path identifies nothing there
+LOG_DET_EQUAL = 1e-8  # start sweeps' log det values closer than this count as equal
 WAYPOINTS = 12  # poses of the start sweep (fewer when the joint speed does not allow)
 CAP = np.radians(35.0)  # [rad] hit normals of the start sweep, from the centre's
 KNOTS_PER_SECOND = 4.0  # spline control points per second of scan (plus 6)
@@ -182,7 +186,7 @@ class ScanRows:
         p = kin.nominal
         q = ca.SX.sym("q", kin.dof)
         T = kin.flange_pose(q, p)
-        axis = setup.axis / np.linalg.norm(setup.axis)
+        axis = setup.axis / exact.norm(setup.axis)
         o = T[:3, :3] @ setup.offset + T[:3, 3]
         d = T[:3, :3] @ axis
         if setup.centre is None:
@@ -234,12 +238,15 @@ def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
                     sensor_only=setup.sensor_only if sensor_only is None else sensor_only)
     setup, kinematics, workspace = runnable_setup(setup)
     setup = replace(setup, table_height=workspace.table_height)
-    rng = np.random.default_rng(seed)
+    # the pool, the tool weights' workspace samples and the start's centres draw from
+    # streams of their own: how many draws one took does not move the others'
+    draws, samples, rng = (np.random.default_rng(s)
+                           for s in np.random.SeedSequence(seed).spawn(3))
     stream = io.StringIO() if quiet else None
     with Progress("plan: laser poses", total=POOL, stream=stream) as progress:
-        pool = generate(setup, workspace, POOL, rng, progress)
+        pool = generate(setup, workspace, POOL, draws, progress)
     row_model = RowModel(setup, kinematics)
-    info, columns = _information(setup, workspace, row_model, pool, rng)
+    info, columns = _information(setup, workspace, row_model, pool, samples)
     duration = (count - 1) / setup.laser_rate
     times = np.arange(count) / setup.laser_rate
     rows = ScanRows(setup, kinematics, row_model, columns, workspace.body)
@@ -249,7 +256,7 @@ def design_scan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
         Q, status = _solve(setup, workspace, rows, info, index, times, duration, start_path,
                            max_iterations)
     seconds = time.perf_counter() - started
-    start_value = _index_of(info, index, rows.evaluate(start_path)[0])
+    start_value = _index_of(info, index, rows.evaluate(start_path)[0], SINGULAR)
     problems = _problems(setup, workspace, rows, Q, times)
     if problems:
         problems_start = _problems(setup, workspace, rows, start_path, times)
@@ -287,8 +294,12 @@ def _information(setup, workspace, row_model, pool, rng):
     return info, keep[info.columns]
 
 
-def _index_of(info, index, g) -> float:
-    return index_value(index, info.spectrum_of([g], scaling(index)))
+def _index_of(info, index, g, singular: float = 0.0) -> float:
+    """Index ``index`` of rows ``g``; singular values at most ``singular`` times the
+    largest count as zero (the index's worst value): below that they are rounding, and
+    the number they would give differs from one processor to the next."""
+    s = info.spectrum_of([g], scaling(index))
+    return index_value(index, np.where(s <= singular * s.max(), 0.0, s))
 
 
 def _laser_errors(info, g, noise) -> np.ndarray:
@@ -329,10 +340,11 @@ def _start_path(setup, workspace, rows, info, pool, times, rng):
         if len(Q) < 2:
             continue
         g = rows.evaluate(Q)[0]
-        A = g.T @ g
+        A = exact.gram(g)
         ridge = 1e-9 * np.trace(A) / len(A) * np.eye(len(A))
         score = np.linalg.slogdet(A + ridge)[1]
-        if best is None or score > best[0]:
+        # sweeps whose log det agree within rounding: the first is kept
+        if best is None or clearly_greater(score, best[0], 0.0, LOG_DET_EQUAL):
             best = (score, Q)
     if best is None:
         raise InputError("no sweep of the beam over the sphere is reachable from the planned "
@@ -355,9 +367,9 @@ def _local_waypoints(setup, workspace, q0, budget):
     kept while the total largest joint move stays within ``budget`` [rad]."""
     d0, n0, _ = _beam(setup, workspace, q0)
     helper = np.array([1.0, 0, 0]) if abs(n0[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(n0, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(n0, u)
+    u = exact.cross(n0, helper)
+    u /= exact.norm(u)
+    v = exact.cross(n0, u)
     lo, hi = setup.laser_range
     tilt = 0.7 * setup.max_incidence
     out = [q0]
@@ -366,8 +378,8 @@ def _local_waypoints(setup, workspace, q0, budget):
         phi = 2 * np.pi * k / WAYPOINTS
         side = np.cos(phi) * u + np.sin(phi) * v
         normal = np.cos(CAP) * n0 + np.sin(CAP) * side
-        across = np.cross(normal, side)
-        across /= np.linalg.norm(across)
+        across = exact.cross(normal, side)
+        across /= exact.norm(across)
         lean = tilt * (1 if k % 2 else -1)
         beam = -(np.cos(lean) * normal + np.sin(lean) * across)
         reading = lo + (0.3 if k % 2 else 0.7) * (hi - lo)
@@ -391,18 +403,18 @@ def _local_waypoints(setup, workspace, q0, budget):
 def _beam(setup, workspace, q):
     """Laser origin, beam direction, hit normal and stand-off of joints ``q``."""
     T = workspace.kinematics.flange_poses(q[None], workspace.p)[0]
-    o = T[:3, :3] @ setup.offset + T[:3, 3]
-    d = T[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
+    o = exact.matmul(T[:3, :3], setup.offset) + T[:3, 3]
+    d = exact.matmul(T[:3, :3], setup.axis / exact.norm(setup.axis))
     v = o - setup.centre
-    b = d @ v
-    disc = max(b * b - (v @ v - setup.radius**2), 0.0)
+    b = exact.dot(d, v)
+    disc = max(b * b - (exact.dot(v, v) - setup.radius**2), 0.0)
     reading = -b - math.sqrt(disc)
     normal = (o + reading * d - setup.centre) / setup.radius
-    return d, normal / np.linalg.norm(normal), reading
+    return d, normal / exact.norm(normal), reading
 
 
 def _slerp(a, b, s):
-    angle = math.acos(float(np.clip(a @ b, -1.0, 1.0)))
+    angle = math.acos(float(np.clip(exact.dot(a, b), -1.0, 1.0)))
     if angle < 1e-9:
         return a
     return (math.sin((1 - s) * angle) * a + math.sin(s * angle) * b) / math.sin(angle)
@@ -466,12 +478,12 @@ def _solve(setup, workspace, rows, info, index, times, duration, start, max_iter
         problem = _ScanProblem(setup, rows, info, index, B, grid, knots, lower, upper,
                                max_iterations)
         C, status = problem.solve(C)
-        broken = np.flatnonzero(_broken(setup, rows, B @ C))
+        broken = np.flatnonzero(_broken(setup, rows, exact.matmul(B, C)))
         missing = np.setdiff1d(broken, grid)
         if not missing.size:
             break
         grid = np.union1d(grid, missing)
-    return B @ C, status
+    return exact.matmul(B, C), status
 
 
 def _broken(setup, rows, Q) -> np.ndarray:
@@ -503,7 +515,7 @@ def _fit(setup, rows, B, knots, path, lower, upper) -> np.ndarray:
     solver = ca.nlpsol("scan_fit", "ipopt", nlp,
                        {"print_time": False,
                         "ipopt": {**IPOPT, "tol": 1e-8, "max_iter": FIT_ITERATIONS}})
-    first, *_ = np.linalg.lstsq(B, path, rcond=None)
+    first = _least_squares(B, path)
     result = solver(x0=np.clip(first, lower, upper).T.ravel(),
                     lbg=np.concatenate([np.full(p[0].shape[0], p[1], float) for p in parts]),
                     ubg=np.concatenate([np.full(p[0].shape[0], p[2], float) for p in parts]),
@@ -511,12 +523,26 @@ def _fit(setup, rows, B, knots, path, lower, upper) -> np.ndarray:
     return np.asarray(result["x"], float).reshape(dof, K).T
 
 
+def _least_squares(B: np.ndarray, Y: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """``X`` minimising ``|B X - Y|`` (``B`` N x K of full column rank) by the normal
+    equations on ``common.exact``, the rows summed a chunk at a time in order: the
+    solver starts here, and its path must not depend on the processor."""
+    K = B.shape[1]
+    normal = np.zeros((K, K))
+    right = np.zeros((K, Y.shape[1]))
+    for start in range(0, len(B), chunk):
+        rows = B[start:start + chunk]
+        normal += exact.gram(rows)
+        right += (rows[:, :, None] * Y[start:start + chunk, None, :]).sum(axis=0)
+    return np.stack([exact.solve(normal, right[:, j]) for j in range(Y.shape[1])], axis=1)
+
+
 def _linear_parts(setup, knots, C):
     """``(expression, lower, upper)`` of the spline's linear constraints: speed and
     acceleration on the derivative's control points (so everywhere), at rest at both ends."""
     K = C.shape[0]
     D1 = derivative_map(knots, K, DEGREE)
-    D2 = derivative_map(knots[1:-1], K - 1, DEGREE - 1) @ D1
+    D2 = exact.matmul(derivative_map(knots[1:-1], K - 1, DEGREE - 1), D1)
     vmax, amax = setup.max_joint_speed, setup.max_joint_acceleration
     return [(ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D1)), C)), -vmax, vmax),
             (ca.vec(ca.mtimes(ca.DM(sparse.csc_matrix(D2)), C)), -amax, amax),
@@ -599,7 +625,7 @@ class _ScanProblem:
     def _point(self, C: np.ndarray) -> np.ndarray:
         """The solver's variables for control points ``C`` (K x dof)."""
         C = np.asarray(C, float)
-        return np.concatenate([C.T.ravel(), (self.B @ C).ravel()])
+        return np.concatenate([C.T.ravel(), exact.matmul(self.B, C).ravel()])
 
     def objective(self, C: np.ndarray) -> float:
         """The OCP's objective at control points ``C`` (K x dof)."""

@@ -146,3 +146,92 @@ def test_calibration_agrees_under_two_kernels(kernels, tmp_path):
         _robocal(kernel, "calibrate", str(data / "dataset.yaml"), "--out", str(tmp_path / kernel))
         results[kernel] = json.loads((tmp_path / kernel / "result.json").read_text())
     assert _numbers_agree(*results.values()) == []
+
+
+# ------------------------------------------------------------------ plans, tracking, fleet
+
+# (simulation, plan arguments): every kind, the refinement on and off, several indices
+PLANS = {
+    "bar": ("bar", ["--count", "7", "--seed", "1"]),
+    "tracker": ("tracker", ["--count", "12", "--seed", "2", "--index", "O1", "--no-refine"]),
+    "artifact": ("artifact", ["--count", "3", "--seed", "3", "--index", "cond", "--no-refine"]),
+    "laser": ("laser", ["--count", "60", "--seed", "1", "--sensor-only"]),
+}
+
+
+def _cells(path: Path) -> list[list[str]]:
+    return [line.split(",") for line in path.read_text().splitlines()]
+
+
+def _tables_agree(first: Path, second: Path, skip: tuple[str, ...] = ()) -> list[str]:
+    """Where two CSV tables differ: a label, or a number beyond 1e-9 relative (of the
+    number, at least 1; the kernels' rounding is 1e-16) outside the ``skip`` columns."""
+    a, b = _cells(first), _cells(second)
+    if len(a) != len(b) or a[0] != b[0]:
+        return [f"{first.name}: {len(a)} vs {len(b)} lines, header {a[0]} vs {b[0]}"]
+    found = []
+    for line, (row_a, row_b) in enumerate(zip(a[1:], b[1:]), start=2):
+        for name, x, y in zip(a[0], row_a, row_b):
+            if name in skip or x == y:
+                continue
+            try:
+                u, v = float(x), float(y)
+            except ValueError:
+                found.append(f"line {line} {name}: {x!r} vs {y!r}")
+                continue
+            if abs(u - v) > 1e-9 * max(abs(u), abs(v), 1.0):
+                found.append(f"line {line} {name}: {x} vs {y}")
+    return found
+
+
+def test_plans_choose_the_same_poses_under_two_kernels(kernels, tmp_path):
+    """The same candidates, the same chosen poses in the same order and the same joints
+    (to rounding) for every kind, with and without refinement."""
+    for name in {simulation for simulation, _ in PLANS.values()}:
+        _robocal(kernels[0], "simulate", *SIMULATIONS[name], "--out", str(tmp_path / name))
+    for kind, (simulation, args) in PLANS.items():
+        for kernel in kernels:
+            _robocal(kernel, "plan", str(tmp_path / simulation / "dataset.yaml"), *args,
+                     "--out", str(tmp_path / f"{kind}_{kernel}.csv"))
+        first, second = (tmp_path / f"{kind}_{k}.csv" for k in kernels)
+        assert len(_cells(first)) > 3
+        assert _tables_agree(first, second) == [], kind
+
+
+def test_tracking_compensation_and_fleet_agree_under_two_kernels(kernels, tmp_path):
+    """``track`` and ``compensate``: the same statuses and joints within 1e-9; ``fleet``:
+    every robot's result.json within 1e-6 relative, the same decisions."""
+    from test_tracking import lissajous_joints, write_job
+
+    from robocal_casadi.model.examples import industrial_6r
+
+    job, _ = write_job(tmp_path, industrial_6r(), lissajous_joints("industrial_6r", 30))
+    data = tmp_path / "tracker"
+    _robocal(kernels[0], "simulate", *SIMULATIONS["tracker"], "--out", str(data))
+    (tmp_path / "fleet.yaml").write_text("robots:\n  - {name: r1, datasets: "
+                                         "[tracker/dataset.yaml]}\n")
+    for kernel in kernels:
+        _robocal(kernel, "track", str(job), "--out", str(tmp_path / f"track_{kernel}.csv"))
+        _robocal(kernel, "fleet", str(tmp_path / "fleet.yaml"), "--out",
+                 str(tmp_path / f"fleet_{kernel}"), "--workers", "1", "--no-report")
+    # compensate: the fleet's calibrated robot on targets from its own simulated readings
+    points = _cells(data / "points.csv")
+    header = points[0]
+    joints = [header.index(f"q{i}") for i in range(1, 7)]
+    xyz = [header.index(c) for c in ("x", "y", "z")]
+    (tmp_path / "targets.csv").write_text("x,y,z,q1,q2,q3,q4,q5,q6\n" + "".join(
+        ",".join([row[i] for i in xyz] + [row[i] for i in joints]) + "\n"
+        for row in points[1:21]))
+    for kernel in kernels:
+        _robocal(kernel, "compensate", str(data / "robot.yaml"), str(tmp_path / "targets.csv"),
+                 "--calibrated", str(tmp_path / f"fleet_{kernels[0]}" / "r1"),
+                 "--out", str(tmp_path / f"compensate_{kernel}.csv"))
+    first, second = kernels
+    assert {row[-2] for row in _cells(tmp_path / f"track_{first}.csv")[1:]} == {"ok"}
+    assert _tables_agree(tmp_path / f"track_{first}.csv", tmp_path / f"track_{second}.csv",
+                         skip=("solve_ms",)) == []
+    assert _tables_agree(tmp_path / f"compensate_{first}.csv",
+                         tmp_path / f"compensate_{second}.csv") == []
+    results = [json.loads((tmp_path / f"fleet_{k}" / "r1" / "result.json").read_text())
+               for k in kernels]
+    assert _numbers_agree(*results) == []

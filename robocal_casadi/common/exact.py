@@ -112,3 +112,97 @@ def inverse_pose(T) -> np.ndarray:
     out[:3, :3] = R.T
     out[:3, 3] = -matmul(R.T, T[:3, 3])
     return out
+
+
+def solve_stack(A, b) -> np.ndarray:
+    """``x`` with ``A[k] x[k] = b[k]`` for a stack of small square systems (``A``:
+    ``(B, n, n)``, ``b``: ``(B, n)``): ``solve`` applied to each, all at once.
+
+    Raises ``SingularMatrix`` when a system meets a zero pivot.
+    """
+    M = np.array(A, dtype=float)
+    x = np.array(b, dtype=float)
+    rows = np.arange(len(M))
+    n = M.shape[-1]
+    for k in range(n):
+        pivot = k + np.argmax(np.abs(M[:, k:, k]), axis=1)
+        value = M[rows, pivot, k]
+        if np.any(value == 0.0) or not np.all(np.isfinite(value)):
+            raise SingularMatrix(f"zero pivot in column {k}")
+        row_k, row_p = M[rows, k].copy(), M[rows, pivot].copy()
+        M[rows, k], M[rows, pivot] = row_p, row_k
+        x_k, x_p = x[rows, k].copy(), x[rows, pivot].copy()
+        x[rows, k], x[rows, pivot] = x_p, x_k
+        factors = M[:, k + 1:, k] / M[:, k, k][:, None]
+        M[:, k + 1:, k:] -= factors[:, :, None] * M[:, None, k, k:]
+        x[:, k + 1:] -= factors * x[:, k][:, None]
+    for k in range(n - 1, -1, -1):
+        x[:, k] = (x[:, k] - (M[:, k, k + 1:] * x[:, k + 1:]).sum(axis=1)) / M[:, k, k]
+    return x
+
+
+def cholesky(A) -> np.ndarray:
+    """Lower-triangular ``L`` with ``L L^T = A`` for a symmetric positive definite ``A``.
+
+    Raises ``SingularMatrix`` when a pivot is not positive.
+    """
+    A = np.asarray(A, dtype=float)
+    n = len(A)
+    L = np.zeros_like(A)
+    for j in range(n):
+        pivot = A[j, j] - (L[j, :j] * L[j, :j]).sum()
+        if not pivot > 0.0:
+            raise SingularMatrix(f"not positive definite at column {j}")
+        L[j, j] = np.sqrt(pivot)
+        L[j + 1:, j] = (A[j + 1:, j] - (L[j + 1:, :j] * L[j, :j]).sum(axis=1)) / L[j, j]
+    return L
+
+
+def lower_inverse(L) -> np.ndarray:
+    """The inverse of a lower-triangular ``L`` with a non-zero diagonal (forward
+    substitution, column by column of the identity)."""
+    L = np.asarray(L, dtype=float)
+    n = len(L)
+    X = np.zeros_like(L)
+    for i in range(n):
+        # row i of L X = I: L[i, i] X[i] = e_i - sum_{k<i} L[i, k] X[k]
+        right = -(L[i, :i, None] * X[:i]).sum(axis=0)
+        right[i] += 1.0
+        X[i] = right / L[i, i]
+    return X
+
+
+def orthonormal_basis(A, rtol: float) -> np.ndarray:
+    """Orthonormal columns spanning the column space of ``A`` (rows x k): modified
+    Gram-Schmidt with column pivoting, each new column orthogonalised twice; a direction
+    whose remaining norm is at most ``rtol`` times the largest column norm of ``A`` counts
+    as already spanned (the pivot is the first largest, so ties break alike)."""
+    R = np.array(A, dtype=float)
+    if R.size == 0:
+        return np.zeros((R.shape[0], 0))
+    largest = float(np.sqrt((R * R).sum(axis=0)).max())
+    basis: list[np.ndarray] = []
+    for _ in range(min(R.shape)):
+        norms = np.sqrt((R * R).sum(axis=0))
+        j = int(np.argmax(norms))
+        if not norms[j] > rtol * largest:
+            break
+        u = R[:, j] / norms[j]
+        for q in basis:  # the second pass removes what rounding left of earlier directions
+            u = u - (q * u).sum() * q
+        u = u / np.sqrt((u * u).sum())
+        basis.append(u)
+        R = R - u[:, None] * (u[:, None] * R).sum(axis=0)[None, :]
+    if not basis:
+        return np.zeros((R.shape[0], 0))
+    return np.stack(basis, axis=1)
+
+
+def project_out(G, A, rtol: float) -> np.ndarray:
+    """``G`` with its component in the column space of ``A`` removed (``orthonormal_basis``
+    of ``A`` at ``rtol``)."""
+    G = np.asarray(G, dtype=float)
+    U = orthonormal_basis(A, rtol)
+    if U.shape[1] == 0:
+        return G.copy()
+    return G - matmul(U, matmul(U.T, G))

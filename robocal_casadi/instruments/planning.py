@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..common import exact
+
 MARGIN = 1e-3  # [m] clearance kept above the worktable while refining
 ANGLE_MARGIN = 1e-4  # [rad] kept inside the visibility cone and incidence limit
 
@@ -43,7 +45,7 @@ def reach_radius(setup) -> float:
         total += abs(joint.a) + abs(joint.d)
         if not joint.revolute and joint.limits is not None:
             total += max(abs(joint.limits[0]), abs(joint.limits[1]))
-    return total + float(np.linalg.norm(setup.offset))
+    return total + exact.norm(setup.offset)
 
 
 def shoulder(workspace) -> np.ndarray:
@@ -52,4 +54,4 @@ def shoulder(workspace) -> np.ndarray:
 
 
 def unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / exact.norm(v, axis=-1)[..., None]

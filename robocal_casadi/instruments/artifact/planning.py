@@ -11,10 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from ...common import exact
 from ...errors import InputError
 from ...model.transforms import rot_x, rot_z
 from ..planning import Candidate, reach_radius
 from .reader import ArtifactTouches
+
+LAYOUT_ROUNDING = 1e-9  # socket layout positions are kept to this share of its size
 
 
 def setup_fields(dataset: ArtifactTouches, options: Any, *, bar: bool = False,
@@ -65,20 +68,27 @@ def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray
         start = rng.normal(scale=scale, size=(len(names), 3))
         start[:, 2] = 0.0
         fits.append(least_squares(residual, start.ravel(), xtol=1e-15, ftol=1e-15, gtol=1e-15))
-    best = min(fits, key=lambda fit: fit.cost)
+    # the first fit that meets the constraints as well as the best one: costs of fits
+    # that all meet them differ only by rounding, which must not choose among them
+    least = min(fit.cost for fit in fits)
+    best = next(fit for fit in fits if fit.cost <= least + (LAYOUT_ROUNDING * scale) ** 2)
     X = best.x.reshape(-1, 3)
     constraint = residual(best.x)[: len(dataset.distances) + len(dataset.perpendicular)]
     if np.max(np.abs(constraint)) > 1e-9 * max(scale, 1.0):
         raise InputError("the known distances and perpendicularities contradict each other: no "
                          "rigid artifact has them", file=dataset.path, where="artifact")
     X -= X.mean(axis=0)
+    # rounded far below any machining tolerance: the fit's last bits depend on the
+    # processor, and every placement of the plan is built on these positions
+    quantum = LAYOUT_ROUNDING * scale
+    X = np.round(X / quantum) * quantum
     return {n: X[index[n]] for n in names}
 
 
 def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
     layout = setup.layout  # socket name -> position in the artifact frame [m]
     names = sorted(layout)
-    span = max(np.linalg.norm(layout[a] - layout[b]) for a in names for b in names)
+    span = max(exact.norm(layout[a] - layout[b]) for a in names for b in names)
     radius = reach_radius(setup)
     if span >= 2 * radius:
         raise InputError(
@@ -95,11 +105,15 @@ def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
         centres = workspace.kinematics.points(workspace.random_joints(rng, batch), setup.offset,
                                               workspace.p)
         placements = [_random_placement(setup, c, rng) for c in centres]
+        # which touches of a socket are kept: the first by a random priority drawn for
+        # every touch, so how many touches were reached does not change what is drawn
+        # next (the same stream whichever rounding decided a touch)
+        priority = rng.random(len(placements) * len(names) * setup.touches * 2)
         # sockets in the world for each placement, each touched `touches` times, 2 seeds each
         world_points, owners = [], []
         for k, T in enumerate(placements):
             for name in names:
-                world = T[:3, :3] @ (layout[name] - centroid) + T[:3, 3]
+                world = exact.matmul(T[:3, :3], layout[name] - centroid) + T[:3, 3]
                 for _ in range(setup.touches * 2):
                     world_points.append(world)
                     owners.append((k, name))
@@ -111,12 +125,12 @@ def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
             rows, points, sockets = [], [], {}
             complete = True
             for name in names:
-                sockets[name] = T[:3, :3] @ (layout[name] - centroid) + T[:3, 3]
+                sockets[name] = exact.matmul(T[:3, :3], layout[name] - centroid) + T[:3, 3]
                 good = [i for i, o in enumerate(owners) if o == (k, name) and ok[i]]
                 if len(good) < setup.touches:
                     complete = False
                     break
-                chosen = rng.choice(good, size=setup.touches, replace=False)
+                chosen = sorted(good, key=lambda i: (priority[i], i))[:setup.touches]
                 rows += [solved.joints[i] for i in chosen]
                 points += [name] * setup.touches
             if complete and all(sockets[n][2] > workspace.table_height for n in names):
@@ -140,7 +154,7 @@ def _random_placement(setup, position, rng) -> np.ndarray:
     yaw = rng.uniform(-np.pi, np.pi)
     tilt_axis = rng.uniform(-np.pi, np.pi)
     tilt = rng.uniform(0.0, setup.max_tilt)
-    R = (rot_z(tilt_axis) @ rot_x(tilt) @ rot_z(-tilt_axis) @ rot_z(yaw))[:3, :3]
+    R = exact.chain(rot_z(tilt_axis), rot_x(tilt), rot_z(-tilt_axis), rot_z(yaw))[:3, :3]
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = position

@@ -11,6 +11,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ...common import exact
 from ...common.fields import vector
 from ...errors import InputError
 from ...model.beam import beam_direction, tangent_basis
@@ -47,7 +48,7 @@ def setup_fields(dataset: SphereLaser, options: Any) -> dict:
 def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
     centre, radius = setup.centre, setup.radius
     lo, hi = setup.laser_range
-    distance_to_shoulder = np.linalg.norm(centre - shoulder(workspace))
+    distance_to_shoulder = exact.norm(centre - shoulder(workspace))
     if distance_to_shoulder - radius - hi > reach_radius(setup):
         raise InputError(
             f"the sphere at {np.round(centre / setup.units.length_scale, 6).tolist()} "
@@ -86,9 +87,9 @@ def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
 def _tilted(n: np.ndarray, angle: float, rng) -> np.ndarray:
     """``n`` rotated by ``angle`` [rad] about a random axis perpendicular to it."""
     helper = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+    u = exact.cross(n, helper)
+    u /= exact.norm(u)
+    v = exact.cross(n, u)
     phi = rng.uniform(-np.pi, np.pi)
     side = np.cos(phi) * u + np.sin(phi) * v
     return np.cos(angle) * n + np.sin(angle) * side
@@ -99,7 +100,7 @@ def refine(program, setup, workspace, row_model, candidate, Q) -> None:
     limit and the sensor's range [m]; the expected reading follows the pose."""
     T = workspace.kinematics.flange_pose(Q[:, 0], row_model.p)
     o = T[:3, :3] @ setup.offset + T[:3, 3]
-    axis = setup.axis / np.linalg.norm(setup.axis)
+    axis = setup.axis / exact.norm(setup.axis)
     d = T[:3, :3] @ axis
     v = o - setup.centre
     b = ca.dot(d, v)
@@ -120,17 +121,17 @@ def feasible(setup, workspace, candidate: Candidate, Q: np.ndarray):
     range or hits beyond the incidence limit."""
     kin = workspace.kinematics
     pose = kin.flange_poses(Q, workspace.p)[0]
-    o = pose[:3, :3] @ setup.offset + pose[:3, 3]
-    d = pose[:3, :3] @ (setup.axis / np.linalg.norm(setup.axis))
+    o = exact.matmul(pose[:3, :3], setup.offset) + pose[:3, 3]
+    d = exact.matmul(pose[:3, :3], setup.axis / exact.norm(setup.axis))
     v = o - setup.centre
-    b = d @ v
-    disc = b * b - (v @ v - setup.radius**2)
+    b = exact.dot(d, v)
+    disc = b * b - (exact.dot(v, v) - setup.radius**2)
     if disc <= 0:
         return None
     reading = -b - np.sqrt(disc)
     lo, hi = setup.laser_range
     normal = (o + reading * d - setup.centre) / setup.radius
-    if not (lo <= reading <= hi and -d @ normal >= np.cos(setup.max_incidence) - 1e-9):
+    if not (lo <= reading <= hi and -exact.dot(d, normal) >= np.cos(setup.max_incidence) - 1e-9):
         return None
     return Candidate(Q, distance=np.array([reading])), Q, o[None]
 

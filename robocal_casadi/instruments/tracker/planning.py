@@ -11,6 +11,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from ...common import exact
 from ...errors import InputError
 from ..planning import ANGLE_MARGIN, MARGIN, Candidate, unit
 from .reader import TrackerPoints
@@ -29,9 +30,9 @@ def visible(setup, poses: np.ndarray) -> np.ndarray:
     ``poses`` (N x 4 x 4); all True when no instrument position is known."""
     if setup.instrument is None:
         return np.ones(len(poses), dtype=bool)
-    targets = poses[:, :3, :3] @ setup.offset + poses[:, :3, 3]
+    targets = exact.matmul(poses[:, :3, :3], setup.offset) + poses[:, :3, 3]
     towards = unit(setup.instrument - targets)
-    return np.einsum("ni,ni->n", poses[:, :3, 2], towards) > np.cos(setup.visibility_cone)
+    return (poses[:, :3, 2] * towards).sum(axis=1) > np.cos(setup.visibility_cone)
 
 
 def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
@@ -43,7 +44,7 @@ def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
         attempts += batch
         Q = workspace.random_joints(rng, batch)
         poses = kin.flange_poses(Q, workspace.p)
-        targets = poses[:, :3, :3] @ setup.offset + poses[:, :3, 3]
+        targets = exact.matmul(poses[:, :3, :3], setup.offset) + poses[:, :3, 3]
         ok = workspace.clear_of_table(Q, targets) & visible(setup, poses)
         found += [q for q in Q[ok]]
         if progress is not None:
