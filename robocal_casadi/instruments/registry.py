@@ -70,6 +70,10 @@ class Instrument:
     configuration, in the order the robot moves, so effects that need absolute points
     along a path (``Effect.tracker_only``) can be simulated for the kind. A kind without a
     simulator or planner is read and calibrated; simulating or planning it is refused.
+    ``noun`` names the instrument in sentences ("tracker"); ``turned`` says what readings
+    would see what it cannot see at one orientation of the measured point;
+    ``plain_posterior``: the fit's covariance is the plain least-squares posterior (False
+    where certified lengths enter it, as an artifact's distances do).
     """
 
     kind: str
@@ -81,6 +85,9 @@ class Instrument:
     planner: Planner | None = None
     check: Callable[[Any, Any, Path], None] = field(default=_no_check)
     any_configuration: bool = False
+    noun: str = "instrument"
+    turned: str = "readings with the flange in other orientations"
+    plain_posterior: bool = True
 
     def __repr__(self) -> str:
         return f"Instrument({self.kind!r}, model={self.model.__name__})"

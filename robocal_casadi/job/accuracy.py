@@ -72,6 +72,7 @@ import numpy as np
 from ..calibration.prior import tolerance_of
 from ..effects.effect_model import EffectModel
 from ..effects.motion import is_derived_column
+from ..instruments.registry import INSTRUMENTS
 from ..model.kinematics import Kinematics
 from ..model.parameters import perturbed_stems
 from ..model.robot import Robot
@@ -347,7 +348,8 @@ def _noise_ratio(result) -> float:
     took up: ``rms_geometric / rms_final`` of the fit; 1 where the covariance does not
     have the plain posterior form (an artifact's certified distances) or nothing was
     taken up."""
-    if any(r.kind == "artifact_touches" for r in result.residuals):
+    if any(kind in INSTRUMENTS and not INSTRUMENTS[kind].plain_posterior
+           for kind in (r.kind for r in result.residuals)):
         return 1.0
     geometric, final = float(result.fit.rms_geometric), float(result.fit.rms_final)
     if not (np.isfinite(geometric) and np.isfinite(final)) or final <= 0:
@@ -431,13 +433,7 @@ def _error_field(result, kinematics: Kinematics, names: Sequence[str],
 
 
 _JOINT_PARAMETER = re.compile(r"^(theta|d|a|alpha|beta)(\d+)$")
-_INSTRUMENT = {"tracker_points": ("tracker", "another reflector orientation: readings with "
-                                  "the flange axis pointing in other directions"),
-               "cross_bar": ("bar", "touches with the probe held in other orientations"),
-               "artifact_touches": ("plate", "touches with the probe held in other "
-                                    "orientations"),
-               "sphere_laser": ("sphere", "scans with the laser tilted to other "
-                                "orientations")}
+
 
 
 def _unseen(result, carried: dict[str, float], box_square: float,
@@ -460,8 +456,9 @@ def _unseen(result, carried: dict[str, float], box_square: float,
 def remedy(name: str, point_names: tuple[str, ...], instrument: str) -> str:
     """What would let the data see parameter ``name`` (words), for data of kind
     ``instrument`` (a dataset kind)."""
-    thing, turned = _INSTRUMENT.get(instrument, ("instrument", "readings with the flange in "
-                                                 "other orientations"))
+    record = INSTRUMENTS.get(instrument)
+    thing, turned = (record.noun, record.turned) if record is not None else (
+        "instrument", "readings with the flange in other orientations")
     if name in point_names:
         return turned
     if name.startswith("base_"):

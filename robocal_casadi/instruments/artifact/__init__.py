@@ -10,6 +10,8 @@ INSTRUMENT = Instrument(
     kind=ArtifactModel.kind, model=ArtifactModel, blocks=reader.BLOCKS, read=reader.read,
     check=reader.check, simulate=simulator.simulate, corrupt=simulator.corrupt,
     planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
-                    planning.feasible))
+                    planning.feasible),
+    noun="plate", turned="touches with the probe held in other orientations",
+    plain_posterior=False)
 
 __all__ = ["INSTRUMENT", "ArtifactModel"]

@@ -17,6 +17,7 @@ INSTRUMENT = Instrument(
     kind=CrossBarModel.kind, model=CrossBarModel, blocks=reader.BLOCKS, read=reader.read,
     check=artifact_reader.check, simulate=simulator.simulate, corrupt=artifact_simulator.corrupt,
     planner=Planner(planning.setup_fields, artifact_planning.candidates,
-                    artifact_planning.refine, artifact_planning.feasible))
+                    artifact_planning.refine, artifact_planning.feasible),
+    noun="bar", turned="touches with the probe held in other orientations")
 
 __all__ = ["INSTRUMENT", "CrossBarModel"]

@@ -10,6 +10,7 @@ INSTRUMENT = Instrument(
     kind=SphereLaserModel.kind, model=SphereLaserModel, blocks=reader.BLOCKS, read=reader.read,
     simulate=simulator.simulate, corrupt=simulator.corrupt,
     planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
-                    planning.feasible, scans=True, measured_point=planning.measured_point))
+                    planning.feasible, scans=True, measured_point=planning.measured_point),
+    noun="sphere", turned="scans with the laser tilted to other orientations")
 
 __all__ = ["INSTRUMENT", "SphereLaserModel", "laser_of"]

@@ -11,6 +11,9 @@ INSTRUMENT = Instrument(
     check=reader.check, simulate=simulator.simulate, corrupt=simulator.corrupt,
     planner=Planner(planning.setup_fields, planning.candidates, planning.refine,
                     planning.feasible),
-    any_configuration=True)
+    any_configuration=True,
+    noun="tracker",
+    turned="another reflector orientation: readings with the flange axis pointing in other "
+           "directions")
 
 __all__ = ["INSTRUMENT", "TrackerModel", "rigid_registration"]
