@@ -44,6 +44,15 @@ STARTS_CONDITION = 12
 REFINE_ROUNDS = 3  # each round moves joints at most refine.STEP
 
 
+class TooFew(InputError):
+    """A count the planner cannot fill: fewer placements or readings than the identifiable
+    parameters need (``needed``: the least count worth asking for)."""
+
+    def __init__(self, message: str, needed: int, **where):
+        super().__init__(message, **where)
+        self.needed = needed
+
+
 @dataclass(frozen=True)
 class Plan:
     """A designed set of measurements and how good it is.
@@ -191,10 +200,10 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
     needed = math.ceil((info.m + info.shared) / info.rows_per_candidate())
     if count < needed:
         what = setup.model.unit_name
-        raise InputError(
+        raise TooFew(
             f"--count {count} is too few: {info.m} identifiable parameters"
             f"{f' and {info.shared} placement unknowns' if info.shared else ''} need at least "
-            f"{needed} {what} of this kind", file=setup.path)
+            f"{needed} {what} of this kind", needed, file=setup.path)
     with Progress("plan: exchange, start", total=_starts(index), stream=stream) as progress:
         chosen, swaps = _best_exchange(info, len(candidates), count, index, rng, progress)
     chosen_candidates = tuple(candidates[i] for i in chosen)
@@ -205,8 +214,8 @@ def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, see
             setup, workspace, row_model, info, chosen_candidates, spectrum, index, refine_rounds)
     value = index_value(index, spectrum)
     if not np.isfinite(value) or spectrum[-1] <= 1e-10 * spectrum[0]:
-        raise InputError(f"no plan of {count} found that identifies all {info.m} parameters; "
-                         f"ask for more (--count)", file=setup.path)
+        raise TooFew(f"no plan of {count} found that identifies all {info.m} parameters; "
+                     f"ask for more (--count)", count + 1, file=setup.path)
     random_values, random_tool, random_condition = _random_plans(
         setup, row_model, info, candidates, count, index, rng)
     blocks = row_model.blocks(list(chosen_candidates))

@@ -11,6 +11,7 @@ and the median of random feasible plans of the same size.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 
@@ -31,8 +32,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", metavar="DATASET.yaml",
                         help="dataset file: kind, robot, units, instrument geometry "
                              "(its data table need not exist)")
-    parser.add_argument("--count", type=int, required=True, metavar="N",
-                        help="bar or artifact placements, or readings, to plan")
+    size = parser.add_mutually_exclusive_group(required=True)
+    size.add_argument("--count", type=int, metavar="N",
+                      help="bar or artifact placements, or readings, to plan")
+    size.add_argument("--target-accuracy", type=float, metavar="X",
+                      help="plan the fewest placements or readings predicted to bring the "
+                           "work-cell RMS to X (the dataset file's length unit) for nine "
+                           "robots in ten; prints the count -> predicted RMS curve")
+    parser.add_argument("--prior", metavar="PRIOR.yaml",
+                        help="with --target-accuracy: predict with this fleet prior (as "
+                             "`robocal prior` writes) in place of the tolerance prior")
     parser.add_argument("--out", required=True, metavar="PLAN.csv", help="plan table to write")
     parser.add_argument("--index", default="tool", choices=INDEX_CHOICES,
                         help="index to optimise: tool = predicted tool-position error over "
@@ -72,12 +81,18 @@ def run(args: argparse.Namespace) -> int:
     from planning.designed import design, scans, table
     from planning.trajectory import Scan
 
-    if args.count < 1:
+    if args.prior is not None and args.target_accuracy is None:
+        raise InputError("is for --target-accuracy", where="--prior")
+    if args.target_accuracy is not None and not (args.target_accuracy > 0
+                                                 and math.isfinite(args.target_accuracy)):
+        raise InputError(f"expected a positive length, got {args.target_accuracy}",
+                         where="--target-accuracy")
+    if args.count is not None and args.count < 1:
         raise InputError(f"expected a positive count, got {args.count}", where="--count")
-    if args.count > MAX_COUNT:
+    if args.count is not None and args.count > MAX_COUNT:
         raise InputError(f"{args.count} is more than a plan of at most {MAX_COUNT} can hold; "
                          "plan in parts", where="--count")
-    output_file(args.out, inputs=[args.dataset])
+    output_file(args.out, inputs=[args.dataset] + ([args.prior] if args.prior else []))
     for fmt in program_formats():
         path = getattr(args, option_name(fmt))
         if path is not None:
@@ -94,8 +109,12 @@ def run(args: argparse.Namespace) -> int:
     if args.sensor_only and not scans(dataset):
         raise InputError(f"--sensor-only is for laser scans, not {dataset.kind} data",
                          where="--sensor-only")
-    designed = design(dataset, args.count, args.index, seed=args.seed,
-                      refine=not args.no_refine, sensor_only=args.sensor_only)
+    searched = None
+    if args.target_accuracy is not None:
+        designed, searched = _targeted(dataset, args)
+    else:
+        designed = design(dataset, args.count, args.index, seed=args.seed,
+                          refine=not args.no_refine, sensor_only=args.sensor_only)
     times = designed.times if isinstance(designed, Scan) else None
     programs = _programs(designed.setup.robot, designed.joints, times, args)
     columns, rows = table(designed)
@@ -104,17 +123,56 @@ def run(args: argparse.Namespace) -> int:
     _write_programs(programs)
     print(designed.summary())
     print(f"wrote {args.out}")
-    _summarise(args, designed, programs)
+    _summarise(args, designed, programs, searched)
     return 0
 
 
-def _summarise(args: argparse.Namespace, plan, programs) -> None:
-    """The plan's figures for --json (the tool-position errors in metres)."""
+def _targeted(dataset, args):
+    """``(plan, search)`` for ``--target-accuracy``; ``InputError`` (exit 2) when no count
+    up to the limit reaches it (nothing written)."""
+    from planning.designed import scans
+    from planning.target import search
+
+    from ..calibration.population_prior import load_prior
+
+    if scans(dataset):
+        raise InputError(f"is for pose plans, not {dataset.kind} scans; use --count",
+                         where="--target-accuracy")
+    if args.index != "tool":
+        raise InputError("plans for the index 'tool' (predicted accuracy)",
+                         where="--target-accuracy")
+    fleet = None
+    if args.prior is not None:
+        fleet = load_prior(Path(args.prior))
+        fleet.check_robot(dataset.robot, args.prior)
+    scale = dataset.units.scale("length")
+    unit = dataset.units.unit_name("length")
+    found = search(dataset, args.target_accuracy * scale, fleet=fleet, seed=args.seed,
+                   refine=not args.no_refine)
+    print(found.curve(scale, unit))
+    if found.plan is None:
+        best = found.best
+        raise InputError(
+            f"no plan of up to {found.limit} {dataset.kind} placements or readings is "
+            f"predicted to reach {args.target_accuracy:g} {unit} for nine robots in ten: "
+            f"the best, {best.count}, gives {best.rms / scale:.4g} {unit}",
+            where="--target-accuracy")
+    return found.plan, found
+
+
+def _summarise(args: argparse.Namespace, plan, programs, searched=None) -> None:
+    """The plan's figures for --json (the tool-position errors in metres; with
+    --target-accuracy the curve, each count's 90% figure in metres)."""
     figures = {"index": "index", "value": "index_value", "random_median": "random_median",
                "tool_error": "tool_error_m", "random_tool_median": "random_tool_error_m",
                "condition_all": "condition_number"}
     summarise(args, rows=len(plan.joints), out=str(args.out),
               programs=[path for _, path in programs],
+              **({} if searched is None else
+                 {"target_m": searched.target,
+                  "curve": [{"count": t.count, "rms_m": t.rms if math.isfinite(t.rms) else None,
+                             "mean_rms_m": t.mean_rms if math.isfinite(t.mean_rms) else None}
+                            for t in searched.trials]}),
               **{name: getattr(plan, key) for key, name in figures.items()
                  if hasattr(plan, key)})
 
