@@ -154,6 +154,7 @@ def search(dataset: Dataset, target: float, *, fleet=None, limit: int | None = N
     predictor = Predictor(dataset, fleet, seed)
     trials: dict[int, Trial] = {}
     plans: dict[int, Plan] = {}
+    needed = 1  # the least count the planner last said it can fill
     with Progress("plan: target", total=None, stream=stream or sys.stderr) as progress:
 
         def reaches(count: int) -> bool | None:
@@ -173,7 +174,6 @@ def search(dataset: Dataset, target: float, *, fleet=None, limit: int | None = N
             trials[count] = Trial(count, *predictor.rms(plan))
             return trials[count].rms <= target
 
-        needed = 1
         count, low, high = 1, 0, None
         while count <= limit:
             outcome = reaches(count)
