@@ -52,11 +52,13 @@ QUANTILE = 0.9  # share of robots the target is to hold for
 class Trial:
     """One count tried: ``rms`` [m] the ``QUANTILE`` quantile of one robot's predicted RMS
     over the workspace, ``mean_rms`` [m] the root of its mean square (inf: the planner
-    could not fill the count)."""
+    could not fill the count); with a fleet prior, ``tolerance_rms`` [m] the quantile the
+    tolerance prior would give on the same plan (None otherwise)."""
 
     count: int
     rms: float
     mean_rms: float
+    tolerance_rms: float | None = None
 
 
 @dataclass(frozen=True)
@@ -79,11 +81,14 @@ class TargetSearch:
     def curve(self, scale: float, unit: str) -> str:
         """The curve as lines, figures divided by ``scale`` [m per ``unit``]."""
         lines = [f"count -> predicted work-cell RMS for {round(100 * QUANTILE)}% of robots "
-                 f"(mean-square figure) [{unit}], {self.prior} prior:"]
+                 f"(mean-square figure) [{unit}], {self.prior} prior"
+                 + ("; with the tolerance prior" if self.prior != "tolerance" else "") + ":"]
         for t in self.trials:
             mark = "  <- fewest reaching the target" if t.count == self.count else ""
             figure = ("too few for the planner" if not math.isfinite(t.rms) else
-                      f"{t.rms / scale:.4g} ({t.mean_rms / scale:.4g})")
+                      f"{t.rms / scale:.4g} ({t.mean_rms / scale:.4g})"
+                      + ("" if t.tolerance_rms is None else
+                         f"; tolerance prior {t.tolerance_rms / scale:.4g}"))
             lines.append(f"  {t.count:5d}  {figure}{mark}")
         return "\n".join(lines)
 
@@ -97,17 +102,26 @@ class Predictor:
         self.rows = RowModel(setup, kinematics)
         names = self.rows.parameters
         self.weights = tool_weights(setup, workspace, names, np.random.default_rng(seed))
-        self.covered, self.precision = prior_precision(names, kinematics.registry,
-                                                       setup.robot, fleet)
+        self.prior = prior_precision(names, kinematics.registry, setup.robot, fleet)
+        self.tolerance = (None if fleet is None else
+                          prior_precision(names, kinematics.registry, setup.robot))
 
-    def rms(self, plan: Plan) -> tuple[float, float]:
-        """``(quantile, root mean square)`` [m] of one robot's RMS calibrated on ``plan``."""
+    def trial(self, plan: Plan) -> Trial:
+        """The figures of ``plan`` under the prior (and the tolerance prior beside a fleet's)."""
+        rms, mean = self.rms(plan, *self.prior)
+        beside = None if self.tolerance is None else self.rms(plan, *self.tolerance)[0]
+        return Trial(len(plan.candidates), rms, mean, beside)
+
+    def rms(self, plan: Plan, covered: np.ndarray, precision: np.ndarray
+            ) -> tuple[float, float]:
+        """``(quantile, root mean square)`` [m] of one robot's RMS calibrated on ``plan``
+        with a prior of ``precision`` over the ``covered`` parameters."""
         names = self.rows.parameters
         n = len(names)
         X = np.vstack([b.X for b in self.rows.blocks(list(plan.candidates))])
         J = _project_shared(X[:, :n], X[:, n:])
-        keep = self.covered | np.isin(np.array(names), np.array(plan.identifiable))
-        A = J.T @ J / self.setup.noise**2 + self.precision
+        keep = covered | np.isin(np.array(names), np.array(plan.identifiable))
+        A = J.T @ J / self.setup.noise**2 + precision
         A = A[np.ix_(keep, keep)]
         d = 1.0 / np.sqrt(np.diag(A))  # scaled: lengths and angles side by side
         covariance = d[:, None] * np.linalg.inv(d[:, None] * A * d[None, :]) * d[None, :]
@@ -171,7 +185,7 @@ def search(dataset: Dataset, target: float, *, fleet=None, limit: int | None = N
                 needed = error.needed
                 return None
             plans[count] = plan
-            trials[count] = Trial(count, *predictor.rms(plan))
+            trials[count] = predictor.trial(plan)
             return trials[count].rms <= target
 
         count, low, high = 1, 0, None

@@ -4,6 +4,8 @@ a tighter prior, a refusal and robots simulated with errors drawn from the toler
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -75,14 +77,22 @@ def _tight_prior(robot, path):
 
 
 def test_a_tight_fleet_prior_needs_no_more_readings(sim, found, tmp_path, capsys):
+    """A prior ten times tighter than the tolerances on every robot parameter adds
+    information: on every plan tried its figure is at most the tolerance prior's on the
+    same plan (within the quantile's sampling error), and the count it needs is at most the tolerance prior's."""
     prior = _tight_prior(sim.truth.nominal, tmp_path / "prior.yaml")
     out = tmp_path / "plan.csv"
     assert main(["plan", str(sim.dataset_path), "--target-accuracy", str(TARGET_MM),
-                 "--prior", str(prior), "--out", str(out), "--no-refine"]) == 0
-    text = capsys.readouterr().out
-    assert "fleet" in text and "<- fewest reaching the target" in text
+                 "--prior", str(prior), "--out", str(out), "--no-refine", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    curve = [c for c in summary["curve"] if c["rms_m"] is not None]
+    assert curve
+    for c in curve:  # the quantiles come from 20000 seeded draws: ~0.5% each
+        assert c["rms_m"] <= c["tolerance_rms_m"] * 1.02
     rows = len(read_table(out).text("q1"))
-    assert rows <= found.count
+    assert rows == summary["rows"] <= found.count
+    reached = [c for c in curve if c["count"] == rows]
+    assert reached and reached[0]["rms_m"] <= TARGET_MM * 1e-3
 
 
 def test_an_unreachable_target_is_refused_with_one_line(sim, tmp_path, capsys, monkeypatch):

@@ -145,18 +145,15 @@ def _targeted(dataset, args):
     if args.prior is not None:
         fleet = load_prior(Path(args.prior))
         fleet.check_robot(dataset.robot, args.prior)
-    scale = dataset.units.scale("length")
-    unit = dataset.units.unit_name("length")
-    found = search(dataset, args.target_accuracy * scale, fleet=fleet, seed=args.seed,
-                   refine=not args.no_refine)
-    print(found.curve(scale, unit))
+    target = args.target_accuracy * dataset.units.scale("length")  # [m]
+    found = search(dataset, target, fleet=fleet, seed=args.seed, refine=not args.no_refine)
+    print(found.curve(1e-3, "mm"))  # lengths people read are in mm
     if found.plan is None:
         best = found.best
         raise InputError(
             f"no plan of up to {found.limit} {dataset.kind} placements or readings is "
-            f"predicted to reach {args.target_accuracy:g} {unit} for nine robots in ten: "
-            f"the best, {best.count}, gives {best.rms / scale:.4g} {unit}",
-            where="--target-accuracy")
+            f"predicted to reach {1e3 * target:.4g} mm for nine robots in ten: the best, "
+            f"{best.count}, gives {1e3 * best.rms:.4g} mm", where="--target-accuracy")
     return found.plan, found
 
 
@@ -171,7 +168,8 @@ def _summarise(args: argparse.Namespace, plan, programs, searched=None) -> None:
               **({} if searched is None else
                  {"target_m": searched.target,
                   "curve": [{"count": t.count, "rms_m": t.rms if math.isfinite(t.rms) else None,
-                             "mean_rms_m": t.mean_rms if math.isfinite(t.mean_rms) else None}
+                             "mean_rms_m": t.mean_rms if math.isfinite(t.mean_rms) else None,
+                             "tolerance_rms_m": t.tolerance_rms}
                             for t in searched.trials]}),
               **{name: getattr(plan, key) for key, name in figures.items()
                  if hasattr(plan, key)})
