@@ -79,7 +79,8 @@ def _tight_prior(robot, path):
 def test_a_tight_fleet_prior_needs_no_more_readings(sim, found, tmp_path, capsys):
     """A prior ten times tighter than the tolerances on every robot parameter adds
     information: on every plan tried its figure is at most the tolerance prior's on the
-    same plan (within the quantile's sampling error), and the count it needs is at most the tolerance prior's."""
+    same plan (within the quantile's sampling error), and the count it needs is at most the
+    tolerance prior's."""
     prior = _tight_prior(sim.truth.nominal, tmp_path / "prior.yaml")
     out = tmp_path / "plan.csv"
     assert main(["plan", str(sim.dataset_path), "--target-accuracy", str(TARGET_MM),
@@ -113,6 +114,9 @@ def test_count_and_target_accuracy_are_exclusive(sim, tmp_path):
     with pytest.raises(SystemExit) as stop:
         main(["plan", str(sim.dataset_path), "--out", str(tmp_path / "p.csv")])
     assert stop.value.code == 2
+    assert main(["plan", str(sim.dataset_path), "--count", "9", "--prior", "any.yaml",
+                 "--out", str(tmp_path / "p.csv")]) == 2
+    assert not (tmp_path / "p.csv").exists()
 
 
 def _tolerance_errors(robot, rng):
@@ -132,7 +136,6 @@ def _rigid_rms(a, b):
     return float(np.sqrt(np.mean(np.sum(((a - ca) @ rotation.T + cb - b) ** 2, axis=1))))
 
 
-@pytest.mark.slow
 def test_robots_calibrated_on_the_plan_reach_the_target(found, tmp_path):
     """Five robots with errors drawn from the tolerances, measured (simulated) at the
     planned readings, calibrated: their true work-cell RMS (calibrated against true tracker
