@@ -81,7 +81,7 @@ class TargetSearch:
     def curve(self, scale: float, unit: str) -> str:
         """The curve as lines, figures divided by ``scale`` [m per ``unit``]."""
         lines = [f"count -> predicted work-cell RMS for {round(100 * QUANTILE)}% of robots "
-                 f"(mean-square figure) [{unit}], {self.prior} prior"
+                 f"[{unit}] (root mean square over robots) with the {self.prior} prior"
                  + ("; with the tolerance prior" if self.prior != "tolerance" else "") + ":"]
         for t in self.trials:
             mark = "  <- fewest reaching the target" if t.count == self.count else ""
