@@ -137,10 +137,10 @@ def _rigid_rms(a, b):
 
 
 def test_robots_calibrated_on_the_plan_reach_the_target(found, tmp_path):
-    """Five robots with errors drawn from the tolerances, measured (simulated) at the
+    """Ten robots with errors drawn from the tolerances, measured (simulated) at the
     planned readings, calibrated: their true work-cell RMS (calibrated against true tracker
     target over random configurations, best rigid motion removed) is below the target for
-    at least four (nine in ten predicted)."""
+    at least eight (nine in ten predicted; eight or more of ten with probability 0.93)."""
     robot = industrial_6r()
     kinematics = Kinematics(robot)
     Q_plan = found.plan.joints
@@ -149,7 +149,7 @@ def test_robots_calibrated_on_the_plan_reach_the_target(found, tmp_path):
     setup, _, workspace = runnable_setup(found.plan.setup)
     Q_cell = workspace_samples(setup, workspace, np.random.default_rng(7), 400)
     rms = []
-    for k in range(5):
+    for k in range(10):
         rng = np.random.default_rng(100 + k)
         sim = simulate(robot, "tracker_points", out_dir=tmp_path / f"robot{k}", rows=10,
                        noise=NOISE, geometric_errors=_tolerance_errors(robot, rng),
@@ -173,4 +173,4 @@ def test_robots_calibrated_on_the_plan_reach_the_target(found, tmp_path):
     print(f"{found.count} readings, predicted 90% {1e3 * trial.rms:.4g} mm, root mean square "
           f"{1e3 * trial.mean_rms:.4g} mm; true "
           "work-cell RMS [mm]:", [round(1e3 * r, 4) for r in rms])
-    assert sum(r <= TARGET_MM * 1e-3 for r in rms) >= 4
+    assert sum(r <= TARGET_MM * 1e-3 for r in rms) >= 8
