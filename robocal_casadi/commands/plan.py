@@ -150,6 +150,9 @@ def _targeted(dataset, args):
     print(found.curve(1e-3, "mm"))  # lengths people read are in mm
     if found.plan is None:
         best = found.best
+        if not math.isfinite(best.rms):
+            raise InputError(f"no plan of up to {found.limit} placements or readings "
+                             "identifies the parameters", where="--target-accuracy")
         raise InputError(
             f"no plan of up to {found.limit} {dataset.kind} placements or readings is "
             f"predicted to reach {1e3 * target:.4g} mm for nine robots in ten: the best, "
