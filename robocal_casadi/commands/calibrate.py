@@ -147,13 +147,19 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if result.predicted_accuracy is not None:
         lines += result.predicted_accuracy.sentence(s, units.length).splitlines()
     lines += _refusal_lines(result)
+    left = result.remainder
     if result.unexplained is not None:
         taken = any(is_learned(e.name) for e in result.effects)
-        lines.append("unexplained: " + result.unexplained.sentence(s, units.length)
+        lines.append("unexplained: " + result.unexplained.sentence(s, units.length, left)
                      + ("; the learned map corrects it inside the region it was trained on"
                         if taken else ""))
-    elif diagnosed:
+    elif diagnosed and (left is None or left.is_noise):
         lines.append("unexplained: none (what remains is consistent with noise)")
+    elif diagnosed:
+        lines.append("unexplained: no structure the diagnosis tests for is significant")
+    if left is not None:
+        variables = () if result.unexplained is None else result.unexplained.variables
+        lines.append("remains: " + left.sentence(units, variables))
     return "\n".join(lines)
 
 

@@ -667,6 +667,8 @@ def _write_dataset(out_dir: Path, generated, truth: Truth, units: Units,
                        **generated.dataset_fields(units), data=table_name)
         if com is not None:
             dataset["payload_com"] = [float(v) / units.length_scale for v in com]
+        if truth.noise > 0:  # a simulated instrument's noise is known: declared
+            dataset["instrument_noise"] = truth.noise / units.length_scale
         (staging / "dataset.yaml").write_text(dump_yaml(dataset))
         columns, table = generated.table(nominal, units)
         write_table(staging / table_name, columns, table)
