@@ -69,6 +69,7 @@ from ..common.progress import note, reports_stages, stage
 from ..common.units import display_units
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
+from ..effects.drives import drives_allowing
 from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
@@ -119,6 +120,9 @@ class CandidateTest:
     estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
     label: str = ""  # the candidate as the effect names it (e.g. a coupling's driver)
     outcome: Decision = Decision.NOT_PAYING
+    # refused for a size absurd on its joints' drives only: per joint (1-based) the other
+    # drives that would make it plausible, nearest first (``effects.drives.drives_allowing``)
+    drives: tuple[tuple[int, tuple[str, ...]], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
@@ -532,6 +536,16 @@ class _Verdicts:
     decisions: dict[int, str] = field(default_factory=dict)
     outcomes: dict[int, Decision] = field(default_factory=dict)
     numbers: dict[int, tuple] = field(default_factory=dict)
+    drives: dict[int, tuple[tuple[int, tuple[str, ...]], ...]] = field(default_factory=dict)
+
+    def implausible(self, s, effect: Effect, values: dict[str, float], robot, reason: str,
+                    after_refit: bool = False) -> None:
+        """Record ``s`` as refused for its size (``reason``), with the drives that would
+        allow it."""
+        self.decisions[id(s)] = (f"implausible{' after refit' if after_refit else ''} "
+                                 f"({reason}): stands in for something else")
+        self.outcomes[id(s)] = Decision.IMPLAUSIBLE
+        self.drives[id(s)] = drives_allowing(effect, values, robot)
 
 
 @dataclass(frozen=True)
@@ -685,12 +699,10 @@ def _judge_screens(screening: _Screening, screens: list[_Screen], search: _Searc
         verdicts.decisions[id(s)] = s.decision or screening.verdict(
             s.bic_drop, s.held_out, bic_threshold)
         if not verdicts.decisions[id(s)]:
-            reason = _implausible(search.effect_of[s.candidate], dict(s.values),
-                                  search.big.robot)
+            effect = search.effect_of[s.candidate]
+            reason = _implausible(effect, dict(s.values), search.big.robot)
             if reason:
-                verdicts.decisions[id(s)] = (f"implausible ({reason}): stands in for "
-                                             f"something else")
-                verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+                verdicts.implausible(s, effect, dict(s.values), search.big.robot, reason)
     verdicts.numbers.update({id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out)
                              for s in screens})
 
@@ -729,8 +741,9 @@ def _refit(search: _Search, screening: _Screening, s: _Screen, verdicts: _Verdic
         values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
         reason = _implausible(search.effect_of[s.candidate], values, big.robot)
         if reason:
-            verdict = f"implausible after refit ({reason}): stands in for something else"
-            verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+            verdicts.implausible(s, search.effect_of[s.candidate], values, big.robot, reason,
+                                 after_refit=True)
+            verdict = verdicts.decisions[id(s)]
     if verdict:
         verdicts.decisions[id(s)] = f"rejected after refit: {verdict}"
         return None
@@ -754,7 +767,8 @@ def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
             cv_rms_after=after, decision=verdicts.decisions[id(s)] or "not supported",
             extrapolation=total, worst_region=worst, estimate=s.values,
             label=_label(s.candidate),
-            outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING)))
+            outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING),
+            drives=verdicts.drives.get(id(s), ())))
     return out
 
 

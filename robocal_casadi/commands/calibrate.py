@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from ..calibration import METHODS
+from ..calibration.drive_hints import drive_lines
 from ..calibration.identification import CALIBRATION_LOSSES
 from ..calibration.outliers import rejected_lines
 from ..common.units import Units, display_units
@@ -209,6 +210,7 @@ def _refusal_lines(result: CalibrationResult) -> list[str]:
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
                      f"library does not name): {', '.join(stand_ins)}")
+    lines += drive_lines(result)
     removed = _rejected(result, Decision.TAKEN_OUT)
     if removed:
         lines.append("added, then taken out again (with the later effects in, it no longer "

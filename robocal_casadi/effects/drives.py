@@ -47,3 +47,40 @@ def drive_of(robot, joint: int | None) -> str:
     if robot is None or joint is None or not 1 <= joint <= robot.dof:
         return DEFAULT_DRIVE
     return robot.drive(joint)
+
+
+def _absurd(limits: Plausible, value: float) -> bool:
+    """Whether ``value`` (SI) is absurd for ``limits``: not finite, of the wrong sign, or
+    beyond the largest magnitude (smaller than real robots show is weak, not absurd)."""
+    if not math.isfinite(value):
+        return True
+    if limits.sign and value * limits.sign < 0:
+        return True
+    return abs(value) > limits.maximum
+
+
+def drives_allowing(effect, values: Mapping[str, float], robot
+                    ) -> tuple[tuple[int, tuple[str, ...]], ...]:
+    """Where ``values`` (name -> SI) of ``effect`` are refused only for their size on the
+    drives ``robot`` has: per joint whose drive makes one of them absurd, the other drives
+    under which every value of that joint is plausible, the nearest (smallest largest
+    plausible magnitude) first. Empty when some absurd value has no joint, or no drive
+    would allow it: then it is no matter of the drive."""
+    failing: dict[int, list[str]] = {}
+    for parameter, value in values.items():
+        if not _absurd(effect.plausible_on(parameter, robot), float(value)):
+            continue
+        joint = effect.parameter_joint(parameter)
+        if joint is None or robot is None or not 1 <= joint <= robot.dof:
+            return ()
+        failing.setdefault(joint, []).append(parameter)
+    out = []
+    for joint, absurd in sorted(failing.items()):
+        own = [p for p in values if effect.parameter_joint(p) == joint]
+        allowing = [d for d in DRIVES if d != robot.drive(joint)
+                    and not any(_absurd(effect.plausible(p, d), float(values[p])) for p in own)]
+        if not allowing:
+            return ()
+        allowing.sort(key=lambda d: max(effect.plausible(p, d).maximum for p in absurd))
+        out.append((joint, tuple(allowing)))
+    return tuple(out)

@@ -9,6 +9,7 @@ that did not converge).
 
 from __future__ import annotations
 
+from ..calibration.drive_hints import drive_lines
 from ..results import HELD_OUT_DECIDE, CalibrationResult
 from .accuracy import recommended
 from .effect_views import effect_title
@@ -55,6 +56,7 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     left = remainder_sentence(result)
     if left:
         paragraphs.append(left)
+    paragraphs += [f"Joint {line[len('joint '):]}." for line in drive_lines(result)]
     warnings = _warnings(result)
     if warnings:
         paragraphs.append("Caution: " + " ".join(warnings))
