@@ -200,11 +200,14 @@ def _candidates(problem: Problem, extras: dict) -> tuple[list[_Candidate], list[
     taken = set(problem.unknowns.names)
     candidates: list[_Candidate] = []
     effects: list[Effect] = []
+    readings = [m.dataset.joints for m in problem.models
+                if m.uses_robot and m.dataset.joints is not None]
+    Q = np.vstack(readings) if readings else np.zeros((0, robot.dof))
     for cls in EFFECTS.values():
         groups: dict[str | None, list[Effect]] = {}
         for unit in cls.candidates(robot, extras):
             names = unit.parameter_names()
-            if not names or set(names) & taken:
+            if not names or set(names) & taken or not unit.sampled_well(Q):
                 continue
             column = getattr(unit, "column", None)
             candidates.append(_Candidate(cls.name, unit.joints, names, unit.typical, column, unit))
@@ -833,7 +836,7 @@ def _removal(group: list[_Step], numbers: dict, reason: str, round_: int) -> Can
     first = group[0].candidate
     return CandidateTest(
         round=round_, effect=first.effect,
-        joints=tuple(sorted(j for step in group for j in step.candidate.joints)),
+        joints=tuple(sorted({j for step in group for j in step.candidate.joints})),
         parameters=sum(len(step.kept) for step in group),
         held=tuple(n for step in group for n in step.held), remaining_norm=float("nan"),
         rss_drop=float(numbers["rms_drop"]), bic_drop=float(numbers["bic_drop"]),
@@ -915,7 +918,7 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
     findings = []
     for key, group in groups.items():
         name = key[0]
-        joints = tuple(sorted(j for s in group for j in s.candidate.joints))
+        joints = tuple(sorted({j for s in group for j in s.candidate.joints}))
         kept = [n for s in group for n in s.kept]
         held = [n for s in group for n in s.held]
         values = {n: float(solution.x[problem.unknowns.index(n)]) for n in kept}
