@@ -93,8 +93,8 @@ class Remainder:
                     f"{self.noise_words(s, u)} explains: a noise floor")
         most = "most" if self.lacking >= 0.5 else "part"
         follows = (f"; it varies with {', '.join(variables[:4])}" if variables else
-                   "; no variable the diagnosis tests follows it (motion the robot does not "
-                   "repeat, or an effect nothing here describes)")
+                   "; the diagnosis's tests name no variable it follows (an effect they do "
+                   "not describe, or motion the robot does not repeat)")
         return (f"{self.held_out / s:.3g} {u} remain {where}, about {self.ratio:.2g} times "
                 f"{self.noise_words(s, u)}: the model still lacks {most} of what this robot "
                 f"does{follows}")
