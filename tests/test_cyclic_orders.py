@@ -126,3 +126,44 @@ def test_the_orders_reach_the_effects_file_and_fk(third_harmonic, tmp_path):
     a, b = entry["parameters"]["a3_2"], entry["parameters"]["b3_2"]
     np.testing.assert_allclose(dq, a * np.sin(3 * q[:, 1]) + b * np.cos(3 * q[:, 1]),
                                atol=1e-15)
+
+
+def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monkeypatch):
+    """Joint 2 over half a turn with a third harmonic; the first round is kept from seeing
+    the third order, so a lower-order periodic error takes a sliver of its pattern first.
+    Once the third harmonic is in, that candidate is judged again with it and goes."""
+    from dataclasses import replace
+
+    from robocal_casadi.calibration import diagnosis
+    from robocal_casadi.delivery.results import Decision
+
+    robot = ROBOTS["ur_type"]()
+    joints = list(robot.joints)
+    joints[1] = replace(joints[1], limits=(-math.pi, 0.0))
+    robot = replace(robot, joints=tuple(joints))
+    data = simulate(robot, "tracker_points", out_dir=tmp_path / "d", rows=400, noise=NOISE,
+                    seed=11, geometric_errors={"a2": 3e-4},
+                    effects={"joint_cyclic": {2: (0.0, 0.0, 0.0, 0.0, 2 * THIRD, 0.0)}},
+                    progress=False).load()
+    original = diagnosis._round
+
+    def third_order_hidden_in_round_one(search, rounds, *args):
+        if rounds != 1:
+            return original(search, rounds, *args)
+        hidden = [c for c in search.remaining if c.unit is not None
+                  and getattr(c.unit, "orders", None) == ((3,),)]
+        search.remaining = [c for c in search.remaining if c not in hidden]
+        try:
+            return original(search, rounds, *args)
+        finally:
+            search.remaining += hidden
+
+    monkeypatch.setattr(diagnosis, "_round", third_order_hidden_in_round_one)
+    result = calibrate([data])
+    early = [t for t in result.diagnosis if t.round == 1 and t.outcome is Decision.ADDED]
+    assert early, "no candidate stood in during the first round: the case tests nothing"
+    removed = {t.label for t in result.diagnosis if t.outcome is Decision.TAKEN_OUT}
+    assert {t.label for t in early} <= removed, [t.decision for t in result.diagnosis
+                                                 if t.outcome is not Decision.NOT_PAYING]
+    assert [(e.name, e.joints, set(e.parameters)) for e in result.effects] == \
+        [("joint_cyclic", (2,), {"a3_2", "b3_2"})], [e.summary for e in result.effects]

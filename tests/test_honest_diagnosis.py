@@ -294,8 +294,9 @@ def test_an_effect_that_stood_in_for_a_later_one_is_taken_out(tmp_path, monkeypa
     result = calibrate([data])
     assert sorted(e.name for e in result.effects) == ["joint_compliance", "joint_scale"]
     removed = [t for t in result.diagnosis if t.decision.startswith("removed")]
-    assert [t.effect for t in removed] == ["joint_coupling"]
-    assert "with the other effects in" in removed[0].decision
+    # each coupling candidate added is judged on its own, and each goes
+    assert removed and {t.effect for t in removed} == {"joint_coupling"}
+    assert all("with the other effects in" in t.decision for t in removed)
     assert [t for t in result.diagnosis if t.outcome is Decision.TAKEN_OUT] == removed
     assert any(line.startswith("added, then taken out again") and "joint_coupling" in line
                for line in summary(result).splitlines())

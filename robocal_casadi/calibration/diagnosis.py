@@ -778,25 +778,26 @@ def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
 def _settled(problem: Problem, search: _Search, extras: dict, rounds: int, method: Method,
              loss: Loss, bic_threshold: float
              ) -> tuple[Problem, Solution, tuple[Effect, ...], list[EffectFinding]]:
-    """The final model with the effects added, each paying its way with the others in
-    (those that no longer do taken out, the weakest first, and recorded), and their
-    findings."""
+    """The final model with the effects added, each candidate added paying its way with
+    the others in (those that no longer do taken out, the weakest first, and recorded),
+    and their findings."""
     big, x, free, steps = search.big, search.x, search.free, search.steps
     schemes, n_errors = search.schemes, search.n_errors
-    with stage("diagnosis: the final model and the evidence of each effect"):
+    with stage("diagnosis: the final model and what each added candidate pays"):
         final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
-        groups = _groups(steps)
-        evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
-    # An effect added early can stand in for one found later (a coupling taking part of a
-    # gear-ratio error before the gear ratio is in): each must still pay its way with the
-    # others in the model, or it goes, the weakest first.
-    while len(groups) > 1:
+        evidence = _evidence(final, solution, _each(steps), schemes, n_errors, method, loss)
+    # A candidate added early can stand in for one found later (a coupling taking part of
+    # a gear-ratio error before the gear ratio is in; a low harmonic, or the same effect
+    # on another joint, taking a sliver of a higher harmonic's pattern): each must still
+    # pay its way with the others in the model, or it goes, the weakest first. Judged per
+    # candidate added, so a stand-in of the same effect type as the finding goes too.
+    while len(steps) > 1:
         failing = {key: reason for key, numbers in evidence.items()
                    if (reason := _no_longer_supported(numbers, bic_threshold))}
         if not failing:
             break
         weakest = min(failing, key=lambda key: evidence[key]["bic_drop"])
-        dropped = groups[weakest]
+        dropped = _each(steps)[weakest]
         search.tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
         taken_out = _mask_of(big, [n for step in dropped for n in step.kept])
         x = x.copy()
@@ -806,9 +807,25 @@ def _settled(problem: Problem, search: _Search, extras: dict, rounds: int, metho
         with stage(f"diagnosis: the model without {_label(dropped[0].candidate)}"):
             final, solution, effects = _final(problem, big, x, free, steps, extras, method,
                                               loss)
-            groups = _groups(steps)
+            evidence = _evidence(final, solution, _each(steps), schemes, n_errors, method,
+                                 loss)
+    groups = _groups(steps)
+    if len(groups) != len(steps):  # a type found on several candidates: its evidence whole
+        with stage("diagnosis: the evidence of each effect"):
             evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
+    else:
+        evidence = {key: evidence[_key(group[0])] for key, group in groups.items()}
     return final, solution, effects, _findings(final, solution, groups, evidence)
+
+
+def _key(step: _Step) -> tuple[str, str | None]:
+    """One added candidate's key: its effect type and label (unique among the steps)."""
+    return (step.candidate.effect, _label(step.candidate))
+
+
+def _each(steps: list[_Step]) -> dict[tuple[str, str | None], list[_Step]]:
+    """Each added candidate on its own (``_key``), in the order added."""
+    return {_key(step): [step] for step in steps}
 
 
 def _unless_supported(screen: _Screen, bic_threshold: float) -> _Screen:
