@@ -135,7 +135,7 @@ def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monk
     from dataclasses import replace
 
     from robocal_casadi.calibration import diagnosis
-    from robocal_casadi.delivery.results import Decision
+    from robocal_casadi.results import Decision
 
     robot = ROBOTS["ur_type"]()
     joints = list(robot.joints)
