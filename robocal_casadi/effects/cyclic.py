@@ -96,7 +96,8 @@ class JointCyclic(Effect):
     @classmethod
     def view_caption(cls, torque: bool) -> tuple[str, str]:
         return ("against the joint angle", "the dashed line (right axis) is the fitted reading "
-                "error, the sum over its orders h of ah sin hq + bh cos hq")
+                "error a1 sin q + b1 cos q + a2 sin 2q + b2 cos 2q, or where other orders h "
+                "were found the sum of ah sin hq + bh cos hq over them")
 
     def _terms(self) -> list[tuple[int, int]]:
         """(joint, order) of each sine/cosine pair, in parameter order."""
