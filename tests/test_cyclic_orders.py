@@ -14,7 +14,7 @@ from robocal_casadi.common.fields import load_yaml
 from robocal_casadi.effects.cyclic import MAX_ORDER, JointCyclic
 from robocal_casadi.effects.effect_model import load_effects, save_effects
 from robocal_casadi.errors import InputError
-from robocal_casadi.instruments.simulate import inject_gross_errors, simulate
+from robocal_casadi.instruments.simulate import inject_gross_errors, simulate, simulate_again
 from robocal_casadi.model.examples import ROBOTS
 
 NOISE = 1e-5  # [m] per tracker coordinate
@@ -77,6 +77,9 @@ def test_simulate_takes_more_pairs_for_higher_orders(tmp_path):
                          effects=effects, progress=False)
     truth = load_yaml(simulated.truth_path)["effects"]["joint_cyclic"]
     assert truth["orders"] == {2: [1, 2, 3]} and truth["parameters"]["a3_2"] == 1.5e-4
+    again = simulate_again(simulated.truth_path, out_dir=tmp_path / "again", rows=10, seed=2,
+                           progress=False)
+    assert load_yaml(again.truth_path)["effects"]["joint_cyclic"] == truth
 
 
 @pytest.fixture(scope="module")
