@@ -110,7 +110,8 @@ def remainder_sentence(result: CalibrationResult) -> str | None:
     if left is None or not hasattr(left, "sentence"):
         return None
     found = unexplained_of(result)
-    return f"What remains: {left.sentence(result.units, found.variables if found else ())}."
+    in_mm = Units("mm", result.units.angle)  # the report shows lengths in mm
+    return f"What remains: {left.sentence(in_mm, found.variables if found else ())}."
 
 
 def unexplained_blocks(result: CalibrationResult, units: Units) -> list:
