@@ -61,7 +61,8 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "fleet": ("fleet.py", "--robots", "20", "--rows", "200"),
         "fleet_memory": ("fleet_memory.py", "--robots", "1000"),
         "table_memory": ("table_memory.py",),
-        "delivered": ("delivered.py", "--seeds", "5")}
+        "delivered": ("delivered.py", "--seeds", "5"),
+        "third_harmonic": ("third_harmonic.py",)}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
@@ -761,6 +762,28 @@ def render_fleet(record: dict) -> str:
     return "\n\n".join([lead, body]) + _notes(record)
 
 
+def render_third_harmonic(record: dict) -> str:
+    """A periodic error three times per turn, found or not, from ``third_harmonic.py``."""
+    out = record["output"]
+    lead = (f"**A periodic error three times per turn** ({out['case']}; the same data "
+            f"calibrated with the harmonic orders diagnosis offers, and with the first two "
+            f"only). {_run_line(record)}")
+    rows = ["| orders offered | effects named | third harmonic found / true | held-out RMS "
+            "geometric / final | final over the noise floor | gross errors found / injected "
+            "(same lines) | s |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name, run in ((k, v) for k, v in out.items() if isinstance(v, dict)):
+        third, held, gross = run["third_harmonic_deg"], run["held_out_rms_mm"], \
+            run["gross_errors"]
+        found = "none" if third["found"] is None else f"{third['found']:.4f} deg"
+        effects = "; ".join(e.split(";")[0] for e in run["effects"]) or "none"
+        rows.append(f"| {name} (up to {run['max_order_offered']}) | {effects} | {found} / "
+                    f"{third['true']:.4f} deg | {held['geometric']:.4f} / {held['final']:.4f} "
+                    f"mm | {held['final_over_floor']:.2f}x | {gross['found']} / "
+                    f"{gross['injected']} ({'yes' if gross['same_lines'] else 'no'}) | "
+                    f"{run['seconds']:.0f} |")
+    return "\n\n".join([lead, "\n".join(rows)]) + _notes(record)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
                                                "jobs": render_jobs,
                                                "fleet_memory": render_fleet_memory,
@@ -777,7 +800,8 @@ RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration
                                                "robust": render_robust,
                                                "design_bound": render_design_bound,
                                                "delivered": render_delivered,
-                                               "fleet": render_fleet}
+                                               "fleet": render_fleet,
+                                               "third_harmonic": render_third_harmonic}
 
 
 def render(records: dict[str, dict]) -> str:

@@ -17,6 +17,7 @@ from .common.units import Units, display_units, to_file_units
 from .model.robot import Robot
 
 if TYPE_CHECKING:
+    from .calibration.remainder import Remainder
     from .effects.base import Effect
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
@@ -362,13 +363,18 @@ class Unexplained:
         return {"rms": self.rms / length_scale, "unit": unit, "share": self.share,
                 "variables": list(self.variables)}
 
-    def sentence(self, length_scale: float, unit: str) -> str:
-        """One sentence for a person, in the file's length unit."""
+    def sentence(self, length_scale: float, unit: str, remainder: Remainder | None = None
+                 ) -> str:
+        """One sentence for a person, in the file's length unit; with ``remainder``, what
+        would remain is called a noise floor only where the instrument's noise explains it."""
         pairs = [f"{p} with {v}" for v, p in zip(self.variables, self.parameters)]
+        floor = (f"the noise floor is about {self.noise_floor / length_scale:.3g} {unit}"
+                 if remainder is None else
+                 remainder.floor_words(self.noise_floor, length_scale, unit))
         return (f"a structured residual of {self.rms / length_scale:.3g} {unit} RMS "
                 f"({100 * self.share:.3g}% of what remains) follows {', '.join(self.variables)}"
                 f" (it behaves like {'; '.join(pairs)}); no effect in the library explains "
-                f"it; the noise floor is about {self.noise_floor / length_scale:.3g} {unit}")
+                f"it; {floor}")
 
 
 
@@ -786,6 +792,7 @@ class CalibrationResult:
     rejected: tuple[RejectedReading, ...] = ()  # units of data set aside as gross errors
     validation_all: RmsSummary | None = None  # held-out RMS over every reading (``validation``:
     # over the readings kept)
+    remainder: Remainder | None = None  # what remains beside the instrument's noise
 
     @property
     def warning(self) -> str:
@@ -844,8 +851,7 @@ class CalibrationResult:
                          if isinstance(v, (int, float, str, bool))}
         out["recommended"] = self.recommended
         out["parameters_geometric"] = [p.to_json(units) for p in self.parameters_geometric]
-        out["unexplained"] = (None if self.unexplained is None else
-                              self.unexplained.to_json(units.length_scale, units.length))
+        out["unexplained"] = self._unexplained_json(units)
         if self.selection:
             out["selection"] = {"dropped": {k: list(v) for k, v in self.selection.items()}}
         if self.profile is not None:
@@ -857,6 +863,19 @@ class CalibrationResult:
         out["predicted_accuracy"] = (None if self.predicted_accuracy is None else
                                      self.predicted_accuracy.to_json(units.length_scale,
                                                                      units.length))
+        return out
+
+    def _unexplained_json(self, units: Units) -> dict | None:
+        """The structure found (``rms``, ``share``, ``variables``; null and empty when none)
+        beside what remains and the instrument's noise; None with neither."""
+        if self.unexplained is None and self.remainder is None:
+            return None
+        out: dict[str, Any] = {"rms": None, "unit": units.length, "share": None,
+                               "variables": []}
+        if self.unexplained is not None:
+            out = self.unexplained.to_json(units.length_scale, units.length)
+        if self.remainder is not None:
+            out.update(self.remainder.to_json(units))
         return out
 
     def _validation_json(self, validation: RmsSummary, units: Units) -> dict:
@@ -886,6 +905,9 @@ class CalibrationResult:
             entry.update(self.prior.entry(parameter.name, units))
         return entry
 
+    def _variables(self) -> tuple[str, ...]:
+        return () if self.unexplained is None else self.unexplained.variables
+
     def __repr__(self) -> str:
         u = self.units
         s = u.length_scale
@@ -905,7 +927,10 @@ class CalibrationResult:
             lines.append(f"  effect {effect.name} joints {list(effect.joints)}: {effect.summary}")
         lines.append(f"  recommended model: {self.recommended}")
         if self.unexplained is not None:
-            lines.append("  unexplained: " + self.unexplained.sentence(s, u.length))
+            lines.append("  unexplained: " + self.unexplained.sentence(s, u.length,
+                                                                    self.remainder))
+        if self.remainder is not None:
+            lines.append("  remains: " + self.remainder.sentence(u, self._variables()))
         return "\n".join(lines)
 
 

@@ -7,8 +7,14 @@ from dataclasses import replace
 
 import pytest
 
+from robocal_casadi.calibration import calibrate
+from robocal_casadi.calibration.drive_hints import drive_lines
+from robocal_casadi.commands.calibrate import summary
 from robocal_casadi.effects import EFFECTS
+from robocal_casadi.effects.drives import drives_allowing
 from robocal_casadi.errors import InputError
+from robocal_casadi.instruments.datasets import load_dataset
+from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.robot import DRIVES, load_robot, save_robot
 
@@ -85,3 +91,36 @@ def test_backlash_is_looked_for_on_geared_joints_only():
                                                     "belt", "direct"])
     units = EFFECTS["backlash"].candidates(robot, {})
     assert sorted(j for u in units for j in u.joints) == [2, 3]
+
+
+def test_the_drives_that_allow_a_size_nearest_first():
+    robot = ROBOTS["industrial_6r"]()
+    scale = EFFECTS["joint_scale"]((2,))
+    # 0.8 %: beyond a gear train's 0.2 %, within a belt's 1 % and a cable's 3 %
+    assert drives_allowing(scale, {"s2": 0.008}, robot) == ((2, ("belt", "cable")),)
+    assert drives_allowing(scale, {"s2": 0.001}, robot) == ()  # plausible as it is
+    assert drives_allowing(scale, {"s2": 0.05}, robot) == ()  # no drive shows 5 %
+    cabled = with_drives(robot, ["gear", "cable"] + ["gear"] * 4)
+    assert drives_allowing(scale, {"s2": 0.02}, cabled) == ()
+
+
+def test_a_size_refused_on_the_default_gear_points_to_the_drive(tmp_path):
+    """A belt-driven joint 2 whose ratio is 0.8 % off, in a robot file without drive:
+    refused on the default gear, with the line that allows it; declared, found."""
+    robot = ROBOTS["industrial_6r"]()
+    simulated = simulate(robot, "tracker_points", out_dir=tmp_path / "d", rows=200,
+                         noise=1e-5, seed=5, geometric_errors={"a2": 3e-4},
+                         effects={"joint_scale": {2: 0.008}}, progress=False)
+    result = calibrate([simulated.load()])
+    assert "joint_scale" not in [e.name for e in result.effects]
+    hints = drive_lines(result)
+    ours = [line for line in hints if line.startswith("joint 2:")]
+    assert len(ours) == 1 and "joint_scale[2]" in ours[0] and "`drive: belt`" in ours[0], hints
+    assert summary(result).count("joint 2: joint_scale[2]") == 1  # said once
+    assert result.robot_calibrated.drive(2) == "gear"  # never switched silently
+    belted = with_drives(robot, ["gear", "belt"] + ["gear"] * 4)
+    declared = calibrate([load_dataset(simulated.dataset_path, robot=belted)])
+    found = [e for e in declared.effects if e.name == "joint_scale"]
+    assert len(found) == 1 and found[0].joints == (2,)
+    assert found[0].parameters["s2"] == pytest.approx(0.008, rel=0.1)
+    assert not [line for line in drive_lines(declared) if line.startswith("joint 2:")]

@@ -69,6 +69,7 @@ from ..common.progress import note, reports_stages, stage
 from ..common.units import display_units
 from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
+from ..effects.drives import drives_allowing
 from ..results import Decision, EffectFinding, Identifiability
 from .folds import FoldGrams, FoldScheme, fold_schemes
 from .problem import Problem
@@ -119,6 +120,9 @@ class CandidateTest:
     estimate: tuple[tuple[str, float], ...] = ()  # screened parameter values (SI)
     label: str = ""  # the candidate as the effect names it (e.g. a coupling's driver)
     outcome: Decision = Decision.NOT_PAYING
+    # refused for a size absurd on its joints' drives only: per joint (1-based) the other
+    # drives that would make it plausible, nearest first (``effects.drives.drives_allowing``)
+    drives: tuple[tuple[int, tuple[str, ...]], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
@@ -196,11 +200,14 @@ def _candidates(problem: Problem, extras: dict) -> tuple[list[_Candidate], list[
     taken = set(problem.unknowns.names)
     candidates: list[_Candidate] = []
     effects: list[Effect] = []
+    readings = [m.dataset.joints for m in problem.models
+                if m.uses_robot and m.dataset.joints is not None]
+    Q = np.vstack(readings) if readings else np.zeros((0, robot.dof))
     for cls in EFFECTS.values():
         groups: dict[str | None, list[Effect]] = {}
         for unit in cls.candidates(robot, extras):
             names = unit.parameter_names()
-            if not names or set(names) & taken:
+            if not names or set(names) & taken or not unit.sampled_well(Q):
                 continue
             column = getattr(unit, "column", None)
             candidates.append(_Candidate(cls.name, unit.joints, names, unit.typical, column, unit))
@@ -532,6 +539,16 @@ class _Verdicts:
     decisions: dict[int, str] = field(default_factory=dict)
     outcomes: dict[int, Decision] = field(default_factory=dict)
     numbers: dict[int, tuple] = field(default_factory=dict)
+    drives: dict[int, tuple[tuple[int, tuple[str, ...]], ...]] = field(default_factory=dict)
+
+    def implausible(self, s, effect: Effect, values: dict[str, float], robot, reason: str,
+                    after_refit: bool = False) -> None:
+        """Record ``s`` as refused for its size (``reason``), with the drives that would
+        allow it."""
+        self.decisions[id(s)] = (f"implausible{' after refit' if after_refit else ''} "
+                                 f"({reason}): stands in for something else")
+        self.outcomes[id(s)] = Decision.IMPLAUSIBLE
+        self.drives[id(s)] = drives_allowing(effect, values, robot)
 
 
 @dataclass(frozen=True)
@@ -685,12 +702,10 @@ def _judge_screens(screening: _Screening, screens: list[_Screen], search: _Searc
         verdicts.decisions[id(s)] = s.decision or screening.verdict(
             s.bic_drop, s.held_out, bic_threshold)
         if not verdicts.decisions[id(s)]:
-            reason = _implausible(search.effect_of[s.candidate], dict(s.values),
-                                  search.big.robot)
+            effect = search.effect_of[s.candidate]
+            reason = _implausible(effect, dict(s.values), search.big.robot)
             if reason:
-                verdicts.decisions[id(s)] = (f"implausible ({reason}): stands in for "
-                                             f"something else")
-                verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+                verdicts.implausible(s, effect, dict(s.values), search.big.robot, reason)
     verdicts.numbers.update({id(s): (s.rss_drop, s.bic_drop, s.cv_after, s.held_out)
                              for s in screens})
 
@@ -729,8 +744,9 @@ def _refit(search: _Search, screening: _Screening, s: _Screen, verdicts: _Verdic
         values = {n: float(solution.x[big.unknowns.index(n)]) for n in s.kept}
         reason = _implausible(search.effect_of[s.candidate], values, big.robot)
         if reason:
-            verdict = f"implausible after refit ({reason}): stands in for something else"
-            verdicts.outcomes[id(s)] = Decision.IMPLAUSIBLE
+            verdicts.implausible(s, search.effect_of[s.candidate], values, big.robot, reason,
+                                 after_refit=True)
+            verdict = verdicts.decisions[id(s)]
     if verdict:
         verdicts.decisions[id(s)] = f"rejected after refit: {verdict}"
         return None
@@ -754,32 +770,34 @@ def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
             cv_rms_after=after, decision=verdicts.decisions[id(s)] or "not supported",
             extrapolation=total, worst_region=worst, estimate=s.values,
             label=_label(s.candidate),
-            outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING)))
+            outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING),
+            drives=verdicts.drives.get(id(s), ())))
     return out
 
 
 def _settled(problem: Problem, search: _Search, extras: dict, rounds: int, method: Method,
              loss: Loss, bic_threshold: float
              ) -> tuple[Problem, Solution, tuple[Effect, ...], list[EffectFinding]]:
-    """The final model with the effects added, each paying its way with the others in
-    (those that no longer do taken out, the weakest first, and recorded), and their
-    findings."""
+    """The final model with the effects added, each candidate added paying its way with
+    the others in (those that no longer do taken out, the weakest first, and recorded),
+    and their findings."""
     big, x, free, steps = search.big, search.x, search.free, search.steps
     schemes, n_errors = search.schemes, search.n_errors
-    with stage("diagnosis: the final model and the evidence of each effect"):
+    with stage("diagnosis: the final model and what each added candidate pays"):
         final, solution, effects = _final(problem, big, x, free, steps, extras, method, loss)
-        groups = _groups(steps)
-        evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
-    # An effect added early can stand in for one found later (a coupling taking part of a
-    # gear-ratio error before the gear ratio is in): each must still pay its way with the
-    # others in the model, or it goes, the weakest first.
-    while len(groups) > 1:
+        evidence = _evidence(final, solution, _each(steps), schemes, n_errors, method, loss)
+    # A candidate added early can stand in for one found later (a coupling taking part of
+    # a gear-ratio error before the gear ratio is in; a low harmonic, or the same effect
+    # on another joint, taking a sliver of a higher harmonic's pattern): each must still
+    # pay its way with the others in the model, or it goes, the weakest first. Judged per
+    # candidate added, so a stand-in of the same effect type as the finding goes too.
+    while len(steps) > 1:
         failing = {key: reason for key, numbers in evidence.items()
                    if (reason := _no_longer_supported(numbers, bic_threshold))}
         if not failing:
             break
         weakest = min(failing, key=lambda key: evidence[key]["bic_drop"])
-        dropped = groups[weakest]
+        dropped = _each(steps)[weakest]
         search.tested.append(_removal(dropped, evidence[weakest], failing[weakest], rounds + 1))
         taken_out = _mask_of(big, [n for step in dropped for n in step.kept])
         x = x.copy()
@@ -789,9 +807,25 @@ def _settled(problem: Problem, search: _Search, extras: dict, rounds: int, metho
         with stage(f"diagnosis: the model without {_label(dropped[0].candidate)}"):
             final, solution, effects = _final(problem, big, x, free, steps, extras, method,
                                               loss)
-            groups = _groups(steps)
+            evidence = _evidence(final, solution, _each(steps), schemes, n_errors, method,
+                                 loss)
+    groups = _groups(steps)
+    if len(groups) != len(steps):  # a type found on several candidates: its evidence whole
+        with stage("diagnosis: the evidence of each effect"):
             evidence = _evidence(final, solution, groups, schemes, n_errors, method, loss)
+    else:
+        evidence = {key: evidence[_key(group[0])] for key, group in groups.items()}
     return final, solution, effects, _findings(final, solution, groups, evidence)
+
+
+def _key(step: _Step) -> tuple[str, str | None]:
+    """One added candidate's key: its effect type and label (unique among the steps)."""
+    return (step.candidate.effect, _label(step.candidate))
+
+
+def _each(steps: list[_Step]) -> dict[tuple[str, str | None], list[_Step]]:
+    """Each added candidate on its own (``_key``), in the order added."""
+    return {_key(step): [step] for step in steps}
 
 
 def _unless_supported(screen: _Screen, bic_threshold: float) -> _Screen:
@@ -819,7 +853,7 @@ def _removal(group: list[_Step], numbers: dict, reason: str, round_: int) -> Can
     first = group[0].candidate
     return CandidateTest(
         round=round_, effect=first.effect,
-        joints=tuple(sorted(j for step in group for j in step.candidate.joints)),
+        joints=tuple(sorted({j for step in group for j in step.candidate.joints})),
         parameters=sum(len(step.kept) for step in group),
         held=tuple(n for step in group for n in step.held), remaining_norm=float("nan"),
         rss_drop=float(numbers["rms_drop"]), bic_drop=float(numbers["bic_drop"]),
@@ -901,7 +935,7 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
     findings = []
     for key, group in groups.items():
         name = key[0]
-        joints = tuple(sorted(j for s in group for j in s.candidate.joints))
+        joints = tuple(sorted({j for s in group for j in s.candidate.joints}))
         kept = [n for s in group for n in s.kept]
         held = [n for s in group for n in s.held]
         values = {n: float(solution.x[problem.unknowns.index(n)]) for n in kept}

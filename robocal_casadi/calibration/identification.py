@@ -45,7 +45,7 @@ from ..results import (
     RmsSummary,
     SphereEstimate,
 )
-from . import diagnosis, learned, outliers, unexplained
+from . import diagnosis, learned, outliers, remainder, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
@@ -426,6 +426,7 @@ def _result(request: _Request, nominal: NominalFit, geometric: GeometricFit,
     recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
     chosen = final.solution if recommended == "final" else geometric.solution
     ours = _final_estimates(final, std)
+    left = _remainder(request, final, held_out)
     covariance_names, covariance = _geometric_covariance(problem, geometric.solution)
     return CalibrationResult(
         datasets=tuple(d.path.name for d in nominal.datasets), robot_nominal=robot,
@@ -450,7 +451,24 @@ def _result(request: _Request, nominal: NominalFit, geometric: GeometricFit,
         notes=geometric.notes + notes,
         mounted_geometric=_mounted_values(problem, geometric.solution.x),
         covariance_names=covariance_names, covariance=covariance,
-        rejected=rejected + held_out.rejected, validation_all=held_out.all)
+        rejected=rejected + held_out.rejected, validation_all=held_out.all, remainder=left)
+
+
+def _remainder(request: _Request, final: DiagnosedFit, held_out: Validation
+               ) -> remainder.Remainder | None:
+    """What the final model leaves beside the instruments' noise: on the validation data
+    when given, else held out of the fit data (a learned map's own folds when one was
+    added)."""
+    maps = [f for f in final.added if "cv_rms_after" in f.evidence]
+    cv = float(maps[-1].evidence["cv_rms_after"]) if maps else None
+    with stage("remainder"):
+        if held_out.summary is not None:
+            return remainder.measure(final.problem, final.solution.x, final.solution.free,
+                                     validation_models=models_for(request.validation,
+                                                                  "validation:"),
+                                     validation_rms=held_out.summary.rms_final)
+        return remainder.measure(final.problem, final.solution.x, final.solution.free,
+                                 cv_rms=cv)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from ..calibration import METHODS
+from ..calibration.drive_hints import drive_lines
 from ..calibration.identification import CALIBRATION_LOSSES
 from ..calibration.outliers import rejected_lines
 from ..common.units import Units, display_units
@@ -147,13 +148,19 @@ def summary(result: CalibrationResult, *, diagnosed: bool = True) -> str:
     if result.predicted_accuracy is not None:
         lines += result.predicted_accuracy.sentence(s, units.length).splitlines()
     lines += _refusal_lines(result)
+    left = result.remainder
     if result.unexplained is not None:
         taken = any(is_learned(e.name) for e in result.effects)
-        lines.append("unexplained: " + result.unexplained.sentence(s, units.length)
+        lines.append("unexplained: " + result.unexplained.sentence(s, units.length, left)
                      + ("; the learned map corrects it inside the region it was trained on"
                         if taken else ""))
-    elif diagnosed:
+    elif diagnosed and (left is None or left.is_noise):
         lines.append("unexplained: none (what remains is consistent with noise)")
+    elif diagnosed:
+        lines.append("unexplained: no structure the diagnosis tests for is significant")
+    if left is not None:
+        variables = () if result.unexplained is None else result.unexplained.variables
+        lines.append("remains: " + left.sentence(units, variables))
     return "\n".join(lines)
 
 
@@ -203,6 +210,7 @@ def _refusal_lines(result: CalibrationResult) -> list[str]:
     if stand_ins:
         lines.append("not added, sizes no real robot shows (they stand in for something the "
                      f"library does not name): {', '.join(stand_ins)}")
+    lines += drive_lines(result)
     removed = _rejected(result, Decision.TAKEN_OUT)
     if removed:
         lines.append("added, then taken out again (with the later effects in, it no longer "

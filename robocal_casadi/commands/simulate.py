@@ -188,8 +188,10 @@ def parse_effect_options(options: list[str], robot: Robot) -> dict:
         for item in spec.split(","):
             key_text, _, value_text = item.partition("=")
             key = cls.simulation_key(key_text, robot, where)
-            values = _floats(value_text.replace("/", ","), width, where) if value_text else \
+            values = _floats(value_text.replace("/", ","), None, where) if value_text else \
                 list(cls.simulation_default)
+            if not cls.accepts_simulation_values(len(values)):
+                raise InputError(f"expected {width} numbers, got {value_text!r}", where=where)
             entries[key] = values[0] if width == 1 else tuple(values)
     return effects
 

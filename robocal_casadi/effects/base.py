@@ -457,6 +457,11 @@ class Effect(ABC):
                      if (robot.joints[j - 1].revolute or not cls.revolute_only)
                      and robot.drive(j) in cls.drives)
 
+    def sampled_well(self, Q: np.ndarray) -> bool:
+        """Whether joint readings ``Q`` (N x dof) [rad or m] sample the joints densely
+        enough for this candidate to be told from others (all do by default)."""
+        return True
+
     @classmethod
     def merged(cls, units: Sequence[Effect], robot: Robot,
                extras: Mapping[str, Any]) -> Effect:
@@ -518,6 +523,18 @@ class Effect(ABC):
     def for_simulation(cls, keys: Sequence) -> Effect:
         """The effect holding the simulated entries ``keys`` (see ``simulation_key``)."""
         return cls(tuple(int(k) for k in keys))
+
+    @classmethod
+    def accepts_simulation_values(cls, count: int) -> bool:
+        """Whether one simulated entry may give ``count`` values (``simulation_default``'s
+        number, unless the effect takes more)."""
+        return count == len(cls.simulation_default)
+
+    @classmethod
+    def for_simulated_values(cls, keys: Sequence, widths: Sequence[int]) -> Effect:
+        """The effect holding the simulated entries ``keys`` with ``widths`` values each
+        (``for_simulation`` unless the number of values changes the effect)."""
+        return cls.for_simulation(keys)
 
     @classmethod
     def simulation_syntax(cls) -> str:

@@ -47,3 +47,43 @@ def drive_of(robot, joint: int | None) -> str:
     if robot is None or joint is None or not 1 <= joint <= robot.dof:
         return DEFAULT_DRIVE
     return robot.drive(joint)
+
+
+def _absurd_joints(effect, values: Mapping[str, float], robot) -> set[int | None]:
+    """The joints of the estimates ``effect.implausibility`` refuses on ``robot``."""
+    return {effect.parameter_joint(f.parameter) for f in effect.check_plausible(values, robot)
+            if f.value == 0 or abs(f.value) > f.plausible.minimum}
+
+
+def with_drive(robot, joint: int, drive: str):
+    """``robot`` with joint ``joint``'s (1-based) drive set to ``drive``."""
+    joints = list(robot.joints)
+    joints[joint - 1] = replace(joints[joint - 1], drive=drive)
+    return replace(robot, joints=tuple(joints))
+
+
+def drives_allowing(effect, values: Mapping[str, float], robot
+                    ) -> tuple[tuple[int, tuple[str, ...]], ...]:
+    """Where ``values`` (name -> SI) of ``effect`` are refused only for their size on the
+    drives ``robot`` has: per joint whose drive makes one of them absurd, the other drives
+    under which every value of that joint is plausible, the nearest (smallest largest
+    plausible magnitude) first. Empty when some absurd value has no joint, or no drive
+    would allow it: then it is no matter of the drive."""
+    if robot is None:
+        return ()
+    failing = _absurd_joints(effect, values, robot)
+    if not failing or None in failing:
+        return ()
+    out = []
+    for joint in sorted(j for j in failing if j is not None):
+        if not 1 <= joint <= robot.dof:
+            return ()
+        own = [p for p in values if effect.parameter_joint(p) == joint]
+        allowing = [d for d in DRIVES if d != robot.drive(joint)
+                    and joint not in _absurd_joints(effect, values,
+                                                    with_drive(robot, joint, d))]
+        if not allowing:
+            return ()
+        allowing.sort(key=lambda d: max(effect.plausible(p, d).maximum for p in own))
+        out.append((joint, tuple(allowing)))
+    return tuple(out)

@@ -34,10 +34,11 @@ from ..common.units import Units
 from ..effects.motion import with_directions
 from ..errors import InputError
 from ..model.robot import Robot, load_robot
+from .noise import InstrumentNoise
 
 QUATERNION_TOLERANCE = 1e-6
 COMMON_KEYS = ("kind", "robot", "units", "data", "payload_com", "planning", "report",
-               "base_link", "tip_link", "station", "work_cell")
+               "base_link", "tip_link", "station", "work_cell", "instrument_noise")
 MAX_STATION_CHARACTERS = 200
 
 
@@ -69,6 +70,9 @@ class DatasetBase:
     # file declares them (``work_cell``); the predicted accuracy is stated over them
     # (or the text ``"measured"``: the poses the fit data were measured in)
     work_cell: tuple[tuple[float, float] | None, ...] | str | None = None
+    # the instrument's own noise as the file declares it (``instruments.noise``); None:
+    # the measurement model's typical value stands
+    instrument_noise: InstrumentNoise | None = None
 
     def line(self, reading: int) -> int:
         """The data table's line (1-based, header on line 1) of reading ``reading``

@@ -35,7 +35,7 @@ from ..common.table import Table, read_table
 from ..common.units import Units, units_of
 from ..errors import InputError
 from ..model.robot import Robot, load_robot
-from . import Instrument, instrument
+from . import Instrument, instrument, noise
 from .artifact.reader import ArtifactTouches
 from .dataset import (
     COMMON_KEYS,
@@ -83,7 +83,10 @@ def load_dataset(path: str | Path, *, require_data: bool = True,
     common = dict(path=path, kind=record.kind, robot=robot, robot_path=robot_path, units=units,
                   data_path=data_path, payload_com=_payload_com(content, units, path),
                   raw=content, lines=lines, station=station_name(content.get("station"), path),
-                  work_cell=work_cell_of(content.get("work_cell"), robot, units, path))
+                  work_cell=work_cell_of(content.get("work_cell"), robot, units, path),
+                  instrument_noise=noise.declared(
+                      content.get("instrument_noise"), units,
+                      grows_with_range=record.model.noise_grows_with_range, path=path))
     return record.read(content, table, common)
 
 

@@ -171,7 +171,9 @@ def true_effects_of(truth: HeldTruth, robot: Robot) -> tuple[tuple[Any, dict[str
             keys = [(int(j), int(k)) for j, k in drivers.items()]
         else:
             keys = [int(j) for j in entry.get("joints") or []]
-        effect = cls.for_simulation(keys)
+        orders = entry.get("orders")  # a periodic error's harmonics, per joint
+        effect = cls.for_simulation(keys) if not isinstance(orders, dict) else \
+            cls.create(keys, orders=[list(orders.get(j, ())) for j in keys])
         given = entry["parameters"]
         if set(given) != set(effect.parameter_names()):
             raise InputError(f"expected the parameters {list(effect.parameter_names())}, got "

@@ -38,6 +38,7 @@ import numpy as np
 from ..model.parameters import ParameterRegistry
 from ..results import ErrorTerm
 from .dataset import dataset_rows
+from .noise import InstrumentNoise
 
 PointsFunction = Callable[[ca.MX], ca.MX]
 
@@ -113,6 +114,13 @@ class MeasurementModel(metaclass=_Immutable):
     sphere: ClassVar[bool] = False
     """True: the placement is a sphere's centre [m] (base frame) of radius
     ``dataset.radius``; the report and ``result.json`` list the fitted spheres."""
+    instrument_name: ClassVar[str] = "instrument"
+    """The instrument in a person's words (``the tracker's noise``)."""
+    default_noise: ClassVar[tuple[float, float]] = (1e-5, 0.0)
+    """A typical instrument's noise where the dataset declares none: one reading's
+    standard deviation per coordinate ``(a [m], b_per_m [m/m])`` (``instruments.noise``)."""
+    noise_grows_with_range: ClassVar[bool] = False
+    """True: the dataset may declare ``instrument_noise: {a, b_per_m}`` (a tracker)."""
 
     def __init__(self, dataset, label: str):
         self.dataset = dataset
@@ -211,6 +219,20 @@ class MeasurementModel(metaclass=_Immutable):
         distances between sockets located by repeated touches), so they carry no reading
         noise of their own. Default: none."""
         return np.zeros(self.residual_size(), dtype=bool)
+
+    @property
+    def instrument_noise(self) -> InstrumentNoise:
+        """The noise the dataset declares, else the instrument's typical value."""
+        given = getattr(self.dataset, "instrument_noise", None)
+        return given if given is not None else InstrumentNoise(*self.default_noise)
+
+    def entry_noise(self) -> np.ndarray:
+        """The standard deviation [m] of each residual entry that the instrument's noise
+        alone gives: ``a`` on each entry that holds a reading, zero on the certified
+        ones. Models whose noise grows with range say more."""
+        out = np.full(self.residual_size(), self.instrument_noise.a)
+        out[self.certified_entries()] = 0.0
+        return out
 
     def residual_groups(self) -> np.ndarray:
         """For each residual entry, the unit of data it belongs to (-1: none).

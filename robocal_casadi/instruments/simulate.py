@@ -230,7 +230,8 @@ def _entry_values(spec, cls, where: str) -> tuple[float, ...]:
                                                                               dtype=float))
     except (TypeError, ValueError):
         values = None
-    if values is None or values.shape != (width,) or not np.all(np.isfinite(values)):
+    if values is None or values.ndim != 1 or not cls.accepts_simulation_values(len(values)) \
+            or not np.all(np.isfinite(values)):
         raise InputError(f"expected {width} finite number(s), got {spec!r}", where=where)
     return tuple(float(v) for v in values)
 
@@ -240,7 +241,8 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
 
     ``spec`` per joint effect: ``{joint: value(s)}`` with as many values as the effect's
     ``simulation_default`` (``joint_compliance`` ``{j: c}``, ``joint_cyclic``
-    ``{j: (a1, b1, a2, b2)}``, ``joint_scale`` ``{j: s}``, ``backlash`` ``{j: b}``);
+    ``{j: (a1, b1, a2, b2)}``, more sine/cosine pairs for higher orders, ``joint_scale``
+    ``{j: s}``, ``backlash`` ``{j: b}``);
     ``joint_coupling`` ``{(j, k): (s, c)}`` or ``{"j@k": (s, c)}`` (joint j driven by k);
     ``thermal_drift`` a coefficient ``k`` [1/K] (or ``{"k_T": k}``).
     """
@@ -265,15 +267,17 @@ def parse_effects(effects: Mapping | None, robot: Robot) -> TrueEffects:
         else:
             if not isinstance(spec, Mapping):
                 raise InputError(f"expected a mapping joint -> value, got {spec!r}", where=where)
-            keys, values = [], {}
+            keys, values, widths = [], {}, []
             for key, value in spec.items():
                 key = cls.simulation_key(key, robot, where)
-                unit = cls.for_simulation((key,))
-                values.update(unit.simulation_values(_entry_values(value, cls, where)))
+                given = _entry_values(value, cls, where)
+                unit = cls.for_simulated_values((key,), (len(given),))
+                values.update(unit.simulation_values(given))
                 keys.append(key)
+                widths.append(len(given))
             if not keys:
                 continue
-            effect = cls.for_simulation(keys)
+            effect = cls.for_simulated_values(keys, widths)
         effect.check_simulation(robot, values)
         entries.append((effect, values))
     order = list(EFFECTS)
@@ -667,6 +671,8 @@ def _write_dataset(out_dir: Path, generated, truth: Truth, units: Units,
                        **generated.dataset_fields(units), data=table_name)
         if com is not None:
             dataset["payload_com"] = [float(v) / units.length_scale for v in com]
+        if truth.noise > 0:  # a simulated instrument's noise is known: declared
+            dataset["instrument_noise"] = truth.noise / units.length_scale
         (staging / "dataset.yaml").write_text(dump_yaml(dataset))
         columns, table = generated.table(nominal, units)
         write_table(staging / table_name, columns, table)

@@ -9,10 +9,12 @@ that did not converge).
 
 from __future__ import annotations
 
+from ..calibration.drive_hints import drive_lines
 from ..results import HELD_OUT_DECIDE, CalibrationResult
 from .accuracy import recommended
 from .effect_views import effect_title
 from .numbers import ErrorStats, error_noun, format_number, pooled
+from .unexplained import remainder_sentence
 from .unexplained import sentence as unexplained_sentence
 
 OVERFIT_RATIO = 2.0  # held-out RMS above this multiple of the fit RMS earns a warning
@@ -51,6 +53,10 @@ def conclusion_paragraphs(result: CalibrationResult) -> list[str]:
     unexplained = unexplained_sentence(result)
     if unexplained:
         paragraphs.append(unexplained)
+    left = remainder_sentence(result)
+    if left:
+        paragraphs.append(left)
+    paragraphs += [f"Joint {line[len('joint '):]}." for line in drive_lines(result)]
     warnings = _warnings(result)
     if warnings:
         paragraphs.append("Caution: " + " ".join(warnings))

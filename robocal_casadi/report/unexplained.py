@@ -103,13 +103,28 @@ def sentence(result: CalibrationResult) -> str | None:
             f"effect in the model accounts for it; see Error before and after.")
 
 
-def unexplained_blocks(result: CalibrationResult, units: Units) -> list:
-    """A paragraph and a plot of the calibrated error against the strongest variable."""
+def remainder_sentence(result: CalibrationResult) -> str | None:
+    """What remains beside the instrument's noise, in one sentence (``Remainder``), or
+    None when the result does not carry it."""
+    left = getattr(result, "remainder", None)
+    if left is None or not hasattr(left, "sentence"):
+        return None
     found = unexplained_of(result)
+    in_mm = Units("mm", result.units.angle)  # the report shows lengths in mm
+    return f"What remains: {left.sentence(in_mm, found.variables if found else ())}."
+
+
+def unexplained_blocks(result: CalibrationResult, units: Units) -> list:
+    """A paragraph and a plot of the calibrated error against the strongest variable,
+    and what remains beside the instrument's noise."""
+    found = unexplained_of(result)
+    left = remainder_sentence(result)
     if found is None:
-        return []
+        return [Paragraph("What remains", "heading"), Paragraph(left)] if left else []
     blocks: list = [Paragraph("What the model does not explain", "heading"),
                     Paragraph(sentence(result) or "")]
+    if left:
+        blocks.append(Paragraph(left))
     if not found.variables:
         return blocks
     role, residuals = judged_on(result)

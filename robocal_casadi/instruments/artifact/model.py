@@ -45,6 +45,8 @@ class ArtifactModel(MeasurementModel):
     reach = "sockets"
     unit_name = "placements"
     reading_name = "touch"
+    instrument_name = "touch probe"
+    default_noise = (5e-6, 0.0)  # [m] a ball seated in a machined socket, per coordinate
 
     @classmethod
     def table_rows_per_unit(cls, sockets: int, touches: int) -> int:

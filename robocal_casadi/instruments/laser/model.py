@@ -49,6 +49,8 @@ class SphereLaserModel(MeasurementModel):
     reach = "beam"
     error_title = "distance from the sphere surface"
     reading_name = "laser reading"
+    instrument_name = "laser"
+    default_noise = (1e-5, 0.0)  # [m] a triangulating point laser's distance reading
     measured_columns = ("distance",)
     sphere = True
     invisible_reason = "has no effect on the laser points' distances from the sphere centre"

@@ -52,6 +52,10 @@ class TrackerModel(MeasurementModel):
     reading_name = "tracker point"
     measured_columns = ("x", "y", "z")
     separable = True
+    instrument_name = "tracker"
+    # Half a typical tracker's maximum permissible error, 15 um + 6 um/m, per coordinate.
+    default_noise = (7.5e-6, 3e-6)
+    noise_grows_with_range = True
     invisible_reason = "has no effect on the measured positions"
     absorbed_reason = "absorbed by the unknown instrument frame (tracker data fix no robot base)"
 
@@ -133,6 +137,13 @@ class TrackerModel(MeasurementModel):
     def row_constants(self) -> np.ndarray:
         """``R0`` row by row (9,)."""
         return np.asarray(self.R0, dtype=float).ravel()
+
+    def entry_noise(self) -> np.ndarray:
+        """``a + b_per_m * range`` on each coordinate, ``range`` [m] the measured point's
+        distance from the tracker (the instrument frame's origin)."""
+        measured = np.asarray(self.dataset.measured, dtype=float)
+        sigma = self.instrument_noise.at(np.linalg.norm(measured, axis=1))
+        return np.repeat(sigma, 3)
 
     def errors(self, residual: np.ndarray) -> np.ndarray:
         return np.linalg.norm(np.asarray(residual, float).reshape(-1, 3), axis=1)
