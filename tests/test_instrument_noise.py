@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -60,9 +62,17 @@ def test_without_a_declaration_each_instrument_says_its_default(tmp_path):
     model = model_for(data, "d")
     assert data.instrument_noise is None and model.instrument_noise.source == "default"
     assert model.instrument_name == "touch probe"
-    # three coordinates per touch, none on the certified distances between located sockets
+    # three coordinates per touch, each the deviation from its socket fitted as the mean of
+    # the socket's n touches (a sqrt(1 - 1/n)); none on the certified distances between
+    # located sockets
+    rows = list(csv.DictReader((tmp_path / "t" / "touches.csv").open()))
+    counts = Counter((r["pose"], r["point"]) for r in rows)
+    assert len(set(counts.values())) == 1
+    n = next(iter(counts.values()))
     touches = ~model.certified_entries()
-    assert np.all(model.entry_noise()[touches] == model.default_noise[0])
+    assert touches.sum() == 3 * len(rows)
+    expected = model.default_noise[0] * np.sqrt(1.0 - 1.0 / n)
+    assert np.allclose(model.entry_noise()[touches], expected, rtol=1e-15, atol=0)
     assert np.all(model.entry_noise()[~touches] == 0.0)
 
 

@@ -200,6 +200,33 @@ class ArtifactModel(MeasurementModel):
             sizes += [1] * n
         return np.array(rows, dtype=int), np.array(sizes, dtype=int)
 
+    def entry_noise(self) -> np.ndarray:
+        """The standard deviation [m] of each residual entry the touches' noise alone gives
+        (``a`` per coordinate of a touch), propagated through the entry's formula: a touch's
+        deviation from the socket fitted as the mean of its ``n`` touches, ``a sqrt(1 -
+        1/n)`` per coordinate; a distance between two sockets, the noise of each end along
+        the line (``a`` for a socket touched once); a perpendicularity ``AC . BD / L``, the
+        noise of each of the four ends times the other arm's length over ``L`` (about 1).
+        Entries between sockets located by repeated touches are certified: zero."""
+        sigma = self.instrument_noise.a
+        touches = {(s.pose, s.name): len(s.rows) for s in self.sockets}
+        located = {(s.pose, s.name) for s in self.sockets if s.unknown_index is not None}
+        out: list[float] = []
+        for socket in self.sockets:
+            if socket.unknown_index is not None:
+                n = len(socket.rows)
+                out += [sigma * np.sqrt(max(1.0 - 1.0 / n, 0.0))] * (3 * n)
+
+        def end(pose: int, name: str) -> float:  # variance of one end along a line [m^2]
+            return 0.0 if (pose, name) in located else sigma**2 / touches[(pose, name)]
+
+        for pose in self._poses():
+            for a, b, _ in self._distances(pose):
+                out.append(float(np.sqrt(end(pose, a) + end(pose, b))))
+            for names in self._perpendiculars(pose):
+                out.append(float(np.sqrt(sum(end(pose, n) for n in names))))
+        return np.array(out)
+
     def certified_entries(self) -> np.ndarray:
         """The distances and perpendicularities between sockets that are all placement
         unknowns (touched more than once): they compare the fitted socket positions with
