@@ -165,6 +165,8 @@ def pool_size_for(count: int, kind: str) -> int:
     return max(least, per_count * count)
 
 
+# long: the design reads as the method in one place: pool, start, exchange, refinement and the
+# kept best, each step already a helper; splitting it would pass the same state around.
 def design_plan(dataset: Dataset, count: int, index: str = DEFAULT_INDEX, *, seed: int = 0,
                 pool: int | None = None, refine: bool = True, refine_rounds: int = REFINE_ROUNDS,
                 quiet: bool = False) -> Plan:

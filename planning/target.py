@@ -14,7 +14,8 @@ nominal value, as the planner does, and left out. The square of one robot's RMS 
 error over the workspace (its best rigid motion removed, ``accuracy.tool_weights``
 ``W``) is then ``sum_i lambda_i z_i^2`` with ``lambda_i`` the eigenvalues of
 ``Sigma W`` and ``z`` standard normal: the weighted sum of chi-squares the calibrate
-job's band uses (``job.accuracy.rms_band``, its seeded draws). Its ``QUANTILE`` quantile
+job's band uses (``job.accuracy.rms_band``, its seeded draws ``results.BAND_SEED``).
+Its ``QUANTILE`` quantile
 is the figure a count must bring to the target: nine robots in ten calibrated on such a
 plan do at least that well.
 
@@ -35,7 +36,8 @@ import numpy as np
 from robocal_casadi.calibration.prior import tolerance_of
 from robocal_casadi.common.progress import Progress
 from robocal_casadi.instruments.datasets import Dataset
-from robocal_casadi.job.accuracy import DRAWS, SEED
+from robocal_casadi.results import BAND_DRAWS as DRAWS
+from robocal_casadi.results import BAND_SEED as SEED
 
 from .accuracy import tool_weights
 from .design import DEFAULT_INDEX, Plan, TooFew, design_plan
@@ -128,7 +130,7 @@ class Predictor:
         root = np.linalg.cholesky(0.5 * (covariance + covariance.T))
         W = self.weights[np.ix_(keep, keep)]
         lam = np.clip(np.linalg.eigvalsh(root.T @ W @ root), 0.0, None)[::-1]
-        # the band's draws (job.accuracy), every weight kept, largest first: two priors
+        # the band's draws (results.BAND_SEED), every weight kept, largest first: two priors
         # over the same parameters meet the same z, so a tighter prior (smaller weights,
         # one by one) never shows a larger quantile through sampling alone
         z = np.random.default_rng(SEED).standard_normal((DRAWS, len(lam)))

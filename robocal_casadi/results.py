@@ -17,8 +17,23 @@ from .common.units import Units, display_units, to_file_units
 from .model.robot import Robot
 
 if TYPE_CHECKING:
-    from .calibration.remainder import Remainder
     from .effects.base import Effect
+
+
+class Remainder(Protocol):
+    """What the final model leaves beside the instrument's noise, as the result records use
+    it (the record itself, ``calibration.remainder.Remainder``, lives with the engine that
+    measures it; the records here import nothing from the engine)."""
+
+    @property
+    def is_noise(self) -> bool: ...
+
+    def to_json(self, units: Units) -> dict[str, Any]: ...
+
+    def sentence(self, units: Units, variables: tuple[str, ...] = ()) -> str: ...
+
+    def floor_words(self, floor: float, s: float, u: str) -> str: ...
+
 
 DOMINATED_SHARE = 0.5  # data share of an estimate below which the prior dominates it
 
@@ -447,6 +462,8 @@ DECLARED = "declared work cell"
 PARTLY_DECLARED = "declared work cell, other joints the ranges of the fit data"
 MEASURED = "poses of the fit data"
 BAND = (0.1, 0.9)  # quantiles of one robot's RMS over the work cell a prediction gives
+BAND_SEED = 9283  # the band's draws are seeded: a prediction is repeatable
+BAND_DRAWS = 20000  # draws of the parameter error behind a band (quantile error ~0.5%)
 
 
 BOX_RATIO = 2.0  # the box figure is stated beside the poses' when they differ by more

@@ -85,6 +85,8 @@ def artifact_layout(dataset: ArtifactTouches, bar: bool) -> dict[str, np.ndarray
     return {n: X[index[n]] for n in names}
 
 
+# long: one placement's draw, seat and checks in the order an operator would make them,
+# with the random priorities of every touch drawn first so a reach decision shifts no draw.
 def candidates(setup, workspace, count, rng, progress) -> list[Candidate]:
     layout = setup.layout  # socket name -> position in the artifact frame [m]
     names = sorted(layout)
