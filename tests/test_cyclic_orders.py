@@ -132,9 +132,11 @@ def test_the_orders_reach_the_effects_file_and_fk(third_harmonic, tmp_path):
 
 
 def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monkeypatch):
-    """Joint 2 over half a turn with a third harmonic; the first round is kept from seeing
-    the third order, so a lower-order periodic error takes a sliver of its pattern first.
-    Once the third harmonic is in, that candidate is judged again with it and goes."""
+    """Joint 2 over half a turn (two and a half periods of a fifth harmonic: diagnosis
+    offers an order where the readings span two of its periods) with a fifth harmonic; the
+    first round is kept from seeing the fifth order, so a lower-order periodic error takes
+    a sliver of its pattern first. Once the fifth harmonic is in, that candidate is judged
+    again with it and goes."""
     from dataclasses import replace
 
     from robocal_casadi.calibration import diagnosis
@@ -146,7 +148,7 @@ def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monk
     robot = replace(robot, joints=tuple(joints))
     data = simulate(robot, "tracker_points", out_dir=tmp_path / "d", rows=400, noise=NOISE,
                     seed=11, geometric_errors={"a2": 3e-4},
-                    effects={"joint_cyclic": {2: (0.0, 0.0, 0.0, 0.0, 2 * THIRD, 0.0)}},
+                    effects={"joint_cyclic": {2: (0.0,) * 8 + (2 * THIRD, 0.0)}},
                     progress=False).load()
     original = diagnosis._round
 
@@ -154,7 +156,7 @@ def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monk
         if rounds != 1:
             return original(search, rounds, *args)
         hidden = [c for c in search.remaining if c.unit is not None
-                  and getattr(c.unit, "orders", None) == ((3,),)]
+                  and getattr(c.unit, "orders", None) == ((5,),)]
         search.remaining = [c for c in search.remaining if c not in hidden]
         try:
             return original(search, rounds, *args)
@@ -169,4 +171,4 @@ def test_a_stand_in_of_the_same_type_goes_once_the_harmonic_is_in(tmp_path, monk
     assert {t.label for t in early} <= removed, [t.decision for t in result.diagnosis
                                                  if t.outcome is not Decision.NOT_PAYING]
     assert [(e.name, e.joints, set(e.parameters)) for e in result.effects] == \
-        [("joint_cyclic", (2,), {"a3_2", "b3_2"})], [e.summary for e in result.effects]
+        [("joint_cyclic", (2,), {"a5_2", "b5_2"})], [e.summary for e in result.effects]

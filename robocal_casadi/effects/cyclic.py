@@ -12,8 +12,10 @@ offset already holds; diagnosis checks each column against the geometry.
 Diagnosis offers, per revolute joint, the first two orders together (as always) and each
 higher order ``h`` up to ``MAX_ORDER`` on its own, chosen like every other candidate by
 the held-out rules. A higher order is offered only where the data can resolve it
-(``sampled_well``): the joint's readings span at least one of its periods, and no gap
-between consecutive readings exceeds a quarter period (``SAMPLES_PER_PERIOD``).
+(``sampled_well``): the joint's readings span at least ``PERIODS_SPANNED`` of its periods
+(over a single period a sinusoid of that order passes for a smooth trend, a gear-ratio
+error or a compliance, and stands in for them), and no gap between consecutive readings
+exceeds a quarter period (``SAMPLES_PER_PERIOD``).
 
 Plausible on real robots, by the joint's drive: each amplitude below about 0.05 deg
 (8.7e-4 rad) for gear trains and strain-wave gears (the periodic errors of gears and
@@ -42,6 +44,7 @@ from .drives import per_drive
 BASE_ORDERS = (1, 2)  # offered together, and what an effect without ``orders`` carries
 MAX_ORDER = 6  # the highest harmonic diagnosis offers
 SAMPLES_PER_PERIOD = 4  # readings per period, at the sparsest, to resolve an order
+PERIODS_SPANNED = 2  # periods of an order the readings must span for it to be offered
 AMPLITUDE = per_drive(
     Plausible(math.radians(0.05), basis="periodic gear and encoder errors stay below about "
               "0.05 deg"),
@@ -182,7 +185,8 @@ class JointCyclic(Effect):
 
     def sampled_well(self, Q: np.ndarray) -> bool:
         """Whether readings ``Q`` (N x dof) [rad] resolve every order above the first two:
-        they span a period of it, with no gap over a ``SAMPLES_PER_PERIOD``-th of one."""
+        they span ``PERIODS_SPANNED`` periods of it, with no gap over a
+        ``SAMPLES_PER_PERIOD``-th of one."""
         for j, hs in zip(self.joints, self.orders):
             top = max(hs)
             if top <= BASE_ORDERS[-1]:
@@ -191,7 +195,8 @@ class JointCyclic(Effect):
             if len(values) < 2:
                 return False
             period = 2 * math.pi / top
-            if np.ptp(values) < period or np.max(np.diff(values)) > period / SAMPLES_PER_PERIOD:
+            if (np.ptp(values) < PERIODS_SPANNED * period
+                    or np.max(np.diff(values)) > period / SAMPLES_PER_PERIOD):
                 return False
         return True
 
