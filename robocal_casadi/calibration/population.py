@@ -145,8 +145,24 @@ class Membership:
         return not self.distance > self.threshold
 
 
+class PopulationFigures:
+    """What a population record derives from its ``covariance`` and ``members``: the
+    ``spread`` (square roots of the covariance's diagonal, SI) and the ``odd`` robots."""
+
+    covariance: np.ndarray
+    members: tuple[Membership, ...]
+
+    @property
+    def spread(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.covariance))
+
+    @property
+    def odd(self) -> tuple[Membership, ...]:
+        return tuple(m for m in self.members if not m.belongs)
+
+
 @dataclass(frozen=True)
-class Population:
+class Population(PopulationFigures):
     """The population of one model: ``mean`` deviation from nominal [SI] and
     ``covariance`` [SI^2] over ``names``; ``spread`` the square roots of its diagonal;
     ``seen_by`` how many robots' data decided at least half of each parameter;
@@ -159,13 +175,6 @@ class Population:
     members: tuple[Membership, ...]
     rounds: int
 
-    @property
-    def spread(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.covariance))
-
-    @property
-    def odd(self) -> tuple[Membership, ...]:
-        return tuple(m for m in self.members if not m.belongs)
 
     def __repr__(self) -> str:
         return (f"Population({len(self.names)} parameters, {len(self.members)} robots, "

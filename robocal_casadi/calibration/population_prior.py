@@ -196,7 +196,7 @@ def _quantity(units: Units, unit: str) -> str:
 
 
 @dataclass(frozen=True)
-class PopulationPrior:
+class PopulationPrior(population.PopulationFigures):
     """A fleet's population prior of one robot model (``PRIOR.yaml``), SI inside: per
     parameter ``names`` its ``quantities``, ``nominal`` value, ``mean`` deviation from it
     and the ``covariance`` of the deviations; ``seen_by`` robots whose data decided at
@@ -217,13 +217,6 @@ class PopulationPrior:
     pseudo_robots: float = population.PSEUDO_ROBOTS
     path: Path | None = None
 
-    @property
-    def spread(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.covariance))
-
-    @property
-    def odd(self) -> tuple[Membership, ...]:
-        return tuple(m for m in self.members if not m.belongs)
 
     def check_robot(self, robot, file) -> None:
         """Refuse (``InputError`` naming ``file``) a robot not of this model."""
