@@ -384,11 +384,24 @@ def _fits(request: _Request, diagnose: bool
                                                 max_iterations=max_iterations,
                                                 defer=diagnose)
     for attempt in range(2):
-        identifiability, least_squares = _geometric_fit(nominal, method=method, loss=fit_loss,
-                                                        max_iterations=max_iterations)
+        short: InputError | None = None
+        try:
+            identifiability, least_squares = _geometric_fit(
+                nominal, method=method, loss=fit_loss, max_iterations=max_iterations)
+        except InputError as error:
+            # Data too few for least squares alone: a population prior, which knows what
+            # robots of the model are like, may still determine the rest (what a fleet
+            # prior is for); the tolerance prior is not trusted to.
+            if request.fleet_prior is None or request.rule != "prior":
+                raise
+            identifiability, least_squares, short = nominal.identifiability, None, error
         geometric = _prior_fit(nominal, identifiability, least_squares, request.rule,
                                method=method, loss=fit_loss, max_iterations=max_iterations,
                                fleet=request.fleet_prior)
+        if short is not None and not (geometric.use is not None and geometric.use.belongs):
+            raise InputError(f"{short.what}; the fleet prior, which could have made up "
+                             f"for it, does not hold for this robot", file=short.file,
+                             where=short.where)
         final = _diagnose(nominal.problem, geometric, request.validation, diagnose,
                           method=method, loss=fit_loss)
         # Effects found change what the residual holds: readings set aside before they
@@ -712,25 +725,32 @@ def _geometric_fit(nominal: NominalFit, *, method: Method, loss: Loss,
     return identifiability, geometric
 
 
-def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squares: Solution,
-               rule: Rule, *, method: Method, loss: Loss, max_iterations: int,
-               fleet: PopulationPrior | None = None) -> GeometricFit:
+def _prior_fit(nominal: NominalFit, identifiability: Identifiability,
+               least_squares: Solution | None, rule: Rule, *, method: Method, loss: Loss,
+               max_iterations: int, fleet: PopulationPrior | None = None) -> GeometricFit:
     """Stage 3 under ``rule``: ``"prior"`` refits by maximum a posteriori; both flag
-    repeated readings and the parameters the prior dominates."""
+    repeated readings and the parameters the prior dominates. ``least_squares`` is None
+    where the data were too few for it (only with a fleet prior): the fit then starts from
+    the nominal fit and weighs the prior against the instruments' own noise."""
     # The least-squares fit, on the parameters with a fair share of their own, also gives
     # the noise level the prior is weighed against.
     problem = nominal.problem
     distinct, repeated, units_of_data = duplicate_rows(problem)
     notes = (_warn_duplicates(repeated, units_of_data),) if repeated else ()
     geometric, prior, use = least_squares, None, None
+    if least_squares is None:
+        noise, start = _instrument_sigma(problem), nominal.solution.x
+    else:
+        noise = posterior(problem.jacobian(least_squares.x, least_squares.free),
+                          problem.residual(least_squares.x),
+                          np.flatnonzero(least_squares.free), None, rows=distinct).sigma
+        start = least_squares.x
     if rule == "prior":
-        noise = posterior(problem.jacobian(geometric.x, geometric.free),
-                          problem.residual(geometric.x), np.flatnonzero(geometric.free), None,
-                          rows=distinct).sigma
         determined = identifiability
         identifiability, geometric, prior, use = _map_geometric(
-            problem, nominal.solution.x, geometric.x, noise, distinct, method=method, loss=loss,
-            max_iterations=max_iterations, candidates=nominal.candidates, fleet=fleet)
+            problem, nominal.solution.x, start, noise, distinct, method=method, loss=loss,
+            max_iterations=max_iterations, candidates=nominal.candidates, fleet=fleet,
+            noise_known=least_squares is None)
         # The condition number describes the data: that of the parameters with a fair share
         # of their effect their own (the weak ones lean on the prior, not on the data).
         identifiability = replace(identifiability,
@@ -741,8 +761,17 @@ def _prior_fit(nominal: NominalFit, identifiability: Identifiability, least_squa
                 f"({method}) did not converge: {geometric.status} after "
                 f"{geometric.iterations} iterations",
                 stats={"iterations": geometric.iterations, "status": geometric.status})
+    assert geometric is not None  # least squares is skipped only under the prior rule
     dominated = frozenset(_dominated(problem, geometric, prior, distinct))
     return GeometricFit(identifiability, geometric, prior, dominated, distinct, notes, use)
+
+
+def _instrument_sigma(problem: Problem) -> float:
+    """The RMS [m] of the instruments' own noise over ``problem``'s residual entries
+    (declared ``instrument_noise`` or each instrument's typical value)."""
+    noise = np.concatenate([m.entry_noise() for m in problem.models])
+    noise = noise[noise > 0]
+    return float(np.sqrt(np.mean(noise**2))) if noise.size else float("nan")
 
 
 def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[DatasetBase],
@@ -856,13 +885,14 @@ def _prior_summary(problem: Problem, prior: Prior | None, statistics: Posterior,
 
 
 def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, distinct,
-               *, method: Method, loss: Loss, max_iterations: int):
-    """MAP estimate over ``x[free]``; the noise level re-estimated until it settles.
+               *, method: Method, loss: Loss, max_iterations: int, noise_known: bool = False):
+    """MAP estimate over ``x[free]``; the noise level re-estimated until it settles
+    (``noise_known``: kept at ``prior.sigma``, where the data are too few to tell it).
 
     The fit ends when it has settled (``prior.settled_decrease``).
     """
     decrease = settled_decrease(problem)
-    for _ in range(SIGMA_ITERATIONS):
+    for _ in range(1 if noise_known else SIGMA_ITERATIONS):
         with stage("identification with the prior"):
             solution = solve(PriorProblem(problem, prior, copy_weights(problem)), x, free,
                              method=method, loss=loss, max_iterations=max_iterations,
@@ -870,7 +900,8 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
         x = solution.x
         r = problem.residual(x)
         statistics = posterior(problem.jacobian(x, free), r, np.flatnonzero(free), prior,
-                               rows=distinct, certified=problem.certified_entries())
+                               rows=distinct, certified=problem.certified_entries(),
+                               noise_known=noise_known)
         settled = abs(statistics.sigma / prior.sigma - 1.0) < SIGMA_SETTLED
         if not np.isfinite(statistics.sigma) or settled:
             break
@@ -882,7 +913,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
 def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray, sigma: float,
                    distinct, *, method: Method, loss: Loss, max_iterations: int,
                    candidates: Sequence[str] | None = None,
-                   fleet: PopulationPrior | None = None):
+                   fleet: PopulationPrior | None = None, noise_known: bool = False):
     """Identifiability with exact dependencies only, and the MAP fit of the rest
     (``candidates``: the unknowns that may be fitted, default all).
 
@@ -904,24 +935,45 @@ def _map_geometric(problem: Problem, x_nominal: np.ndarray, x_start: np.ndarray,
     tolerance_prior = prior_for(problem, free, sigma, None)
     offered, member = None, None
     if fleet is not None:
-        solution, prior = _map_solve(problem, x_start, free, prior_for(problem, free, sigma,
-                                                                      fleet),
+        widened = _with_population(identifiability, fleet, candidates)
+        fleet_free = _free_mask(problem, widened)
+        population = prior_for(problem, fleet_free, sigma, fleet)
+        start = np.array(x_start, float)
+        if noise_known:  # no least-squares start: the population's robot is the best guess
+            start[population.index] = population.centre
+        solution, prior = _map_solve(problem, start, fleet_free, population,
                                      distinct, method=method, loss=loss,
-                                     max_iterations=max_iterations)
-        position = {int(i): k for k, i in enumerate(np.flatnonzero(free))}
+                                     max_iterations=max_iterations, noise_known=noise_known)
+        position = {int(i): k for k, i in enumerate(np.flatnonzero(fleet_free))}
         where = [position[int(i)] for i in prior.index]
         member = judge(prior, solution.covariance[np.ix_(where, where)], solution.x, fleet,
                        problem.robot.name)
         offered = str(fleet.path) if fleet.path is not None else "fleet prior"
         if member.belongs:
-            return identifiability, solution, prior, PriorUse(
+            return widened, solution, prior, PriorUse(
                 offered, offered, True, member, prior.names, prior.centre, prior.covariance)
     solution, prior = _map_solve(problem, x_start, free, tolerance_prior,
                                  distinct, method=method, loss=loss,
-                                 max_iterations=max_iterations)
+                                 max_iterations=max_iterations, noise_known=noise_known)
     use = PriorUse("tolerance", offered, None if fleet is None else False, member,
                    prior.names, prior.centre, prior.covariance)
     return identifiability, solution, prior, use
+
+
+def _with_population(identifiability: Identifiability, fleet: PopulationPrior,
+                     candidates: Sequence[str] | None) -> Identifiability:
+    """``identifiability`` widened by the parameters the population's calibrations fitted:
+    with few readings the rank of their Jacobian says how many readings there are, not
+    what the instrument sees, and holding those parameters at the drawing would contradict
+    the population that knows them (the prior determines what the data do not)."""
+    known = [n for n in fleet.fitted() if n in identifiability.unidentifiable
+             and (candidates is None or n in candidates)]
+    if not known:
+        return identifiability
+    return replace(identifiability,
+                   identifiable=identifiability.identifiable + tuple(known),
+                   unidentifiable={n: why for n, why in identifiability.unidentifiable.items()
+                                   if n not in known})
 
 
 GENERIC_SCALE = 0.1  # generic point: robot and mounted parameters off nominal by this x tolerance

@@ -20,7 +20,7 @@ import datetime
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -216,6 +216,11 @@ class PopulationPrior(population.PopulationFigures):
     members: tuple[Membership, ...] = ()
     pseudo_robots: float = population.PSEUDO_ROBOTS
     path: Path | None = None
+    fitted_by: tuple[int, ...] = ()  # robots whose calibration fitted it (empty: not known)
+
+    def fitted(self) -> tuple[str, ...]:
+        """The parameters some robot's calibration fitted (its data could see them)."""
+        return tuple(n for n, k in zip(self.names, self.fitted_by) if k > 0)
 
 
     def check_robot(self, robot, file) -> None:
@@ -224,7 +229,8 @@ class PopulationPrior(population.PopulationFigures):
         if robot.convention != self.convention or tuple(registry.names) != self.names:
             raise InputError(f"a prior of {self.model!r} ({self.convention}, "
                              f"{len(self.names)} parameters) does not fit robot "
-                             f"{robot.name!r} ({robot.convention}, {len(registry)} parameters)",
+                             f"{robot.name!r} ({robot.convention}, {len(registry)} parameters"
+                             f"{_first_difference(self.names, tuple(registry.names))})",
                              file=file)
         nominal = robot.parameter_vector()
         scale = np.maximum(np.abs(self.nominal), 1e-3)
@@ -233,6 +239,17 @@ class PopulationPrior(population.PopulationFigures):
             raise InputError(f"a prior of another nominal robot: {self.names[int(off[0])]} "
                              f"is {self.nominal[int(off[0])]:.9g} SI in the prior, "
                              f"{nominal[int(off[0])]:.9g} in robot {robot.name!r}", file=file)
+
+
+def _first_difference(prior: Sequence[str], robot: Sequence[str]) -> str:
+    """Where two parameter lists part, in words (empty when they agree)."""
+    for k, (a, b) in enumerate(zip(prior, robot)):
+        if a != b:
+            return f"; parameter {k + 1} is {a!r} in the prior, {b!r} in the robot"
+    if len(prior) != len(robot):
+        longer, which = (prior, "prior") if len(prior) > len(robot) else (robot, "robot")
+        return f"; the {which} goes on with {longer[min(len(prior), len(robot))]!r}"
+    return ""
 
 
 def learn(calibrations: Sequence[Calibration],
@@ -249,8 +266,9 @@ def learn(calibrations: Sequence[Calibration],
                 for c in calibrations]
     tolerance = np.where(np.isfinite(first.tolerance), first.tolerance, _fallback(first))
     fitted = population.estimate(evidence, first.names, tolerance, pseudo_robots)
-    return from_population(fitted, first, tuple(str(c.folder) for c in calibrations),
-                           pseudo_robots)
+    fitted_by = tuple(sum(n in c.fitted for c in calibrations) for n in first.names)
+    return replace(from_population(fitted, first, tuple(str(c.folder) for c in calibrations),
+                                   pseudo_robots), fitted_by=fitted_by)
 
 
 def _fallback(calibration: Calibration) -> np.ndarray:
@@ -280,10 +298,11 @@ def save_prior(prior: PopulationPrior, path: Path) -> None:
         "odd": [_member(m) for m in prior.odd],
         "members": [_member(m) for m in prior.members],
         "parameters": [{"name": n, "unit": units.unit_name(q), "nominal": float(v / s),
-                        "mean": float(m / s), "spread": float(d / s), "seen_by": int(k)}
-                       for n, q, v, m, d, s, k in zip(prior.names, prior.quantities,
-                                                      prior.nominal, prior.mean, spread,
-                                                      scale, prior.seen_by)],
+                        "mean": float(m / s), "spread": float(d / s), "seen_by": int(k),
+                        **({"fitted_by": int(prior.fitted_by[i])} if prior.fitted_by else {})}
+                       for i, (n, q, v, m, d, s, k) in enumerate(zip(
+                           prior.names, prior.quantities, prior.nominal, prior.mean, spread,
+                           scale, prior.seen_by))],
         "correlation": [[float(v) for v in row] for row in correlation],
     }
     with atomic_file(path) as staging:
@@ -310,9 +329,10 @@ def load_prior(path: Path) -> PopulationPrior:
     rows = content.get("parameters")
     if not isinstance(rows, list) or not rows:
         raise InputError("expected a list of parameters", file=path, where="parameters")
-    names, quantities, values = [], [], []
+    names, quantities, values, fitted_by = [], [], [], []
     for k, row in enumerate(rows):
         try:
+            fitted_by.append(int(row.get("fitted_by", -1)))
             names.append(str(row["name"]))
             quantities.append(_quantity(units, str(row["unit"])))
             values.append([float(row[key]) for key in ("nominal", "mean", "spread")]
@@ -340,7 +360,8 @@ def load_prior(path: Path) -> PopulationPrior:
                            units, str(content.get("date", "")), robots, tuple(names),
                            tuple(quantities), table[:, 0] * scale, table[:, 1] * scale,
                            covariance, tuple(int(v) for v in table[:, 3]), (),
-                           float(content.get("pseudo_robots", population.PSEUDO_ROBOTS)), path)
+                           float(content.get("pseudo_robots", population.PSEUDO_ROBOTS)), path,
+                           () if min(fitted_by) < 0 else tuple(fitted_by))
 
 
 @dataclass(frozen=True)

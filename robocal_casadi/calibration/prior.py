@@ -229,7 +229,7 @@ class Posterior:
 
 def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior | None,
               sigma: float | None = None, rows: np.ndarray | None = None,
-              certified: np.ndarray | None = None) -> Posterior:
+              certified: np.ndarray | None = None, noise_known: bool = False) -> Posterior:
     """Posterior at an estimate from the data Jacobian ``J`` (columns ``free_index``) and
     residual ``r`` [m].
 
@@ -272,7 +272,10 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     dof = m - spent
     sigma_new = math.sqrt(rss / dof) if dof > 0.5 else float("nan")
     covariance = np.full((n, n), np.nan)
-    scale = sigma_new**2
+    # Data too few to estimate their own noise (only a population prior lets a fit get
+    # here): the uncertainty is that of the noise the prior was weighed against.
+    known = sigma_prior is not None and (noise_known or not math.isfinite(sigma_new))
+    scale = sigma_prior**2 if known else sigma_new**2
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
     covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_reached, sigma_prior)
     share = _data_share(inverse, reached, prior_position, variance_prior, sigma_prior)
