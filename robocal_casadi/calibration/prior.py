@@ -274,8 +274,10 @@ def posterior(J: np.ndarray, r: np.ndarray, free_index: np.ndarray, prior: Prior
     covariance = np.full((n, n), np.nan)
     # Data too few to estimate their own noise (only a population prior lets a fit get
     # here): the uncertainty is that of the noise the prior was weighed against.
-    known = sigma_prior is not None and (noise_known or not math.isfinite(sigma_new))
-    scale = sigma_prior**2 if known else sigma_new**2
+    if sigma_prior is not None and (noise_known or not math.isfinite(sigma_new)):
+        scale = sigma_prior**2
+    else:
+        scale = sigma_new**2
     sub = np.ix_(np.flatnonzero(reached), np.flatnonzero(reached))
     covariance[sub] = scale * _sandwich(inverse, Jr, certified, precision_reached, sigma_prior)
     share = _data_share(inverse, reached, prior_position, variance_prior, sigma_prior)
