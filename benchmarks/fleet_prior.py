@@ -182,10 +182,13 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
     members = [r for r in rows if not r["off_model"]]
     out = {}
     for count in counts:
-        at = [r for r in members if r["count"] == count
-              and r["tolerance"] is not None and r["fleet"] is not None]
-        out[str(count)] = {"tolerance_median_mm": _median([r["tolerance"] for r in at]),
-                           "fleet_median_mm": _median([r["fleet"] for r in at]),
+        at = [r for r in members if r["count"] == count]
+        tolerance = [r["tolerance"] for r in at if r["tolerance"] is not None]
+        fleet = [r["fleet"] for r in at if r["fleet"] is not None]
+        out[str(count)] = {"tolerance_median_mm": _median(tolerance),
+                           "fleet_median_mm": _median(fleet),
+                           "tolerance_calibrated": len(tolerance),
+                           "fleet_calibrated": len(fleet),
                            "belongs": sum(bool(r.get("belongs")) for r in at),
                            "robots": len(at)}
     third = min(counts, key=lambda c: abs(c - full / 3))
@@ -195,7 +198,11 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
                      and r["tolerance"] is not None}
     no_worse = [fleet_third[k] <= tolerance_all[k] for k in fleet_third if k in tolerance_all]
     off = [r for r in rows if r["off_model"]]
+    only_fleet = [r for r in members if r["tolerance"] is None and r["fleet"] is not None]
     return {"per_count": out, "third": third,
+            "calibrated_only_with_the_fleet_prior": [{"robot": r["robot"], "count": r["count"],
+                                                      "fleet": r["fleet"]}
+                                                     for r in only_fleet],
             "fleet_at_third_no_worse_than_tolerance_at_all": f"{sum(no_worse)}/{len(no_worse)}",
             "fleet_third_median_mm": _median(list(fleet_third.values())),
             "tolerance_all_median_mm": _median(list(tolerance_all.values())),
@@ -276,8 +283,9 @@ def main() -> None:
                         help="each robot's own errors, in tolerances (default %(default).3g)")
     parser.add_argument("--shared", type=Path, default=None,
                         help="folder holding panda-mukca/ and panda-fleet/")
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results"
-                        / "fleet_prior.json")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="also write the JSON here (benchmarks/readme_measured.py --run "
+                        "fleet_prior saves it with the facts of the run)")
     args = parser.parse_args()
     parts = args.part.split(",")
     if "panda" in parts and args.shared is None:
@@ -294,6 +302,8 @@ def main() -> None:
             report[part]["seconds"] = time.perf_counter() - started
     text = json.dumps(report, indent=1)
     print(text)
+    if args.out is None:
+        return
     if args.out.exists():
         earlier = json.loads(args.out.read_text())
         earlier.update(report)

@@ -42,7 +42,8 @@ END = "<!-- End of the generated section. -->"
 # The parts of the section, in order.
 ORDER = ("setup", "first_run", "real_data", "identification", "kinematics", "calibration", "jobs",
          "sphere_laser", "diagnosis", "design_bound", "scan", "tracking", "ik",
-         "robust", "fleet", "fleet_memory", "table_memory", "delivered")
+         "robust", "fleet", "fleet_memory", "table_memory", "delivered", "third_harmonic",
+         "fleet_prior")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
 RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "first_run": ("setup.py", "--cold-cache", "--blas-default", "--demo-runs", "2"),
@@ -62,7 +63,9 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "fleet_memory": ("fleet_memory.py", "--robots", "1000"),
         "table_memory": ("table_memory.py",),
         "delivered": ("delivered.py", "--seeds", "5"),
-        "third_harmonic": ("third_harmonic.py",)}
+        "third_harmonic": ("third_harmonic.py",),
+        "fleet_prior": ("fleet_prior.py", "--part", "tracker,bar,panda", "--robots", "40",
+                        "--next", "5", "--shared", "../shared/data")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
@@ -784,6 +787,66 @@ def render_third_harmonic(record: dict) -> str:
     return "\n\n".join([lead, "\n".join(rows)]) + _notes(record)
 
 
+def _mm(value: float | None) -> str:
+    return "refused" if value is None else f"{value:.3f}"
+
+
+def render_fleet_prior(record: dict) -> str:
+    """The fleet prior against the tolerance prior, from ``fleet_prior.py``'s JSON."""
+    out = record["output"]
+    parts = []
+    simulated = [k for k in ("tracker", "bar") if k in out]
+    first = out[simulated[0]]
+    lead = (f"**What the fleet already knows** (simulated fleets of the example 6R: each "
+            f"robot's geometric errors a part the model shares, {first['shared']:.2f} of the "
+            f"tolerance, plus its own, {first['own']:.2f} of it; the prior learned from "
+            f"{first['fleet_robots']} calibrated robots; the next robots measured with fewer "
+            f"and fewer poses and calibrated on the same data with the tolerance prior and "
+            f"with the fleet prior; true work-cell RMS: calibrated against simulated tool "
+            f"point over 400 configurations in the joint limits, after the best rigid "
+            f"motion, median over the robots of the model, in mm; then the real Pandas, "
+            f"each left out of its own prior). {_run_line(record)}")
+    parts.append(lead)
+    for kind in simulated:
+        part = out[kind]
+        summary = part["summary"]
+        unit = "readings" if kind == "tracker" else "placements"
+        rows = [f"| {kind} ({part['noise_mm']:g} mm noise): {unit} | tolerance prior | "
+                f"fleet prior | robots that belong |", "| --- | --- | --- | --- |"]
+        for count in part["counts"]:
+            c = summary["per_count"][str(count)]
+            tolerance = (_mm(c["tolerance_median_mm"]) if c["tolerance_calibrated"]
+                         else "refused (too few)")
+            rows.append(f"| {count} | {tolerance} | {_mm(c['fleet_median_mm'])} | "
+                        f"{c['belongs']} of {c['robots']} |")
+        parts.append("\n".join(rows))
+        parts.append(
+            f"A third of the {unit} ({summary['third']}) with the fleet prior against all "
+            f"{part['full']} with the tolerance prior: no worse on "
+            f"{summary['fleet_at_third_no_worse_than_tolerance_at_all']} robots (medians "
+            f"{_mm(summary['fleet_third_median_mm'])} against "
+            f"{_mm(summary['tolerance_all_median_mm'])} mm). The robot off the model (own "
+            f"errors {part['off']:g} times the fleet's spread) told it does not belong: "
+            f"{summary['off_model_refused']}, and then calibrated as with the tolerance "
+            f"prior: {'yes' if summary['off_model_same_as_tolerance'] else 'no'}.")
+    if "panda" in out:
+        panda = out["panda"]
+        rows = ["| Panda left out | held-out RMS, tolerance prior / fleet prior [mm] | ratio | "
+                "belongs (conflict / limit) | all touches of the placement, tolerance [mm] |",
+                "| --- | --- | --- | --- | --- |"]
+        for e in panda["robots"]:
+            rows.append(f"| {e['robot']} ({e['fit_touches']} touches; "
+                        f"{len(e['held_out_placements'])} placements held out) | "
+                        f"{e['tolerance_held_out_mm']:.3f} / {e['fleet_held_out_mm']:.3f} | "
+                        f"{e['ratio']:.2f} | {'yes' if e['belongs'] else 'no'} "
+                        f"({e['conflict']:.1f} / {e['threshold']:.1f}) | "
+                        f"{e['tolerance_full_placement_held_out_mm']:.3f} |")
+        parts.append("\n".join(rows))
+        parts.append(f"At most 0.85 of the tolerance prior's held-out RMS: "
+                     f"{panda['at_most_0.85']} of {panda['count']} Pandas.")
+    return "\n\n".join(parts) + _notes(record)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
                                                "jobs": render_jobs,
                                                "fleet_memory": render_fleet_memory,
@@ -801,7 +864,8 @@ RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration
                                                "design_bound": render_design_bound,
                                                "delivered": render_delivered,
                                                "fleet": render_fleet,
-                                               "third_harmonic": render_third_harmonic}
+                                               "third_harmonic": render_third_harmonic,
+                                               "fleet_prior": render_fleet_prior}
 
 
 def render(records: dict[str, dict]) -> str:
