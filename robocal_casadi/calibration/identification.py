@@ -439,7 +439,8 @@ def _result(request: _Request, nominal: NominalFit, geometric: GeometricFit,
     recommended, recommendation = recommend(fit, held_out.summary, bool(final.added))
     chosen = final.solution if recommended == "final" else geometric.solution
     ours = _final_estimates(final, std)
-    left = _remainder(request, final, held_out)
+    left = _remainder(request, final, held_out,
+                      (problem, geometric.solution) if recommended == "geometric" else None)
     covariance_names, covariance = _geometric_covariance(problem, geometric.solution)
     return CalibrationResult(
         datasets=tuple(d.path.name for d in nominal.datasets), robot_nominal=robot,
@@ -467,14 +468,22 @@ def _result(request: _Request, nominal: NominalFit, geometric: GeometricFit,
         rejected=rejected + held_out.rejected, validation_all=held_out.all, remainder=left)
 
 
-def _remainder(request: _Request, final: DiagnosedFit, held_out: Validation
+def _remainder(request: _Request, final: DiagnosedFit, held_out: Validation,
+               geometric: tuple[Problem, Solution] | None = None
                ) -> remainder.Remainder | None:
-    """What the final model leaves beside the instruments' noise: on the validation data
-    when given, else held out of the fit data (a learned map's own folds when one was
-    added)."""
+    """What the recommended model leaves beside the instruments' noise: on the validation
+    data when given, else held out of the fit data (a learned map's own folds when one was
+    added). ``geometric`` (problem and solution): the geometric model, where the held-out
+    data recommended it over the final one; what remains is then what it leaves."""
     maps = [f for f in final.added if "cv_rms_after" in f.evidence]
     cv = float(maps[-1].evidence["cv_rms_after"]) if maps else None
     with stage("remainder"):
+        if held_out.summary is not None and geometric is not None:
+            problem, solution = geometric
+            return remainder.measure(problem, solution.x, solution.free,
+                                     validation_models=models_for(request.validation,
+                                                                  "validation:"),
+                                     validation_rms=held_out.summary.rms_geometric)
         if held_out.summary is not None:
             return remainder.measure(final.problem, final.solution.x, final.solution.free,
                                      validation_models=models_for(request.validation,
