@@ -402,8 +402,15 @@ def _fits(request: _Request, diagnose: bool
             raise InputError(f"{short.what}; the fleet prior, which could have made up "
                              f"for it, does not hold for this robot", file=short.file,
                              where=short.where)
-        final = _diagnose(nominal.problem, geometric, request.validation, diagnose,
-                          method=method, loss=fit_loss)
+        if short is not None and diagnose:
+            # Residuals fewer than the unknowns: any effect would fit them exactly, and the
+            # held-out rules would have nothing left to judge it on.
+            note = ("effects not sought: the readings are fewer than the unknowns, and the "
+                    "fleet prior, not the data, determines the rest")
+            print(f"note: {note}", file=sys.stderr)
+            geometric = replace(geometric, notes=geometric.notes + (note,))
+        final = _diagnose(nominal.problem, geometric, request.validation,
+                          diagnose and short is None, method=method, loss=fit_loss)
         # Effects found change what the residual holds: readings set aside before they
         # were known are judged again under the final model (once).
         if not request.robust or not (final.added or deferred) or attempt:
