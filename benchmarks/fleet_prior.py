@@ -68,6 +68,7 @@ KINDS = {"tracker": ("tracker_points", 30, (5, 10, 15, 20, 30)),
          # prior calibrates (least squares alone cannot)
          "bar": ("cross_bar", 15, (5, 8, 10, 15))}
 PANDA_TOUCHES = 8  # per socket of the first placement
+NOT_HOLDING = "does not hold for this robot"  # calibrate's reason when it refuses
 
 
 def options(prior=None) -> JobOptions:
@@ -206,10 +207,18 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
             "fleet_at_third_no_worse_than_tolerance_at_all": f"{sum(no_worse)}/{len(no_worse)}",
             "fleet_third_median_mm": _median(list(fleet_third.values())),
             "tolerance_all_median_mm": _median(list(tolerance_all.values())),
-            "off_model_refused": f"{sum(r.get('belongs') is False for r in off)}/{len(off)}",
+            "off_model_refused": f"{sum(_told(r) for r in off)}/{len(off)}",
             "off_model_same_as_tolerance": all(
-                math.isclose(r["fleet"], r["tolerance"], rel_tol=1e-6) for r in off
-                if r.get("belongs") is False and r["fleet"] is not None)}
+                (r["fleet"] is None and r["tolerance"] is None)
+                or (r["fleet"] is not None and r["tolerance"] is not None
+                    and math.isclose(r["fleet"], r["tolerance"], rel_tol=1e-6))
+                for r in off if _told(r))}
+
+
+def _told(row: dict) -> bool:
+    """Whether the robot was told it does not belong: calibrated with the tolerances
+    instead, or its data, too few for them, refused with that reason."""
+    return row.get("belongs") is False or NOT_HOLDING in row.get("fleet_refused", "")
 
 
 def _median(values: list[float]) -> float | None:

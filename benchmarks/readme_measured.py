@@ -836,7 +836,8 @@ def render_fleet_prior(record: dict) -> str:
                 "| --- | --- | --- | --- | --- |"]
         for e in panda["robots"]:
             rows.append(f"| {e['robot']} ({e['fit_touches']} touches; "
-                        f"{len(e['held_out_placements'])} placements held out) | "
+                        f"{len(e['held_out_placements'])} placement"
+                        f"{'s' if len(e['held_out_placements']) != 1 else ''} held out) | "
                         f"{e['tolerance_held_out_mm']:.3f} / {e['fleet_held_out_mm']:.3f} | "
                         f"{e['ratio']:.2f} | {'yes' if e['belongs'] else 'no'} "
                         f"({e['conflict']:.1f} / {e['threshold']:.1f}) | "
