@@ -13,7 +13,7 @@ configurations in the joint limits, after the best rigid motion (which registeri
 robot to its cell fixes) is taken out. A robot off the model (own errors five times the
 fleet's spread) is calibrated too, to see it refused and calibrated as before.
 
-Real (``--part panda``): the six Franka Pandas in shared/data (panda-mukca and panda-fleet,
+Real (``--part panda``): six Franka Pandas measured in sockets (panda-mukca and panda-fleet,
 same robot file, same socket plate). Every robot is calibrated on all its placements under
 the tolerance prior; then, for each robot with more than one placement, leave that robot
 out: the prior from the others, the robot fitted on 16 touches of its first placement (the
@@ -24,10 +24,11 @@ Every fit runs without diagnosis and with the linear loss (the robust screening 
 readings than the fewest counts here give); both priors see the same data.
 
     python benchmarks/fleet_prior.py [--part tracker,bar,panda] [--robots N] [--next M]
-        [--shared DIR] [--out benchmarks/results/fleet_prior.json]
+        [--shared DIR] [--out FILE]
 
 ``--shared DIR`` names the folder holding ``panda-mukca/`` and ``panda-fleet/`` (needed for
-``--part panda``).
+``--part panda``; default: the folder the environment variable ``ROBOCAL_PANDA_DATA``
+names).
 
 Prints and writes JSON.
 """
@@ -37,6 +38,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -68,6 +70,7 @@ KINDS = {"tracker": ("tracker_points", 30, (5, 10, 15, 20, 30)),
          # prior calibrates (least squares alone cannot)
          "bar": ("cross_bar", 15, (5, 8, 10, 15))}
 PANDA_TOUCHES = 8  # per socket of the first placement
+PANDA_DATA = "ROBOCAL_PANDA_DATA"  # environment: the folder of the Pandas' data
 NOT_HOLDING = "does not hold for this robot"  # calibrate's reason when it refuses
 
 
@@ -290,7 +293,9 @@ def main() -> None:
                         help="simulated noise per coordinate [mm] (default %(default)s)")
     parser.add_argument("--own", type=float, default=OWN,
                         help="each robot's own errors, in tolerances (default %(default).3g)")
-    parser.add_argument("--shared", type=Path, default=None,
+    parser.add_argument("--shared", type=Path,
+                        default=Path(os.environ[PANDA_DATA]) if os.environ.get(PANDA_DATA)
+                        else None,
                         help="folder holding panda-mukca/ and panda-fleet/")
     parser.add_argument("--out", type=Path, default=None,
                         help="also write the JSON here (benchmarks/readme_measured.py --run "
@@ -298,7 +303,7 @@ def main() -> None:
     args = parser.parse_args()
     parts = args.part.split(",")
     if "panda" in parts and args.shared is None:
-        parser.error("--part panda needs --shared DIR")
+        parser.error(f"--part panda needs --shared DIR (or {PANDA_DATA} set)")
     report: dict = {}
     with tempfile.TemporaryDirectory() as folder:
         for part in parts:

@@ -41,7 +41,7 @@ BEGIN = ("<!-- Written by benchmarks/readme_measured.py from benchmarks/results/
 END = "<!-- End of the generated section. -->"
 # The parts of the section, in order.
 ORDER = ("setup", "first_run", "real_data", "identification", "kinematics", "calibration", "jobs",
-         "sphere_laser", "diagnosis", "design_bound", "scan", "tracking", "ik",
+         "sphere_laser", "diagnosis", "planning", "design_bound", "scan", "tracking", "ik",
          "robust", "fleet", "fleet_memory", "table_memory", "delivered", "third_harmonic",
          "fleet_prior")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
@@ -54,6 +54,7 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "jobs": ("jobs.py", "--demo"),
         "sphere_laser": ("sphere_laser.py",),
         "diagnosis": ("diagnosis.py", "--quick"),
+        "planning": ("planning.py", "--quick"),
         "design_bound": ("design_bound.py",),
         "scan": ("scan.py",),
         "tracking": ("tracking.py",),
@@ -64,8 +65,9 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "table_memory": ("table_memory.py",),
         "delivered": ("delivered.py", "--seeds", "5"),
         "third_harmonic": ("third_harmonic.py",),
+        # the Pandas' data: the folder ROBOCAL_PANDA_DATA names (fleet_prior.py --help)
         "fleet_prior": ("fleet_prior.py", "--part", "tracker,bar,panda", "--robots", "40",
-                        "--next", "5", "--shared", "../shared/data")}
+                        "--next", "5")}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
@@ -742,6 +744,40 @@ def _error_text(message: str) -> str:
     return message.split(": ", 1)[-1].split("; allowed")[0]
 
 
+PLANNING_SETUPS = {("industrial-6r", "tracker_points"): "6R tracker",
+                   ("industrial-6r", "cross_bar"): "6R cross bar",
+                   ("panda-7dof", "tracker_points"): "7-DOF tracker",
+                   ("panda-7dof", "cross_bar"): "7-DOF cross bar"}
+
+
+def render_planning(record: dict) -> str:
+    """Designed against random feasible plans, from ``planning.py``'s JSON."""
+    cases = record["output"]["cases"]
+    rows = ["| set-up | poses | model error, designed / random [mm] | ratio: model error | "
+            "predicted | bound from the pool | cond (designed by `cond` / random) |",
+            "| --- | --- | --- | --- | --- | --- | --- |"]
+    for c in cases:
+        label = PLANNING_SETUPS.get((c["robot"], c["kind"]), f"{c['robot']} {c['kind']}")
+        for size in c["sizes"]:
+            tool, random = size["designed_tool"], size["random_median"]
+            rows.append(f"| {label} | {size['count']} | {tool['model_error_mm']:.4f} / "
+                        f"{random['model_error_mm']:.4f} | "
+                        f"{1 - size['model_error_margin']['tool']:.2f} | "
+                        f"{1 - size['predicted_margin']:.2f} | "
+                        f"{1 - size['attainable_margin']:.2f} | "
+                        f"{size['condition_ratio']:.2f} |")
+    first = cases[0]
+    lead = (f"**Experiment design** (simulated truth, {first['noise_mm']:.2g} mm noise; every "
+            f"plan runnable: joint ranges, capsules, line of sight, random plans drawn under "
+            f"the same checks; {first['random_plans_per_size']} random plans and "
+            f"{first['noise_realisations_per_design']} noise realisations per size, medians; "
+            f"model error = calibrated against true measured point over 500 configurations "
+            f"after the best rigid motion; the ratios are designed (`tool`, the default) over "
+            f"random: simulated, as the planner predicts it, and the least any choice from "
+            f"the candidate pool could reach). {_run_line(record)}")
+    return "\n\n".join([lead, "\n".join(rows)]) + _notes(record)
+
+
 def render_fleet(record: dict) -> str:
     """A small fleet through ``robocal fleet``, from ``fleet.py``'s JSON."""
     out = record["output"]
@@ -864,6 +900,7 @@ RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration
                                                "robust": render_robust,
                                                "design_bound": render_design_bound,
                                                "delivered": render_delivered,
+                                               "planning": render_planning,
                                                "fleet": render_fleet,
                                                "third_harmonic": render_third_harmonic,
                                                "fleet_prior": render_fleet_prior}
