@@ -313,15 +313,21 @@ def test_fleet_learns_a_leave_one_out_prior(fleet, capsys):
     root, folders, _ = fleet
     names = [f"r{k}" for k in range(len(folders))]
     (root / "fleet.yaml").write_text("robots:\n" + "".join(
-        f"  - {{name: {n}, datasets: [data{k}/dataset.yaml]}}\n" for k, n in enumerate(names)))
+        f"  - {{name: {n}, datasets: [data{k}/dataset.yaml]}}\n" for k, n in enumerate(names))
+        + "  - {name: brief, datasets: [few/dataset.yaml]}\n")
     out = root / "fleet-out"
     assert main(["fleet", str(root / "fleet.yaml"), "--out", str(out), "--learn-prior",
                  "--workers", "1", "--no-report", "--no-diagnose", "--loss", "linear"]) == 0
+    # the robot measured too briefly for the tolerance prior: refused in the first pass,
+    # calibrated with the prior of all the others in the second
+    assert not (out / "tolerance-prior" / "brief" / "result.json").is_file()
+    brief = json.loads((out / "brief" / "result.json").read_text())["prior"]
+    assert brief["belongs"] is True and brief["source"].endswith("brief.yaml")
     everyone = yaml.safe_load((out / "prior.yaml").read_text())
     assert everyone["count"] == len(names)
     summary = json.loads((out / "fleet.json").read_text())
     rows = {row["robot"]: row for row in summary["fleet_prior"]["robots"]}
-    assert set(rows) == set(names)
+    assert set(rows) == set(names) | {"brief"}
     for name in names:
         own = yaml.safe_load((out / "priors" / f"{name}.yaml").read_text())
         # leave one out: the robot's own prior never holds the robot itself

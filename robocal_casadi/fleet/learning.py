@@ -13,6 +13,7 @@ from __future__ import annotations
 import html
 import json
 import math
+import shutil
 from pathlib import Path
 
 from ..calibration.population_prior import learn, read_calibration, save_prior
@@ -26,7 +27,9 @@ MIN_ROBOTS = 3  # a leave-one-out prior needs at least two other robots
 
 def learn_priors(out: Path, names: list[str]) -> list[str]:
     """``DIR/prior.yaml`` from every robot of ``names`` calibrated in the first pass and a
-    leave-one-out prior per robot in ``DIR/priors/``; returns the robots given one."""
+    leave-one-out prior per robot in ``DIR/priors/``; returns the robots the population
+    came from. A robot the first pass could not calibrate (measured too briefly for the
+    tolerance prior, say) is given the prior of all the others, which may calibrate it."""
     first = Path(out) / FIRST_PASS
     calibrations = {n: read_calibration(first / n) for n in names
                     if (first / n / "result.json").is_file()}
@@ -39,6 +42,9 @@ def learn_priors(out: Path, names: list[str]) -> list[str]:
     for name in calibrations:
         others = [c for other, c in calibrations.items() if other != name]
         save_prior(learn(others), folder / f"{name}.yaml")
+    for name in names:
+        if name not in calibrations:
+            shutil.copyfile(Path(out) / PRIOR_FILE, folder / f"{name}.yaml")
     return list(calibrations)
 
 
@@ -50,15 +56,19 @@ def changes(out: Path, names: list[str]) -> list[dict]:
     for name in names:
         before = _result(Path(out) / FIRST_PASS / name)
         after = _result(Path(out) / name)
-        if before is None or after is None:
+        if after is None:
             continue
+        # before None: the tolerance prior could not calibrate it, the fleet's could
         prior = after.get("prior") or {}
         row = {"robot": name, "source": prior.get("source"), "belongs": prior.get("belongs"),
                "unit": after["fit"]["unit"],
-               "predicted_rms": [_rms(before.get("predicted_accuracy")),
+               "predicted_rms": [None if before is None else
+                                 _rms(before.get("predicted_accuracy")),
                                  _rms(after.get("predicted_accuracy"))],
-               "validation_rms": [_validation(before), _validation(after)]}
-        row.update(_largest_move(before, after))
+               "validation_rms": [None if before is None else _validation(before),
+                                  _validation(after)]}
+        row.update({"moved": None, "moved_by_std": None} if before is None
+                   else _largest_move(before, after))
         rows.append(row)
     return rows
 
@@ -109,6 +119,8 @@ def table_html(rows: list[dict]) -> str:
         unit = html.escape(str(row["unit"]))
         moved = "" if row["moved"] is None else \
             f"{html.escape(row['moved'])}: {row['moved_by_std']:.3g} standard errors"
+        if row["predicted_rms"][0] is None and row["validation_rms"][0] is None:
+            moved = "refused with the tolerance prior alone: calibrated only with the fleet's"
         source = "fleet" if row["source"] not in (None, "tolerance") else "tolerance"
         parts.append(
             f"<tr><td><a href='{html.escape(row['robot'])}/'>{html.escape(row['robot'])}</a>"
