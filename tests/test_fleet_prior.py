@@ -369,3 +369,6 @@ def test_the_fleet_prior_calibrates_a_robot_measured_too_briefly_for_least_squar
     # the tolerance) against the drawing's whole error (two thirds and a fifth) is about
     # 0.3 before the readings add anything; half of the drawing's error is a loose bound
     assert held_out["rms_geometric"] < 0.5 * held_out["rms_nominal"]
+    # what remains is the few readings' estimation error, not a model that lacks something
+    left = result["unexplained"]
+    assert not left["is_noise"] and left["estimation"]["explains_the_rest"]

@@ -485,19 +485,32 @@ def _remainder(request: _Request, final: DiagnosedFit, held_out: Validation,
     maps = [f for f in final.added if "cv_rms_after" in f.evidence]
     cv = float(maps[-1].evidence["cv_rms_after"]) if maps else None
     with stage("remainder"):
-        if held_out.summary is not None and geometric is not None:
-            problem, solution = geometric
+        if held_out.summary is not None:
+            problem, solution = geometric if geometric is not None else \
+                (final.problem, final.solution)
+            rms = held_out.summary.rms_geometric if geometric is not None else \
+                held_out.summary.rms_final
             return remainder.measure(problem, solution.x, solution.free,
                                      validation_models=models_for(request.validation,
                                                                   "validation:"),
-                                     validation_rms=held_out.summary.rms_geometric)
-        if held_out.summary is not None:
-            return remainder.measure(final.problem, final.solution.x, final.solution.free,
-                                     validation_models=models_for(request.validation,
-                                                                  "validation:"),
-                                     validation_rms=held_out.summary.rms_final)
+                                     validation_rms=rms,
+                                     estimation=_estimation(request, problem, solution))
         return remainder.measure(final.problem, final.solution.x, final.solution.free,
                                  cv_rms=cv)
+
+
+def _estimation(request: _Request, problem: Problem, solution: Solution) -> float | None:
+    """What the uncertainty of ``solution``'s estimates gives on the validation data [m]
+    (``remainder.estimation_rms``), the validation placements fitted again for it."""
+    covariance = solution.covariance
+    if covariance is None or covariance.shape != (int(solution.free.sum()),) * 2:
+        return None
+    held_out, x_held = evaluate(request.robot, request.validation, problem.effects,
+                                _values(problem, solution.x), label_prefix="validation:",
+                                kinematics=problem.kinematics,
+                                frames=StationFrames.of(problem, solution.x))
+    return remainder.estimation_rms(problem, solution.x, solution.free, covariance,
+                                    held_out, x_held)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,11 @@ above ``sqrt(q / n / (1 - p/n))``, ``q`` the chi-square quantile at ``ALPHA``, i
 than noise; the limit never exceeds ``NOISE_CAP`` (a remainder three times the
 instrument's noise is structure whatever the count). Then the remainder is not called a
 noise floor: the model lacks what this robot does (``Remainder.lacking``), the share
-``1 - 1/ratio^2`` of the remaining mean square.
+``1 - 1/ratio^2`` of the remaining mean square, unless the calibrated estimates' own
+uncertainty accounts for the rest: on validation data, ``estimation_rms`` gives the RMS that
+uncertainty leaves on the same errors, and when noise and it together (in quadrature, at
+the same limit) explain what remains, the cause is the readings (too few, or poorly spread),
+not the model.
 """
 
 from __future__ import annotations
@@ -42,7 +46,9 @@ class Remainder:
     dataset declared it), ``instrument`` its name in words, ``noise_rms`` [m] the RMS over
     the per-measurement errors the noise alone gives, ``held_out`` [m] the RMS the model
     leaves there, on data of ``basis`` (one of ``BASES``), ``limit`` the largest ratio
-    noise alone explains (module docstring).
+    noise alone explains (module docstring); ``estimation`` [m] the RMS the calibrated
+    estimates' own uncertainty gives on the same errors (validation data only; None where
+    not computed).
     """
 
     noise: InstrumentNoise
@@ -51,6 +57,7 @@ class Remainder:
     held_out: float
     basis: str
     limit: float
+    estimation: float | None = None  # [m] what the estimates' own uncertainty gives there
 
     @property
     def ratio(self) -> float:
@@ -63,6 +70,14 @@ class Remainder:
         return self.ratio <= self.limit
 
     @property
+    def explained_by_estimates(self) -> bool:
+        """Whether the noise together with the estimates' own uncertainty (too few or too
+        weak readings, not a model that lacks something) explains what remains."""
+        if self.is_noise or self.estimation is None:
+            return False
+        return self.held_out <= self.limit * math.hypot(self.noise_rms, self.estimation)
+
+    @property
     def lacking(self) -> float:
         """The share of the remaining mean square the instrument's noise does not explain."""
         return max(0.0, 1.0 - 1.0 / self.ratio ** 2) if self.ratio > 0 else 0.0
@@ -73,7 +88,10 @@ class Remainder:
         return {"instrument_noise": {**self.noise.to_json(units), "instrument": self.instrument,
                                      "rms": self.noise_rms / s},
                 "held_out": {"rms": self.held_out / s, "unit": unit, "basis": self.basis},
-                "ratio": self.ratio, "noise_limit": self.limit, "is_noise": self.is_noise}
+                "ratio": self.ratio, "noise_limit": self.limit, "is_noise": self.is_noise,
+                "estimation": None if self.estimation is None else {
+                    "rms": self.estimation / s, "unit": unit,
+                    "explains_the_rest": self.explained_by_estimates}}
 
     def noise_words(self, s: float, u: str) -> str:
         """``the tracker's noise (0.028 mm, a default ...)``; ``s`` [m] per unit ``u``."""
@@ -91,6 +109,12 @@ class Remainder:
         if self.is_noise:
             return (f"{self.held_out / s:.3g} {u} remain {where}, within what "
                     f"{self.noise_words(s, u)} explains: a noise floor")
+        if self.explained_by_estimates:
+            assert self.estimation is not None
+            return (f"{self.held_out / s:.3g} {u} remain {where}, about {self.ratio:.2g} times "
+                    f"{self.noise_words(s, u)}; the calibrated estimates' own uncertainty "
+                    f"({self.estimation / s:.3g} {u} there) explains the rest: more or "
+                    f"better-spread readings, not a richer model, would lower it")
         most = "most" if self.lacking >= 0.5 else "part"
         follows = (f"; it varies with {', '.join(variables[:4])}" if variables else
                    "; the diagnosis's tests name no variable it follows (an effect they do "
@@ -151,13 +175,14 @@ def cross_validated(problem, x: np.ndarray, free: np.ndarray, *, seed: int = 0
 
 
 def measure(problem, x: np.ndarray, free: np.ndarray, *, validation_models=(),
-            validation_rms: float | None = None, cv_rms: float | None = None
-            ) -> Remainder | None:
+            validation_rms: float | None = None, cv_rms: float | None = None,
+            estimation: float | None = None) -> Remainder | None:
     """What the final model (``problem`` at ``x``, ``free`` fitted) leaves beside the
     instruments' noise. ``validation_models`` and ``validation_rms`` [m]: the held-out
     data's models and the final RMS there, when given (they are the basis); ``cv_rms``
-    [m]: a held-out RMS of the final model known already (a learned map's folds). None
-    when no dataset uses the robot."""
+    [m]: a held-out RMS of the final model known already (a learned map's folds);
+    ``estimation`` [m]: what the estimates' uncertainty gives on the validation data
+    (``estimation_rms``). None when no dataset uses the robot."""
     if not any(m.uses_robot for m in problem.models):
         return None
     fitted = int(np.count_nonzero(free))
@@ -175,4 +200,42 @@ def measure(problem, x: np.ndarray, free: np.ndarray, *, validation_models=(),
     entries = int(sum(np.count_nonzero(m.entry_noise()) for m in models))
     noise, name = _noise_of(models)
     return Remainder(noise, name, expected_rms(models), float(held), basis,
-                     noise_limit(entries, fitted))
+                     noise_limit(entries, fitted),
+                     estimation if basis == "validation" else None)
+
+
+def estimation_rms(problem, x: np.ndarray, free: np.ndarray, covariance: np.ndarray,
+                   held_out, x_held: np.ndarray) -> float | None:
+    """The RMS [m] over ``held_out``'s per-measurement errors that the uncertainty of the
+    estimates of ``problem`` (at ``x``, ``free`` fitted, ``covariance`` [SI^2] over the
+    free unknowns in order) gives, its placements fitted again as validation does:
+    ``diag(J C J^T)`` per residual entry with ``J`` the held-out problem's Jacobian over
+    the robot, effect and mounted unknowns, the part its own placements can take up
+    projected out. None where it cannot be formed (no such unknowns, a covariance that is
+    not finite)."""
+    order = np.flatnonzero(free)
+    estimated = problem.mask("robot", "effects", "mounted")[order]
+    names = [problem.unknowns.names[i] for i in order[estimated]]
+    theirs = held_out.unknowns.names
+    shared = [k for k, n in enumerate(names) if n in theirs]
+    if not shared:
+        return None
+    C = np.asarray(covariance, float)[np.ix_(estimated, estimated)][np.ix_(shared, shared)]
+    if not np.all(np.isfinite(C)):
+        return None
+    columns = np.array([theirs.index(names[k]) for k in shared])
+    J = held_out.jacobian(x_held, columns)
+    placement = held_out.free_placement()
+    if placement.any():
+        basis = np.linalg.qr(held_out.jacobian(x_held, placement))[0]
+        J = J - basis @ (basis.T @ J)
+    variance = np.clip(np.sum((J @ C) * J, axis=1), 0.0, None)
+    squares, start = [], 0
+    for model in held_out.models:
+        size = model.residual_size()
+        squares.append(model.errors(np.sqrt(variance[start:start + size])) ** 2)
+        start += size
+    if start != len(variance) or not squares:
+        return None
+    total = np.concatenate(squares)
+    return float(np.sqrt(np.mean(total))) if total.size else None
