@@ -418,17 +418,25 @@ def parameters_section(result: CalibrationResult) -> Section:
         numeric.append(True)
     identified = [p for p in result.parameters if p.identifiable]
     held = [p for p in result.parameters if not p.identifiable]
+    prior = getattr(result, "prior", None)
+    use = getattr(prior, "use", None)
+    fleet = use is not None and use.source != "tolerance"
+    against = ("the population of robots of this model the fleet prior holds (the "
+               "tolerances where it says nothing)" if fleet else "its tolerance")
     blocks: list = [Table("parameters", "Identified geometric parameters", tuple(header),
                           tuple(row(p) for p in identified), numeric=tuple(numeric)),
-                    Paragraph("Standard errors come from the posterior covariance of the fit "
-                              "(each parameter weighed against its tolerance), counting "
-                              "repeated readings once.", "note")]
-    prior = getattr(result, "prior", None)
+                    Paragraph(f"Standard errors come from the posterior covariance of the fit "
+                              f"(each parameter weighed against {against}), counting "
+                              f"repeated readings once.", "note")]
+    if use is not None and use.offered is not None:
+        said = use.sentence
+        blocks.append(Paragraph(f"{said[:1].upper()}{said[1:]}.", "note"))
     if prior is not None and prior.dominated:
         listed = ", ".join(f"{name} ({100 * prior.data_share[name]:.0f}% from the data)"
                            for name in prior.dominated)
+        source = "the fleet's population" if fleet else "the tolerances"
         blocks.append(Paragraph(f"Prior-dominated: {listed}. Their estimates say more about "
-                                f"the tolerances than about the robot: the data barely "
+                                f"{source} than about this robot: the data barely "
                                 f"tell them apart from other parameters or the placement.",
                                 "note"))
     if held:
