@@ -23,12 +23,14 @@ from ..model.robot import Robot
 from .backlash import Backlash
 from .base import Contribution, Effect, Implausible, Plausible, RowContext, TrueWorld, joint_list
 from .compliance import JointCompliance
+from .coupled_compliance import CoupledCompliance
 from .coupling import JointCoupling
 from .cyclic import JointCyclic
 from .deflection import LinkDeflection
 from .gravity import GravityModel, gravity_torque
 from .hysteresis import Hysteresis
 from .motion import direction_column, directions_of_motion, with_directions
+from .motor_play import MotorPlay
 from .residual_map import ResidualMap
 from .scale import JointScale
 from .thermal import ThermalDrift
@@ -36,7 +38,7 @@ from .transmission import TransmissionCoupling
 
 REGISTERED: tuple[type[Effect], ...] = (JointCompliance, JointCyclic, JointScale, ThermalDrift,
                                         JointCoupling, TransmissionCoupling, Backlash, Hysteresis,
-                                        LinkDeflection)
+                                        CoupledCompliance, MotorPlay, LinkDeflection)
 EFFECTS: dict[str, type[Effect]] = {cls.name: cls for cls in REGISTERED}
 LEARNED: dict[str, type[Effect]] = {ResidualMap.name: ResidualMap}
 
@@ -90,7 +92,7 @@ def make_effect(name: str, joints=(), robot: Robot | None = None,
                                      **options)
 
 
-__all__ = ["Backlash", "Contribution", "EFFECTS", "Effect", "GravityModel", "Hysteresis",
+__all__ = ["Backlash", "Contribution", "CoupledCompliance", "MotorPlay", "EFFECTS", "Effect", "GravityModel", "Hysteresis",
            "Implausible",
            "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LEARNED",
            "LinkDeflection", "ResidualMap", "is_learned",

@@ -117,7 +117,7 @@ class EffectModel:
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         extras = dict(extras or {})
         if any(is_derived_column(c) for c in self.columns()):
-            extras = with_directions(Q, extras)
+            extras = with_directions(Q, extras, self.robot)
         missing = [c for c in self.columns() if c not in extras]
         if missing:
             raise InputError(f"the effects need {', '.join(missing)} for every row")

@@ -25,6 +25,12 @@ last changed (friction ``hysteresis`` follows it), is ``travel_q{j}`` [rad or m]
 
 Per-row inputs derived here are named ``direction_q{j}`` and ``travel_q{j}`` (1-based)
 and travel with the data columns of ``extras``.
+
+Where joints are driven together (a differential, ``model.transmission``), each motor has
+its own direction of motion, the sign of its motion ``M (q[i] - q[i-1])`` over its group's
+joints (kept where it did not move, 0 until it first moves): ``direction_m{k}``, motor k
+named after the k-th joint of its group. It needs the robot's transmission, so the
+functions that derive it take the robot.
 """
 
 from __future__ import annotations
@@ -33,8 +39,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..errors import InputError
+
 PREFIX = "direction_q"
 TRAVEL = "travel_q"
+MOTOR = "direction_m"
 
 
 def direction_column(joint: int) -> str:
@@ -48,14 +57,25 @@ def travel_column(joint: int) -> str:
     return f"{TRAVEL}{int(joint)}"
 
 
+def motor_direction_column(motor: int) -> str:
+    """The name of motor ``motor``'s direction input: ``direction_m{motor}`` (a motor is
+    named after a joint of its group, ``model.transmission``)."""
+    return f"{MOTOR}{int(motor)}"
+
+
 def is_direction_column(column: str) -> bool:
     return column.startswith(PREFIX) and column[len(PREFIX):].isdigit()
 
 
+def is_motor_direction_column(column: str) -> bool:
+    return column.startswith(MOTOR) and column[len(MOTOR):].isdigit()
+
+
 def is_derived_column(column: str) -> bool:
-    """Whether ``column`` is an input derived from the row order (direction or travel)."""
-    return is_direction_column(column) or (column.startswith(TRAVEL)
-                                           and column[len(TRAVEL):].isdigit())
+    """Whether ``column`` is an input derived from the row order (direction or travel of a
+    joint, direction of a motor)."""
+    return is_direction_column(column) or is_motor_direction_column(column) or (
+        column.startswith(TRAVEL) and column[len(TRAVEL):].isdigit())
 
 
 def directions_of_motion(Q) -> np.ndarray:
@@ -86,10 +106,24 @@ def travel_since_reversal(Q) -> np.ndarray:
     return out
 
 
-def with_directions(joints, extras: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+def motor_directions_of_motion(Q, robot) -> dict[str, np.ndarray]:
+    """``direction_m{k}`` (N,) for every motor of ``robot``'s transmission groups at readings
+    ``Q`` (N x dof) in row order; empty without a transmission."""
+    from ..model.transmission import motor_directions
+
+    out: dict[str, np.ndarray] = {}
+    for group in getattr(robot, "transmission", ()):
+        directions = motor_directions(Q, group)
+        for k, motor in enumerate(group.joints):
+            out[motor_direction_column(motor)] = directions[:, k]
+    return out
+
+
+def with_directions(joints, extras: Mapping[str, np.ndarray],
+                    robot=None) -> dict[str, np.ndarray]:
     """``extras`` plus ``direction_q1..n`` and ``travel_q1..n`` of the full table ``joints``
-    (N x dof), where ``extras`` does not hold them already (a table cut down keeps its
-    own)."""
+    (N x dof), and with ``robot`` the directions of its motors (``direction_m{k}``), where
+    ``extras`` does not hold them already (a table cut down keeps its own)."""
     out = dict(extras)
     if joints is None:
         return out
@@ -98,16 +132,26 @@ def with_directions(joints, extras: Mapping[str, np.ndarray]) -> dict[str, np.nd
     for j in range(1, directions.shape[1] + 1):
         out.setdefault(direction_column(j), directions[:, j - 1])
         out.setdefault(travel_column(j), travel[:, j - 1])
+    if robot is not None:
+        for name, values in motor_directions_of_motion(joints, robot).items():
+            out.setdefault(name, values)
     return out
 
 
 def direction_values(dataset, column: str) -> np.ndarray:
-    """The per-row values of the derived input ``column`` (direction or travel) for
-    ``dataset`` (N,)."""
+    """The per-row values of the derived input ``column`` (direction or travel of a joint,
+    direction of a motor of ``dataset.robot``) for ``dataset`` (N,)."""
     if column in dataset.extras:
         return np.asarray(dataset.extras[column], dtype=float)
     if dataset.joints is None:
         return np.zeros(0)
+    if is_motor_direction_column(column):
+        found = motor_directions_of_motion(dataset.joints, dataset.robot)
+        if column not in found:
+            raise InputError(f"the effects need {column}, a motor the robot file's "
+                             "transmission does not declare", file=dataset.robot_path,
+                             where="transmission")
+        return found[column]
     if is_direction_column(column):
         return directions_of_motion(dataset.joints)[:, int(column[len(PREFIX):]) - 1]
     return travel_since_reversal(dataset.joints)[:, int(column[len(TRAVEL):]) - 1]

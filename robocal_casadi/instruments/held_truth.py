@@ -169,6 +169,8 @@ def true_effects_of(truth: HeldTruth, robot: Robot) -> tuple[tuple[Any, dict[str
             drivers = mapping(entry.get("drivers") or {}, file=truth.path,
                               where=f"{where}.drivers")
             keys = [(int(j), int(k)) for j, k in drivers.items()]
+        elif cls.per == "group":  # coupled joints: the groups, each a list of joints
+            keys = [tuple(int(j) for j in g) for g in entry.get("groups") or []]
         else:
             keys = [int(j) for j in entry.get("joints") or []]
         orders = entry.get("orders")  # a periodic error's harmonics, per joint

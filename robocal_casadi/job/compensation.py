@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..common.checks import count, path_argument
+from ..effects.motion import is_derived_column
 from ..errors import ArgumentError, InputError
 from ..model.configuration import same_configuration
 from ..model.ik import IKBatchResult, inverse_kinematics
@@ -271,11 +272,12 @@ def _with_effects(kinematics: Kinematics, effects, extras: dict, targets: np.nda
     for _ in range(EFFECT_ROUNDS):
         if rows.size == 0:
             break
-        if any(c.startswith(("direction_q", "travel_q")) for c in effects.columns()):
+        if any(is_derived_column(c) for c in effects.columns()):
             # backlash: the directions of motion along the whole path of solutions
             from ..effects.motion import with_directions
 
-            T = effects.tool_poses(Q[rows], _rows_of(with_directions(Q, extras), rows, count))
+            T = effects.tool_poses(Q[rows], _rows_of(with_directions(Q, extras, effects.robot),
+                                                     rows, count))
         else:
             T = effects.tool_poses(Q[rows], _rows_of(extras, rows, count))
         if poses is None:

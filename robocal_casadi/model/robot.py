@@ -45,6 +45,7 @@ from ..common.fields import (
 from ..common.units import SI, Units, to_file_units, units_of
 from ..errors import InputError
 from .parameters import ParameterRegistry
+from .transmission import TransmissionGroup, transmission_from_dict, transmission_to_dict
 from .transforms import pose_from_xyz_rpy
 
 JOINT_TYPES = ("revolute", "prismatic")
@@ -55,7 +56,8 @@ DEFAULT_DRIVE = "gear"
 CONVENTIONS = ("dh", "mdh", "urdf")
 JOINT_KEYS = {"type", "theta", "d", "a", "alpha", "beta", "limits", "mass", "com", "tolerance",
               "drive"}
-ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity", "tolerance")
+ROBOT_KEYS = ("name", "convention", "units", "joints", "base", "tool", "gravity", "tolerance",
+              "transmission")
 JOINT_TOLERANCE_KEYS = {"theta": "angle", "d": "length", "a": "length", "alpha": "angle",
                         "beta": "angle"}
 # Top-level ``tolerance:`` keys: a kind of parameter (``prior.DEFAULT_TOLERANCE``) each.
@@ -169,6 +171,8 @@ class Robot:
     tolerance: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
     flange: Frame = field(default_factory=Frame)
     urdf: UrdfSource | None = field(default=None, compare=False)  # where, not what
+    # Groups of joints driven together (differentials), ``transmission``; none by default.
+    transmission: tuple[TransmissionGroup, ...] = ()
 
     @property
     def dof(self) -> int:
@@ -300,6 +304,7 @@ def robot_from_dict(content: dict, *, file: str | Path | None = None) -> Robot:
         has_tool=content.get("tool") is not None,
         has_gravity=content.get("gravity") is not None,
         tolerance=tolerance,
+        transmission=transmission_from_dict(content.get("transmission"), joints, file=file),
     )
 
 
@@ -510,10 +515,13 @@ def _urdf_robot_from_dict(content: dict, *, file) -> Robot:
         check_keys(block, ("file", "base_link", "tip_link"), file=file, where="urdf")
         source = UrdfSource(*(str(require(block, k, file=file, where="urdf"))
                               for k in ("file", "base_link", "tip_link")))
-    plain = {k: v for k, v in content.items() if k not in ("joints", "flange", "urdf")}
+    plain = {k: v for k, v in content.items()
+             if k not in ("joints", "flange", "urdf", "transmission")}
     plain.update(convention="dh", joints=[{"theta": 0, "d": 0, "a": 0, "alpha": 0}])
     shell = robot_from_dict(plain, file=file)
     return replace(shell, convention="urdf", joints=tuple(joints), urdf=source,
+                   transmission=transmission_from_dict(content.get("transmission"), joints,
+                                                       file=file),
                    flange=_frame_from_dict(content.get("flange"), units, file=file,
                                            where="flange"))
 
@@ -597,6 +605,8 @@ def robot_to_dict(robot: Robot, units: Units | None = None) -> dict:
             block[key] = to_file_units(robot.tolerance[name], units.scale(kind))
     if block:
         content["tolerance"] = block
+    if robot.transmission:
+        content["transmission"] = transmission_to_dict(robot.transmission)
     return content
 
 
@@ -634,6 +644,8 @@ def _urdf_robot_to_dict(robot: Robot, units: Units) -> dict:
             content[key] = _frame_to_dict(frame, units)
     if robot.has_gravity or tuple(robot.gravity) != (0.0, 0.0, -9.81):
         content["gravity"] = list(robot.gravity)
+    if robot.transmission:
+        content["transmission"] = transmission_to_dict(robot.transmission)
     return content
 
 

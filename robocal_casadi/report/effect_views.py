@@ -159,7 +159,8 @@ def effect_view(result: CalibrationResult, finding: EffectFinding) -> EffectView
     units = display_units(result.units)
     models = effect_models_of(result, finding)
     # per-row inputs of the row order (directions of motion) come from the full table
-    with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras))
+    with_joints = tuple(replace(r, extras=with_directions(r.joints, r.extras,
+                                                             result.robot_nominal))
                         for r in residuals if r.joints is not None)
     cls = EFFECTS.get(finding.name)
     joint_effect = (bool(finding.joints) and bool(with_joints)

@@ -101,7 +101,8 @@ def dh_equivalent(robot: Robot) -> DhEquivalent:
     joints = _dh_joints(robot, frames, parallel)
     dh = Robot(name=robot.name, convention="dh", joints=joints, base=frame_of(frames[0]),
                tool=frame_of(invert(frames[-1]) @ tip), gravity=robot.gravity,
-               has_base=True, has_tool=True, has_gravity=robot.has_gravity)
+               has_base=True, has_tool=True, has_gravity=robot.has_gravity,
+               transmission=robot.transmission)
     return DhEquivalent(dh, tuple(notes))
 
 
