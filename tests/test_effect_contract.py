@@ -19,13 +19,18 @@ from robocal_casadi.calibration import calibrate, diagnosis
 from robocal_casadi.common.units import Units
 from robocal_casadi.effects import EFFECTS, Effect, Plausible, RowContext, TrueWorld, register
 from robocal_casadi.effects.effect_model import EffectModel, load_effects, save_effects
-from robocal_casadi.effects.motion import direction_column, travel_column
+from robocal_casadi.effects.motion import direction_column, motor_direction_column, travel_column
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.robot import dump_yaml
+from robocal_casadi.model.transmission import TransmissionGroup
 
 NAMES = sorted(EFFECTS)
-ROBOT = ROBOTS["industrial_6r"]()
+# two coupled groups, for the effects of joints driven together: a differential of ratio
+# 50 and a matrix whose rows scale differently
+ROBOT = replace(ROBOTS["industrial_6r"](), transmission=(
+    TransmissionGroup((2, 3), ((50.0, 50.0), (50.0, -50.0))),
+    TransmissionGroup((5, 6), ((2.0, 1.0), (1.0, -3.0)))))
 FIT_EXTRAS = {"temperature": np.array([18.0, 21.0, 24.0]), "payload": np.array([0.0, 2.0, 5.0])}
 
 
@@ -52,6 +57,7 @@ def rows(effect: Effect, n: int, seed: int = 3):
     for j in range(1, ROBOT.dof + 1):
         extras[direction_column(j)] = rng.choice([-1.0, 0.0, 1.0], n)
         extras[travel_column(j)] = rng.uniform(0.0, 0.05, n)
+        extras[motor_direction_column(j)] = rng.choice([-1.0, 0.0, 1.0], n)
     return Q, extras
 
 
@@ -88,7 +94,7 @@ def test_declarations(name):
     assert cls.name == name
     assert cls.title and cls.title[0].isupper()
     assert cls.plot_variable in Effect.PLOT_VARIABLES
-    assert cls.per in ("joint", "pair", "column")
+    assert cls.per in ("joint", "pair", "column", "group")
     assert cls.formula and cls.sentence
     effect = example(cls)
     names = effect.parameter_names()
@@ -100,7 +106,8 @@ def test_declarations(name):
         # a typical value is a plausible one
         assert limits.minimum <= effect.typical <= limits.maximum, parameter
     one = cls.for_simulation(() if cls.per == "column" else
-                             ((4, 6),) if cls.per == "pair" else (2,))
+                             ((4, 6),) if cls.per == "pair" else
+                             ((2, 3),) if cls.per == "group" else (2,))
     values = one.simulation_values()
     assert len(values) == len(cls.simulation_default)
     assert one.check_plausible(values) == ()
@@ -121,9 +128,10 @@ def test_shapes_and_zero_at_zero_parameters(name):
     assert not zero.dq.any() and not zero.dp.any()
     some = effect.contribution(ROBOT, theta_of(effect), Q, extras)
     assert np.abs(some.dq).max() + np.abs(some.dp).max() > 0
-    # only the joints the effect names move (the geometry for thermal drift)
+    # only the joints the effect names move (the geometry for thermal drift; a motor's
+    # play moves the joints of its transmission group)
     moved = np.flatnonzero(np.abs(some.dq).max(axis=0) > 0) + 1
-    assert set(moved) <= set(effect.joints)
+    assert set(moved) <= set(effect.moved_joints(ROBOT))
 
 
 def _central(f, x, h):
@@ -166,7 +174,8 @@ def test_simulator_truth_agrees_with_the_estimator(name):
     """The simulator's numpy truth (pinocchio gravity for compliance) and the estimator's
     CasADi ``delta`` are two codings of one definition: they agree row by row."""
     cls = EFFECTS[name]
-    keys = () if cls.per == "column" else ((4, 6), (2, 3)) if cls.per == "pair" else (2, 5)
+    keys = () if cls.per == "column" else ((4, 6), (2, 3)) if cls.per == "pair" else \
+        ((2, 3), (5, 6)) if cls.per == "group" else (2, 5)
     offered = {j for unit in cls.candidates(robot_for(cls), FIT_EXTRAS) for j in unit.joints}
     if cls.per == "joint" and not set(keys) <= offered:  # e.g. links without length
         keys = tuple(sorted(offered))[:2]
@@ -263,7 +272,7 @@ def test_the_stated_ranges_of_real_robots():
 # ----------------------------------------------------------------------------- recovery
 
 
-TRUTH_KEYS = {"joint": 2, "pair": (5, 6)}
+TRUTH_KEYS = {"joint": 2, "pair": (5, 6), "group": (2, 3)}
 
 
 @pytest.mark.parametrize("name", NAMES)

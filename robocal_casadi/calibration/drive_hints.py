@@ -17,11 +17,16 @@ from ..results import CalibrationResult, Decision
 STRONG = 0.5  # of the round's largest residual drop a candidate must explain to be named
 
 
+def was_added(result: CalibrationResult, effect: str, joints) -> bool:
+    """Whether an effect ``effect`` the calibration added holds every joint of ``joints``
+    (a unit tested alone is added as part of the finding of its type)."""
+    return any(e.name == effect and set(joints) <= set(e.joints) for e in result.effects)
+
+
 def drive_lines(result: CalibrationResult) -> list[str]:
     """Once per joint: the candidates refused only for a size its drive never shows that
     another drive shows, with the robot-file line that would allow them. Nothing is
     switched: the drive is the user's to declare."""
-    added = {(e.name, tuple(e.joints)) for e in result.effects}
     labels: dict[int, list[str]] = {}
     allowing: dict[int, list[str]] = {}
     strongest: dict[int, float] = {}  # per round, the largest share any candidate explains
@@ -33,7 +38,7 @@ def drive_lines(result: CalibrationResult) -> list[str]:
         if test.outcome is Decision.ADDED:
             taken[round_] = max(taken.get(round_, 0.0), drop)
     for test in result.diagnosis:
-        if test.outcome is not Decision.IMPLAUSIBLE or (test.effect, tuple(test.joints)) in added:
+        if test.outcome is not Decision.IMPLAUSIBLE or was_added(result, test.effect, test.joints):
             continue
         entry = test.as_dict()
         # a candidate that explains a sliver of what a stronger one explains stands in

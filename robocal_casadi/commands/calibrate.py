@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from ..calibration import METHODS
-from ..calibration.drive_hints import drive_lines
+from ..calibration.drive_hints import drive_lines, was_added
 from ..calibration.identification import CALIBRATION_LOSSES
 from ..calibration.outliers import rejected_lines
 from ..common.units import Units, display_units
@@ -258,11 +258,11 @@ def _regions(predicted: PredictedAccuracy, s: float) -> dict:
 
 def _rejected(result: CalibrationResult, outcome: Decision) -> list[str]:
     """Labels of the candidates diagnosis decided ``outcome`` for and never added."""
-    added = {(e.name, tuple(e.joints)) for e in result.effects}
     out: list[str] = []
     for test in result.diagnosis:
         label = test.label or f"{test.effect}{list(test.joints)}"
-        if test.outcome is outcome and (test.effect, tuple(test.joints)) not in added \
+        # a unit refused in one round and added in a later one is no refusal
+        if test.outcome is outcome and not was_added(result, test.effect, test.joints) \
                 and label not in out:
             out.append(label)
     return out

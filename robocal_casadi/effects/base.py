@@ -198,6 +198,11 @@ class Effect(ABC):
     def __repr__(self) -> str:
         return f"{type(self).__name__}(joints={list(self.joints)})"
 
+    def moved_joints(self, robot: Robot) -> tuple[int, ...]:
+        """The joints (1-based) whose ``dq`` the effect may change on ``robot``: its own
+        ``joints`` unless it acts through a transmission (``motor_play``)."""
+        return self.joints
+
     @property
     def label(self) -> str:
         return f"{self.name}{list(self.joints)}"

@@ -82,7 +82,7 @@ class MotorPlay(Effect):
     plot_variable = "direction"
     revolute_only = True
     tracker_only = True
-    simulation_default = (5e-3,)
+    simulation_default = (1e-3,)
     formula = ("q_true_G = q_read_G - N^-1 (b/2 d_motor), d_motor the direction of motion of "
                "each motor\n      (its motion M dq in the row order), N the group's "
                "transmission, rows scaled to joint angles (tracker data only)")
@@ -95,6 +95,10 @@ class MotorPlay(Effect):
 
     def required_columns(self) -> tuple[str, ...]:
         return tuple(motor_direction_column(k) for k in self.joints)
+
+    def moved_joints(self, robot: Robot) -> tuple[int, ...]:
+        """Every joint of the groups of the effect's motors."""
+        return tuple(sorted({j for k in self.joints for j in self._group(robot, k).joints}))
 
     @classmethod
     def candidates(cls, robot: Robot, extras: Mapping[str, Any]) -> tuple[MotorPlay, ...]:
@@ -144,8 +148,9 @@ class MotorPlay(Effect):
         return motor
 
     def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
-        """The lag of each motor at the directions of motion of the motors, found here from
-        the order of the readings ``Q`` (the whole table, in the order written)."""
+        """Each motor's lag at the motors' directions of motion in ``extras`` (the
+        simulator's own, from the order of the readings it writes), mapped to the joints by
+        solving the true robot's normalised transmission."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         dq = np.zeros(Q.shape)
         groups: list[TransmissionGroup] = []
@@ -156,12 +161,10 @@ class MotorPlay(Effect):
         for group in groups:
             columns = [j - 1 for j in group.joints]
             lags = np.array([0.5 * values.get(f"bm{k}", 0.0) for k in group.joints])
-            M, N = group.matrix, group.normalised
-            direction = np.zeros(len(columns))
-            for i in range(1, len(Q)):
-                motion = exact.matmul(M, Q[i, columns] - Q[i - 1, columns])
-                direction = np.where(motion > 0, 1.0, np.where(motion < 0, -1.0, direction))
-                dq[i, columns] = -exact.solve(N, lags * direction)
+            directions = np.column_stack([np.asarray(extras[motor_direction_column(k)],
+                                                     dtype=float) for k in group.joints])
+            for i in range(len(Q)):
+                dq[i, columns] = -exact.solve(group.normalised, lags * directions[i])
         return dq
 
     @classmethod

@@ -35,6 +35,14 @@ with, per joint j (1-based) named in an effect:
   solve readings row by row, without the travel);
 * ``transmission_coupling`` (a share of joint k's motion reaches joint j):
   ``dq_j = r q_k``;
+* ``coupled_compliance`` (a group G of joints driven together, the robot file's
+  ``transmission``): ``dq_G = -C g_G(q_read)``, ``C`` [rad/Nm] symmetric, ``g`` as for
+  ``joint_compliance``;
+* ``motor_play`` (motor k of a group, named after the group's k-th joint):
+  ``dq_G = -N^-1 (b/2 o d_motors)`` [rad], ``d_motors`` the sign of each motor's motion
+  ``M (q_read[i] - q_read[i-1])`` since the row before (the last direction where it did
+  not move, 0 at the start), ``N`` the group's ``M`` with rows scaled to their largest
+  entry (tracker data only);
 * ``link_deflection`` (link i): the measured point shifts by
   ``(f payload + f_m) |L_i| g_perp`` [m] in the world, ``L_i`` the link at the true joints
   and geometry, ``g_perp`` gravity's part perpendicular to it (tracker data only);
@@ -70,12 +78,18 @@ from typing import Any
 
 import numpy as np
 
+from ..common import exact
 from ..common.checks import choice, count, path_argument, positive
 from ..common.output import atomic_directory, replace_refusal
 from ..common.table import read_table, write_table
 from ..common.units import Units, exact_file_units, snapped
 from ..effects import EFFECTS, Effect, TrueWorld
-from ..effects.motion import direction_column, is_direction_column, travel_column
+from ..effects.motion import (
+    direction_column,
+    is_direction_column,
+    motor_direction_column,
+    travel_column,
+)
 from ..errors import ArgumentError, InputError
 from ..model.kinematics import Kinematics
 from ..model.parameters import perturbed_stems
@@ -304,6 +318,26 @@ def travels_in_order(Q_read: np.ndarray) -> np.ndarray:
     return out
 
 
+def motor_directions_in_order(Q_read: np.ndarray, robot: Robot) -> dict[str, np.ndarray]:
+    """The simulator's directions of motion of the motors of ``robot``'s transmission groups
+    at readings ``Q_read`` (N x dof) in written order, ``direction_m{k}`` -> (N,): the sign
+    of each motor's motion ``M (q[i] - q[i-1])`` over its group, the previous direction
+    where it did not move, 0 at the start."""
+    Q_read = np.atleast_2d(Q_read)
+    out: dict[str, np.ndarray] = {}
+    for group in robot.transmission:
+        columns = [j - 1 for j in group.joints]
+        M = group.matrix
+        found = np.zeros((len(Q_read), len(columns)))
+        for i in range(1, len(Q_read)):
+            motion = exact.matmul(M, Q_read[i, columns] - Q_read[i - 1, columns])
+            for k, value in enumerate(motion):
+                found[i, k] = found[i - 1, k] if value == 0 else math.copysign(1.0, value)
+        for k, motor in enumerate(group.joints):
+            out[motor_direction_column(motor)] = found[:, k]
+    return out
+
+
 def directions_in_order(Q_read: np.ndarray) -> np.ndarray:
     """The simulator's directions of motion (N x dof) of readings in written order: the sign
     of each row's change from the row before, the previous direction where nothing
@@ -355,10 +389,12 @@ class TrueRobot:
 
     def joint_delta(self, Q_read: np.ndarray, payload: np.ndarray,
                     directions: np.ndarray | None = None,
-                    travels: np.ndarray | None = None) -> np.ndarray:
+                    travels: np.ndarray | None = None,
+                    motors: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """``sum dq(q_read)`` (N x dof) [rad or m] of the joint effects; ``directions``
         (N x dof) of motion for backlash and hysteresis (0 where None), ``travels`` (N x dof)
-        since the last reversal for hysteresis (0 where None)."""
+        since the last reversal for hysteresis (0 where None), ``motors`` the directions
+        of the transmission's motors (``direction_m{k}`` -> N values; 0 where None)."""
         Q_read = np.atleast_2d(Q_read)
         directions = np.zeros(Q_read.shape) if directions is None else np.atleast_2d(directions)
         travels = np.zeros(Q_read.shape) if travels is None else np.atleast_2d(travels)
@@ -366,6 +402,10 @@ class TrueRobot:
         for j in range(1, self.robot.dof + 1):
             extras[direction_column(j)] = directions[:, j - 1]
             extras[travel_column(j)] = travels[:, j - 1]
+        for group in self.robot.transmission:
+            for motor in group.joints:
+                name = motor_direction_column(motor)
+                extras[name] = np.zeros(len(Q_read)) if motors is None else motors[name]
         dq = np.zeros_like(Q_read)
         for effect, values in self.effects.entries:
             dq += effect.simulated_dq(self.world, Q_read, extras, values)
@@ -375,7 +415,8 @@ class TrueRobot:
         """``q_true = q_read + dq(q_read)`` (N x dof), ``Q_read`` in the order written."""
         Q_read = np.atleast_2d(np.asarray(Q_read, dtype=float))
         return Q_read + self.joint_delta(Q_read, payload, directions_in_order(Q_read),
-                                         travels_in_order(Q_read))
+                                         travels_in_order(Q_read),
+                                         motor_directions_in_order(Q_read, self.robot))
 
     def readings(self, q_true: np.ndarray, payload: float,
                  direction: np.ndarray | None = None) -> np.ndarray:
