@@ -327,7 +327,7 @@ def test_exact_derivatives_match_finite_differences(effect_name, robot_name):
 def test_registry_names_every_contract_effect():
     assert set(EFFECTS) == {"joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift",
                             "joint_coupling", "transmission_coupling", "backlash",
-                            "hysteresis", "link_deflection"}
+                            "hysteresis", "coupled_compliance", "motor_play", "link_deflection"}
     for name, cls in EFFECTS.items():
         assert cls.name == name
 

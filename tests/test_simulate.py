@@ -512,7 +512,13 @@ def test_every_effect_reads_back_from_the_truth_file(tmp_path):
     from robocal_casadi.instruments.held_truth import read_truth, true_effects_of
     from robocal_casadi.instruments.simulate import TrueEffects
 
-    robot = ROBOTS["industrial_6r"]()
+    from dataclasses import replace
+
+    from robocal_casadi.model.transmission import TransmissionGroup
+
+    # joints 3 and 4 driven together, for the effects of coupled groups (key 3: its group)
+    robot = replace(ROBOTS["industrial_6r"](), transmission=(
+        TransmissionGroup((3, 4), ((1.0, 1.0), (1.0, -1.0))),))
     for name, cls in EFFECTS.items():
         if cls.per == "column" and not cls.simulation_default:
             continue  # learned: nothing to simulate

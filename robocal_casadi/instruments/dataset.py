@@ -104,7 +104,7 @@ def dataset_rows(dataset: DatasetBase, mask: np.ndarray) -> DatasetBase:
     """A copy of ``dataset`` with only the rows where ``mask`` is True (any kind)."""
     mask = np.asarray(mask, dtype=bool)
     # the directions of motion belong to the full table's order: computed before cutting
-    extras = with_directions(dataset.joints, dataset.extras, dataset.robot)
+    extras = with_directions(dataset.joints, dataset.extras, getattr(dataset, "robot", None))
     changes: dict[str, Any] = {"extras": {k: np.asarray(v)[mask] for k, v in extras.items()}}
     for name in ("joints", *getattr(dataset, "row_fields", ())):
         value = getattr(dataset, name, None)
