@@ -10,7 +10,8 @@ times the arm's reach, which at a tracker's noise is tens of times the noise and
 the whole table's RMS well above the floor.
 
 So, like the placement of the instrument, this unknown of the held-out table is fitted:
-for each joint an effect reads the direction of, the rows of unknown direction get the
+for each joint (or motor of a differential, ``direction_m{k}``) an effect reads the
+direction of, the rows of unknown direction get the
 value among -1, 0 and +1 (came from below, unknown, came from above) that fits them best
 under the calibrated model, the other joints' values kept. 0 stays where the data do
 not favour a side (a table that starts where the simulator starts, at rest in the
@@ -27,7 +28,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..effects.base import Effect
-from ..effects.motion import is_direction_column, with_directions
+from ..effects.motion import is_direction_column, is_motor_direction_column, with_directions
 from .evaluation import evaluate
 
 SIDES = (0.0, -1.0, 1.0)  # tried in this order: a side must fit better than the middle
@@ -43,7 +44,7 @@ def settle_start(robot, datasets: Sequence, effects: Sequence[Effect], values: d
     placements are fitted on each dataset first, at the middle of the play.
     """
     columns = sorted({c for e in effects for c in e.required_columns()
-                      if is_direction_column(c)})
+                      if is_direction_column(c) or is_motor_direction_column(c)})
     if not columns:
         return tuple(datasets)
     out = []
@@ -51,7 +52,7 @@ def settle_start(robot, datasets: Sequence, effects: Sequence[Effect], values: d
         if dataset.joints is None:
             out.append(dataset)
             continue
-        derived = with_directions(dataset.joints, dataset.extras)
+        derived = with_directions(dataset.joints, dataset.extras, dataset.robot)
         extras = dict(dataset.extras)
         extras.update({c: np.array(derived[c], dtype=float) for c in columns})
         unknown = {c: np.flatnonzero(extras[c] == 0) for c in columns}
