@@ -67,7 +67,8 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "third_harmonic": ("third_harmonic.py",),
         # the Pandas' data: the folder ROBOCAL_PANDA_DATA names (fleet_prior.py --help)
         "fleet_prior": ("fleet_prior.py", "--part", "tracker,bar,panda", "--robots", "40",
-                        "--next", "5")}
+                        "--next", "5"),
+        "cable": ("cable.py",)}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
          "`benchmarks/readme_measured.py` from the JSON saved in `benchmarks/results/`. Each "
@@ -121,6 +122,26 @@ def last_json(text: str) -> dict:
     raise ValueError("the benchmark printed no JSON object")
 
 
+def facts() -> dict:
+    """When, at which commit and on which machine a run starts."""
+    return {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+            "commit": commit(), "machine": machine()}
+
+
+def save(name: str, script: str, arguments, output: dict,
+         measured: dict | None = None) -> dict:
+    """Save the JSON ``output`` a benchmark ``script`` printed with ``arguments`` as
+    ``benchmarks/results/<name>.json``, with the facts of the run (``measured``, taken now
+    when not given); return the record."""
+    record = {"benchmark": name, "script": f"benchmarks/{script}",
+              "command": " ".join(["OPENBLAS_NUM_THREADS=1", "python",
+                                   f"benchmarks/{script}", *arguments]),
+              "provenance": "run", "measured": measured or facts(), "output": output}
+    (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1, ensure_ascii=False)
+                                          + "\n")
+    return record
+
+
 def run(name: str) -> dict:
     """Run part ``name``'s benchmark, save its JSON with the facts of the run, return it."""
     script, *arguments = RUNS[name]
@@ -128,20 +149,13 @@ def run(name: str) -> dict:
     environment = dict(os.environ, OPENBLAS_NUM_THREADS="1",
                        PYTHONPATH=os.pathsep.join(
                            [str(ROOT)] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
-    measured = {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-                "commit": commit(), "machine": machine()}
+    measured = facts()
     done = subprocess.run(command, cwd=ROOT, env=environment, capture_output=True, text=True,
                           check=False)
     if done.returncode:
         raise SystemExit(f"{script} failed (exit {done.returncode}): "
                          f"{done.stderr.strip().splitlines()[-1:]}")
-    record = {"benchmark": name, "script": f"benchmarks/{script}",
-              "command": " ".join(["OPENBLAS_NUM_THREADS=1", "python",
-                                   f"benchmarks/{script}", *arguments]),
-              "provenance": "run", "measured": measured, "output": last_json(done.stdout)}
-    (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1, ensure_ascii=False)
-                                          + "\n")
-    return record
+    return save(name, script, arguments, last_json(done.stdout), measured)
 
 
 def load(name: str) -> dict:
@@ -884,6 +898,47 @@ def render_fleet_prior(record: dict) -> str:
     return "\n\n".join(parts) + _notes(record)
 
 
+def _cable_run(name: str, run: dict, targets: dict) -> str:
+    """One row of the cable table: the declared run against its targets, the undeclared
+    one with what the terminal said of drives."""
+    held = run["held_out_rms_mm"]
+    ratio = f"{held['final_over_floor']:.2f}x"
+    if "estimates" in run:
+        worst = run["largest_relative_error"]
+        target = 100 * targets["relative_error"]
+        within = "an effect not found" if worst is None else \
+            f"largest relative error {100 * worst:.1f}% (target {target:.0f}%)"
+        ratio += f" (target {targets['final_over_floor']:g}x)"
+    else:
+        within = "; ".join(run["drive_lines"]) or "no drive named"
+    effects = ", ".join(run["effect_names"]) or "none"
+    return (f"| {name} | {effects} | {within} | {held['geometric']:.4f} / {held['final']:.4f} "
+            f"mm | {ratio} | {run['seconds']:.0f} |")
+
+
+def render_cable(record: dict) -> str:
+    """A 7-DOF arm with differential cable pairs, from ``cable.py``'s JSON."""
+    out = record["output"]
+    lead = (f"**Differential cable drives** ({out['case']}; the same tables calibrated with a "
+            f"robot file that declares neither drive nor transmission, and with both "
+            f"declared). {_run_line(record)}")
+    rows = ["| robot file | effects named | estimates against the truth, or what the terminal "
+            "says of drives | held-out RMS geometric / final | final over the noise floor | "
+            "s |", "| --- | --- | --- | --- | --- | --- |"]
+    rows.append(_cable_run("no drive, no transmission", out["undeclared"], out["targets"]))
+    rows.append(_cable_run("`drive: cable`, `transmission:` 2-3 and 5-6", out["declared"],
+                           out["targets"]))
+    found = out["declared"]["estimates"]
+    table = ["| effect | parameter | true | found | relative error |",
+             "| --- | --- | --- | --- | --- |"]
+    for effect, parameters in found.items():
+        for parameter, v in parameters.items():
+            error = "-" if v["relative_error"] is None else f"{100 * v['relative_error']:.2f}%"
+            value = "-" if v["found"] is None else f"{v['found']:.4g}"
+            table.append(f"| {effect} | {parameter} | {v['true']:.4g} | {value} | {error} |")
+    return "\n\n".join([lead, "\n".join(rows), "\n".join(table)]) + _notes(record)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration,
                                                "jobs": render_jobs,
                                                "fleet_memory": render_fleet_memory,
@@ -903,7 +958,8 @@ RENDERERS: dict[str, Callable[[dict], str]] = {"calibration": render_calibration
                                                "planning": render_planning,
                                                "fleet": render_fleet,
                                                "third_harmonic": render_third_harmonic,
-                                               "fleet_prior": render_fleet_prior}
+                                               "fleet_prior": render_fleet_prior,
+                                               "cable": render_cable}
 
 
 def render(records: dict[str, dict]) -> str:

@@ -508,12 +508,11 @@ def test_the_truths_own_seed_writes_the_truth_again(tmp_path, kind, options):
 def test_every_effect_reads_back_from_the_truth_file(tmp_path):
     """Each registered effect (its simulator's defaults) survives truth.yaml: the effects
     rebuilt from the file write the same entries."""
+    from dataclasses import replace
+
     from robocal_casadi.effects import EFFECTS
     from robocal_casadi.instruments.held_truth import read_truth, true_effects_of
     from robocal_casadi.instruments.simulate import TrueEffects
-
-    from dataclasses import replace
-
     from robocal_casadi.model.transmission import TransmissionGroup
 
     # joints 3 and 4 driven together, for the effects of coupled groups (key 3: its group)

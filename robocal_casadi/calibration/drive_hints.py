@@ -7,11 +7,14 @@ joint then yields, lags and slips by sizes diagnosis refuses as implausible
 that would allow it; the diagnosis never switches a drive by itself. Only candidates
 among the strongest of their round are named (``STRONG``): one that explains a sliver of
 what another explains stands in for it, and so does one whose pattern a candidate added
-in its round explains as well.
+in its round explains as well. Where a cable or a belt would allow the sizes and the
+joint is in no declared transmission group, the line adds that its motors may turn other
+joints too, and how to declare them.
 """
 
 from __future__ import annotations
 
+from ..model.transmission import group_of
 from ..results import CalibrationResult, Decision
 
 STRONG = 0.5  # of the round's largest residual drop a candidate must explain to be named
@@ -61,5 +64,17 @@ def drive_lines(result: CalibrationResult) -> list[str]:
                      f"{result.robot_nominal.drive(joint)} drive never shows, ordinary for "
                      f"{article} {drive} drive{also}; if joint {joint} is one, give its entry "
                      f"in the robot file `drive: {drive}` (the drive is never switched "
-                     f"without it)")
+                     f"without it){_coupling_hint(result, joint, allowing[joint])}")
     return lines
+
+
+def _coupling_hint(result: CalibrationResult, joint: int, drives) -> str:
+    """Where cables or belts would allow the sizes and the joint is in no declared
+    transmission group: that its motors may drive it together with other joints, and how
+    to say so (the coupled effects are offered only then)."""
+    if not {"cable", "belt"} & set(drives) or \
+            group_of(result.robot_nominal.transmission, joint) is not None:
+        return ""
+    return (f"; if its motors also turn other joints (a differential), list them with joint "
+            f"{joint} under `transmission:` to have their coupled compliance and motor play "
+            f"tried")

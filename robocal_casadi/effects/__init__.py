@@ -92,7 +92,8 @@ def make_effect(name: str, joints=(), robot: Robot | None = None,
                                      **options)
 
 
-__all__ = ["Backlash", "Contribution", "CoupledCompliance", "MotorPlay", "EFFECTS", "Effect", "GravityModel", "Hysteresis",
+__all__ = ["Backlash", "Contribution", "CoupledCompliance", "EFFECTS", "Effect", "GravityModel",
+           "Hysteresis", "MotorPlay",
            "Implausible",
            "JointCompliance", "JointCoupling", "JointCyclic", "JointScale", "LEARNED",
            "LinkDeflection", "ResidualMap", "is_learned",

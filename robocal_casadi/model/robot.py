@@ -45,8 +45,8 @@ from ..common.fields import (
 from ..common.units import SI, Units, to_file_units, units_of
 from ..errors import InputError
 from .parameters import ParameterRegistry
-from .transmission import TransmissionGroup, transmission_from_dict, transmission_to_dict
 from .transforms import pose_from_xyz_rpy
+from .transmission import TransmissionGroup, transmission_from_dict, transmission_to_dict
 
 JOINT_TYPES = ("revolute", "prismatic")
 # How a joint's motor turns it (docs/formats.md#robot-file); the plausible sizes of the
