@@ -4,6 +4,7 @@ simulated truth found again by calibration."""
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -13,10 +14,11 @@ import pytest
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.drive_hints import drive_lines
 from robocal_casadi.cli import main
+from robocal_casadi.common.table import read_table
 from robocal_casadi.effects import EFFECTS
 from robocal_casadi.effects.motion import motor_direction_column, with_directions
 from robocal_casadi.errors import InputError
-from robocal_casadi.instruments.simulate import simulate, simulate_again
+from robocal_casadi.instruments.simulate import TrueRobot, simulate, simulate_again
 from robocal_casadi.model.pinocchio_model import gravity_torques
 from robocal_casadi.model.robot import load_robot, robot_from_dict, save_robot
 from robocal_casadi.model.transmission import TransmissionGroup, motor_directions
@@ -181,31 +183,69 @@ def test_the_effects_are_offered_only_where_a_transmission_is_declared(arm_file)
 
 TRUTH = {"coupled_compliance": {(2, 3): (3e-4, -1e-4, 5e-4)},
          "motor_play": {2: 0.2 * DEG, 3: 0.3 * DEG}}
+# identifiable geometry only, so that the calibrated world frame is the truth's
+ERRORS = {"a2": 4e-4, "d4": -3e-4, "theta3": 2e-4}
 
 
-def _simulated(tmp_path, arm_file):
-    fit = simulate(arm_file, "tracker_points", out_dir=tmp_path / "fit", rows=150, noise=NOISE,
-                   seed=3, geometric_errors=(2e-4, 2e-4), effects=TRUTH, progress=False)
-    held = simulate_again(fit.truth_path, out_dir=tmp_path / "held", rows=80, seed=4,
+def _simulated(folder, arm_file):
+    fit = simulate(arm_file, "tracker_points", out_dir=folder / "fit", rows=150, noise=NOISE,
+                   seed=3, geometric_errors=ERRORS, effects=TRUTH, progress=False)
+    held = simulate_again(fit.truth_path, out_dir=folder / "held", rows=80, seed=4,
                           progress=False)
     return fit, held
 
 
-def test_calibration_finds_the_simulated_coupled_effects(tmp_path, arm_file):
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """The pair arm simulated with both effects, calibrated by ``robocal calibrate``."""
+    folder = tmp_path_factory.mktemp("pair")
+    (folder / "arm.yaml").write_text(ARM)
+    fit, held = _simulated(folder, folder / "arm.yaml")
+    out = folder / "out"
+    assert main(["calibrate", str(fit.dataset_path), "--validate", str(held.dataset_path),
+                 "--out", str(out), "--no-report"]) == 0
+    return fit, out
+
+
+def test_calibration_finds_the_simulated_coupled_effects(calibrated):
     """Both effects named, each parameter within 5 of its standard errors (and 10%) of the
     truth, the held-out RMS at the noise floor of the 3-D point error."""
-    fit, held = _simulated(tmp_path, arm_file)
-    result = calibrate([fit.load()], [held.load()])
-    names = sorted(e.name for e in result.effects)
-    assert names == ["coupled_compliance", "motor_play"], result.effects
+    fit, out = calibrated
+    result = json.loads((out / "result.json").read_text())
+    assert sorted(e["name"] for e in result["effects"]) == ["coupled_compliance", "motor_play"]
     truth = fit.truth.effects.as_dict()
-    for finding in result.effects:
-        for parameter, value in truth[finding.name]["parameters"].items():
-            found, std = finding.parameters[parameter], finding.std[parameter]
+    for finding in result["effects"]:
+        for parameter, value in truth[finding["name"]]["parameters"].items():
+            found, std = finding["parameters"][parameter], finding["std"][parameter]
             assert std is not None and abs(found - value) <= 5 * std + 1e-12, parameter
             assert found == pytest.approx(value, rel=0.1), parameter
-    floor = NOISE * math.sqrt(3)
-    assert result.validation.rms_final <= 1.15 * floor < result.validation.rms_geometric
+    floor = NOISE * math.sqrt(3) / 1e-3  # [mm], the file's unit
+    validation = result["validation"]
+    assert validation["rms_final"] <= 1.15 * floor < validation["rms_geometric"]
+
+
+def test_fk_with_effects_follows_the_motors_in_row_order(calibrated, tmp_path):
+    """``robocal fk --with-effects`` on new readings: the motors' directions from the order
+    of the rows, as the simulator's truth takes them (its own code, pinocchio's gravity)."""
+    fit, out = calibrated
+    truth = fit.truth
+    world = TrueRobot(truth.robot, truth.effects, truth.reference_temperature, np.zeros(3))
+    robot = truth.robot
+    Q = np.random.default_rng(21).uniform(robot.lower_limits, robot.upper_limits, (40, 6))
+    table = tmp_path / "joints.csv"
+    table.write_text("q1,q2,q3,q4,q5,q6\n" + "\n".join(
+        ",".join(repr(float(v)) for v in np.degrees(q)) for q in Q) + "\n")
+    true = world.kinematics.flange_poses(world.true_joints(Q, np.zeros(len(Q))))[:, :3, 3]
+    rms = {}
+    for label, options in (("geometry", []), ("effects", ["--with-effects"])):
+        poses = tmp_path / f"{label}.csv"
+        assert main(["fk", str(fit.robot_path), str(table), "--out", str(poses),
+                     "--calibrated", str(out), *options]) == 0
+        read = read_table(poses)
+        P = np.column_stack([read.numbers(c) for c in "xyz"]) * 1e-3
+        rms[label] = float(np.sqrt(np.mean(np.sum((P - true) ** 2, axis=1))))
+    assert rms["effects"] < 3 * np.sqrt(3) * NOISE
+    assert rms["geometry"] > 5 * rms["effects"]
 
 
 def test_without_the_drive_the_terminal_points_to_other_drives(tmp_path, arm_file):
