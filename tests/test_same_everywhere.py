@@ -77,7 +77,25 @@ SIMULATIONS = {
     "laser": ["--example", "industrial_6r", "--kind", "sphere_laser", "--rows", "40",
               "--noise", "0.005", "--errors", "0.5,0.05", "--effect", "joint_scale:2",
               "--seed", "4"],
+    # joints driven together: coupled compliance (pinocchio's gravity) and motor play
+    # (the motors' directions of motion from the row order)
+    "cable": ["--robot", "{cable_robot}", "--kind", "tracker_points", "--rows", "60",
+              "--noise", "0.01", "--errors", "0.5,0.05", "--effect",
+              "coupled_compliance:2-3=3e-4/-1e-4/5e-4", "--effect", "motor_play:2=4e-3,3",
+              "--seed", "5"],
 }
+# A small cable arm of our own whose joints 2 and 3 share a differential.
+CABLE_ROBOT = """\
+convention: dh
+units: {length: mm, angle: deg}
+joints:
+  - {theta: 0, d: 350, a: 0, alpha: -90, mass: 7.0, com: [0, 50, 0], drive: cable}
+  - {theta: 0, d: 0, a: 450, alpha: 0, mass: 4.0, com: [-220, 0, 20], drive: cable}
+  - {theta: 90, d: 0, a: 40, alpha: 90, mass: 3.0, com: [0, -40, 0], drive: cable}
+  - {theta: 0, d: 380, a: 0, alpha: -90, mass: 1.5, com: [0, 0, -120], drive: cable}
+transmission:
+  - {joints: [2, 3], motors: [[20, 20], [20, -20]]}
+"""
 
 
 def _environment(kernel: str) -> dict[str, str]:
@@ -110,8 +128,11 @@ def _robocal(kernel: str, *args: str) -> None:
 
 
 def test_seeded_simulation_is_byte_identical_under_two_kernels(kernels, tmp_path):
+    robot = tmp_path / "cable.yaml"
+    robot.write_text(CABLE_ROBOT)
     for kernel in kernels:
         for name, args in SIMULATIONS.items():
+            args = [a.replace("{cable_robot}", str(robot)) for a in args]
             _robocal(kernel, "simulate", *args, "--out", str(tmp_path / kernel / name))
     first, second = (tmp_path / k for k in kernels)
     files = sorted(p.relative_to(first) for p in first.rglob("*") if p.is_file())
