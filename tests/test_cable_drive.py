@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import yaml
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.drive_hints import drive_lines
@@ -20,7 +21,7 @@ from robocal_casadi.effects.motion import motor_direction_column, with_direction
 from robocal_casadi.errors import InputError
 from robocal_casadi.instruments.simulate import TrueRobot, simulate, simulate_again
 from robocal_casadi.model.pinocchio_model import gravity_torques
-from robocal_casadi.model.robot import load_robot, robot_from_dict, save_robot
+from robocal_casadi.model.robot import dump_yaml, load_robot, robot_from_dict, save_robot
 from robocal_casadi.model.transmission import TransmissionGroup, motor_directions
 
 DEG = math.pi / 180
@@ -129,6 +130,37 @@ def test_coupled_compliance_is_the_matrix_times_pinocchios_gravity_torque(arm_fi
     scale = np.abs(expected).max()
     assert scale > 1e-4  # the arm holds real torques here
     np.testing.assert_allclose(dq, expected, rtol=0, atol=1e-10 * scale)
+
+
+def test_without_masses_the_lumped_products_span_the_true_deflection(arm_file):
+    """A robot file without masses: the lumped products (and a constant per joint, the
+    joints' offsets) reproduce ``-C tau`` of the true links (pinocchio) by linear least
+    squares, and read back by name from the effects file."""
+    robot = load_robot(arm_file)
+    bare = replace(robot, joints=tuple(replace(j, mass=None, com=None) for j in robot.joints))
+    effect = EFFECTS["coupled_compliance"].create((2, 3), bare)
+    assert effect.lumped and effect.parameter_names()
+    assert any(n.startswith("cc2_3_") for n in effect.parameter_names())  # cross products
+    rng = np.random.default_rng(8)
+    Q = rng.uniform(robot.lower_limits, robot.upper_limits, size=(150, robot.dof))
+    C = np.array([[3e-4, -1e-4], [-1e-4, 5e-4]])
+    tau = gravity_torques(robot, Q)[:, 1:3]
+    target = -(tau @ C.T).ravel()
+    k = len(effect.parameter_names())
+    columns = [effect.contribution(bare, np.eye(k)[i], Q).dq[:, 1:3].ravel() for i in range(k)]
+    columns += [np.tile(np.eye(2)[i], len(Q)) for i in range(2)]
+    A = np.column_stack(columns)
+    w, *_ = np.linalg.lstsq(A, target, rcond=None)
+    assert np.abs(A @ w - target).max() < 1e-8 * np.abs(target).max()
+    # the effects file names the products: read back, the same corrections
+    theta = w[:k]
+    entry = yaml.safe_load(dump_yaml({"e": effect.to_dict(dict(zip(
+        effect.parameter_names(), theta)))}))["e"]
+    back = EFFECTS["coupled_compliance"].from_dict(entry, bare)
+    assert back.parameter_names() == effect.parameter_names()
+    np.testing.assert_allclose(back.contribution(bare, theta, Q).dq,
+                               effect.contribution(bare, theta, Q).dq, rtol=0,
+                               atol=1e-13 * np.abs(target).max())
 
 
 def test_motor_play_follows_each_motors_direction_by_hand():
@@ -262,3 +294,21 @@ def test_without_the_drive_the_terminal_points_to_other_drives(tmp_path, arm_fil
     assert any(line.startswith("joint 2:") and "`drive: " in line and "cable" in line
                and "`transmission:`" in line for line in lines), lines
     assert not {"coupled_compliance", "motor_play"} & {e.name for e in result.effects}
+
+
+def test_without_masses_the_lumped_form_reaches_the_noise_floor(tmp_path, arm_file):
+    """The same simulated arm with a robot file that gives no masses: the coupled
+    compliance is found in its lumped form, the motors' play at its true size, the
+    held-out RMS at the noise floor."""
+    fit, held = _simulated(tmp_path, arm_file)
+    for simulated in (fit, held):
+        robot = load_robot(simulated.robot_path)
+        save_robot(replace(robot, joints=tuple(replace(j, mass=None, com=None)
+                                               for j in robot.joints)), simulated.robot_path)
+    result = calibrate([fit.load()], [held.load()])
+    assert sorted(e.name for e in result.effects) == ["coupled_compliance", "motor_play"]
+    play = next(e for e in result.effects if e.name == "motor_play")
+    for parameter, value in fit.truth.effects.as_dict()["motor_play"]["parameters"].items():
+        assert play.parameters[parameter] == pytest.approx(value, rel=0.1), parameter
+    floor = NOISE * math.sqrt(3)
+    assert result.validation.rms_final <= 1.15 * floor < result.validation.rms_geometric
