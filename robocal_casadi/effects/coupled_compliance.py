@@ -207,8 +207,9 @@ class CoupledCompliance(Effect):
         return COMPLIANCE[drive] if a == b else CROSS[drive]
 
     def parameter_unit(self, parameter: str) -> str:
-        kind = (NAME.fullmatch(parameter) or NAME.fullmatch("cc0_0")).group(3)  # type: ignore
-        return {"m": "rad kg/Nm", "h": "rad kg m/Nm"}.get(kind, self.unit)
+        found = NAME.fullmatch(parameter)
+        kind = None if found is None else found.group(3)
+        return {"m": "rad kg/Nm", "h": "rad kg m/Nm"}.get(kind or "", self.unit)
 
     def settings(self, columns: Collection[str] = ()) -> dict[str, Any]:
         return {"groups": [list(g) for g in self.groups],
@@ -317,8 +318,8 @@ class CoupledCompliance(Effect):
         for group in self.groups:
             joints = "-".join(map(str, group))
             if self.lumped:
-                count = sum(1 for n in values if NAME.fullmatch(n) and
-                            int(NAME.fullmatch(n).group(1)) in group)  # type: ignore[union-attr]
+                found = [NAME.fullmatch(n) for n in values]
+                count = sum(1 for m in found if m is not None and int(m.group(1)) in group)
                 parts.append(f"joints {joints} deflect together under gravity (lumped link "
                              f"masses: {count} terms)")
                 continue
