@@ -133,19 +133,21 @@ def independent_products(robot: Robot, group: tuple[int, ...], *, samples: int =
         terms = [(a, b, t) for a, b in _pairs(group) if (a == b) == diagonal
                  for t in range(count)]
         columns = np.array([_deflection(group, term, rows).ravel() for term in terms]).T
-        norms = np.linalg.norm(columns, axis=0)
+        # sums in a fixed order (``exact``): which products are kept must not turn on the
+        # BLAS kernel
+        norms = exact.norm(columns, axis=0)
         scale = max(scale, float(norms.max()))
-        remaining = columns - span @ (span.T @ columns)
+        remaining = columns - exact.matmul(span, exact.matmul(span.T, columns))
         candidates = [k for k in range(len(terms)) if norms[k] > INDEPENDENCE * scale]
         while candidates:
-            left = np.linalg.norm(remaining[:, candidates], axis=0)
+            left = exact.norm(remaining[:, candidates], axis=0)
             relative = left / norms[candidates]
             best = int(np.argmax(relative))
             if relative[best] <= INDEPENDENCE:
                 break
             k = candidates.pop(best)
             u = remaining[:, k] / left[best]
-            remaining -= np.outer(u, u @ remaining)
+            remaining -= np.outer(u, exact.matmul(u, remaining))
             span = np.column_stack([span, u])
             kept.append(terms[k])
     return tuple(kept)
