@@ -9,9 +9,10 @@ cable-driven arm shows. Tracker data (0.015 mm per coordinate, declared with
 ``instrument_noise``), ``--rows`` readings to fit and ``--held`` held out from another
 draw of the same robot (``simulate --truth``), all simulated by ``robocal_casadi.simulate``.
 
-The calibration runs twice in one process on the same tables: with a robot file that
-declares neither drive nor transmission (what the terminal says about drives, the
-effects named, the held-out RMS), and with the robot file the data were simulated with
+The calibration runs three times in one process on the same tables: with a robot file
+that declares neither drive nor transmission (what the terminal says about drives, the
+effects named, the held-out RMS), with ``drive: cable`` but no transmission (what the
+drive alone allows), and with the robot file the data were simulated with
 (``drive: cable`` on every joint and the two groups in ``transmission:``): each effect's
 estimates beside the truth with their relative errors, and the held-out RMS beside the
 noise floor (the tracker's noise on a 3-D point error, sqrt(3) times 0.015 mm). Prints
@@ -82,14 +83,15 @@ def _case(root: Path, seed: int, rows: int, held_rows: int):
     return fit, held
 
 
-def _undeclared(root: Path, simulated) -> Path:
-    """A copy of ``simulated``'s dataset whose robot file declares no drive (gear, the
-    default) and no transmission; returns the dataset file."""
-    folder = root / f"undeclared_{simulated.dataset_path.parent.name}"
+def _undeclared(root: Path, simulated, drive: str = "gear") -> Path:
+    """A copy of ``simulated``'s dataset whose robot file declares no transmission and
+    ``drive`` on every joint (gear, the default: no drive declared); returns the dataset
+    file."""
+    folder = root / f"{drive}_{simulated.dataset_path.parent.name}"
     folder.mkdir()
     robot = load_robot(simulated.robot_path)
     robot = replace(robot, transmission=(),
-                    joints=tuple(replace(j, drive="gear") for j in robot.joints))
+                    joints=tuple(replace(j, drive=drive) for j in robot.joints))
     save_robot(robot, folder / simulated.robot_path.name)
     for path in (simulated.dataset_path, simulated.table_path):
         (folder / path.name).write_bytes(path.read_bytes())
@@ -151,6 +153,8 @@ def measure(seed: int, rows: int, held_rows: int) -> dict:
         root = Path(folder)
         fit, held = _case(root, seed, rows, held_rows)
         runs = {"undeclared": _run_undeclared(_undeclared(root, fit), _undeclared(root, held)),
+                "drive_only": _run_undeclared(_undeclared(root, fit, "cable"),
+                                              _undeclared(root, held, "cable")),
                 "declared": _run_declared(fit, held)}
     return {"case": f"7-DOF cable arm, differential pairs 2-3 and 5-6, coupled compliance and "
                     f"motor play, tracker {NOISE / 1e-3:g} mm per coordinate (declared), "

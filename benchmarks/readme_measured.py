@@ -920,12 +920,15 @@ def render_cable(record: dict) -> str:
     """A 7-DOF arm with differential cable pairs, from ``cable.py``'s JSON."""
     out = record["output"]
     lead = (f"**Differential cable drives** ({out['case']}; the same tables calibrated with a "
-            f"robot file that declares neither drive nor transmission, and with both "
-            f"declared). {_run_line(record)}")
+            f"robot file that declares neither drive nor transmission, with the drive "
+            f"only, and with both declared). {_run_line(record)}")
     rows = ["| robot file | effects named | estimates against the truth, or what the terminal "
             "says of drives | held-out RMS geometric / final | final over the noise floor | "
             "s |", "| --- | --- | --- | --- | --- | --- |"]
     rows.append(_cable_run("no drive, no transmission", out["undeclared"], out["targets"]))
+    if "drive_only" in out:
+        rows.append(_cable_run("`drive: cable`, no transmission", out["drive_only"],
+                               out["targets"]))
     rows.append(_cable_run("`drive: cable`, `transmission:` 2-3 and 5-6", out["declared"],
                            out["targets"]))
     found = out["declared"]["estimates"]
