@@ -169,3 +169,27 @@ def test_the_last_json_object_is_taken_from_mixed_output():
     assert measured.last_json(printed) == {"b": [1, 2]}
     with pytest.raises(ValueError):
         measured.last_json("no json here\n")
+
+
+def test_the_cable_table_is_read_from_the_run():
+    record = copy.deepcopy(_run_record("cable"))
+    declared = record["output"]["declared"]
+    declared["held_out_rms_mm"]["final_over_floor"] = 9.87
+    declared["largest_relative_error"] = 0.0432
+    record["output"]["undeclared"]["drive_lines"] = ["joint 4: a line of the run"]
+    text = measured.render_cable(record)
+    assert "9.87x (target 1.1x)" in text and "largest relative error 4.3%" in text
+    assert "joint 4: a line of the run" in text
+    # every estimate against its truth, by name
+    for effect, parameters in declared["estimates"].items():
+        for parameter in parameters:
+            assert f"| {effect} | {parameter} |" in text
+
+
+def test_a_benchmark_saves_its_json_the_way_a_run_does(tmp_path, monkeypatch):
+    monkeypatch.setattr(measured, "RESULTS", tmp_path)
+    record = measured.save("example", "example.py", ["--seed", "3"], {"figure": 1.5})
+    assert json.loads((tmp_path / "example.json").read_text()) == record
+    assert record["command"] == "OPENBLAS_NUM_THREADS=1 python benchmarks/example.py --seed 3"
+    assert record["provenance"] == "run" and {"date", "commit", "machine"} <= set(
+        record["measured"])
