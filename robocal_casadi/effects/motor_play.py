@@ -125,8 +125,9 @@ class MotorPlay(Effect):
 
     def describe(self, values, units: Units) -> str:
         a = units.angle_scale
-        parts = "; ".join(f"motor {k[2:]} lags by {v / a:.3g} {units.angle} (at the joints) "
-                          "between its two directions of motion" for k, v in values.items())
+        parts = "; ".join(f"motor {k[2:]} lags by {values[k] / a:.3g} {units.angle} (at the "
+                          "joints) between its two directions of motion"
+                          for k in self.parameter_names() if k in values)
         return self.sentence.format(values=parts)
 
     def plot_values(self, robot, joint: int, Q, extras, payload_com=None) -> np.ndarray:
