@@ -43,7 +43,7 @@ END = "<!-- End of the generated section. -->"
 ORDER = ("setup", "first_run", "real_data", "identification", "kinematics", "calibration", "jobs",
          "sphere_laser", "diagnosis", "planning", "design_bound", "scan", "tracking", "ik",
          "robust", "fleet", "fleet_memory", "table_memory", "delivered", "third_harmonic",
-         "fleet_prior")
+         "cable", "fleet_prior")
 # What --run executes for a part (arguments of ``python benchmarks/<script>``).
 RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "first_run": ("setup.py", "--cold-cache", "--blas-default", "--demo-runs", "2"),
