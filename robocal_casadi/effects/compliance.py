@@ -149,6 +149,13 @@ def _term_name(joint: int, term: int) -> str:
     return f"c{joint}_m{link + 1}" if c == "m" else f"c{joint}_h{link + 1}{c}"
 
 
+
+def require_inertia(robot: Robot, effect: str) -> None:
+    """Refuse to simulate ``effect`` under gravity on a robot file without masses."""
+    if not robot.has_inertia:
+        raise InputError(f"{effect} needs 'mass' and 'com' on every joint of the robot file "
+                         f"to simulate gravity torques", where=f"effects.{effect}")
+
 class JointCompliance(Effect):
     """``dq_j = -c_j tau_j(q)`` for each joint j in ``joints``; see the module docstring.
 
@@ -271,10 +278,7 @@ class JointCompliance(Effect):
 
     def check_simulation(self, robot: Robot, values) -> None:
         super().check_simulation(robot, values)
-        if not robot.has_inertia:
-            raise InputError("joint_compliance needs 'mass' and 'com' on every joint of the "
-                             "robot file to simulate gravity torques",
-                             where="effects.joint_compliance")
+        require_inertia(robot, self.name)
 
     def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
         """``-c_j tau_j(q)`` with pinocchio's gravity torque of the true robot's links and the

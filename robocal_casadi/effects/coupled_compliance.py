@@ -66,6 +66,7 @@ from .compliance import (
     SAMPLES,
     _lumped_functions,
     _torque_function,
+    require_inertia,
 )
 from .gravity import FIRST_MOMENT_COMPONENTS
 
@@ -382,10 +383,7 @@ class CoupledCompliance(Effect):
 
     def check_simulation(self, robot: Robot, values) -> None:
         super().check_simulation(robot, values)
-        if not robot.has_inertia:
-            raise InputError("coupled_compliance needs 'mass' and 'com' on every joint of the "
-                             "robot file to simulate gravity torques",
-                             where="effects.coupled_compliance")
+        require_inertia(robot, self.name)
 
     def simulated_dq(self, world: TrueWorld, Q, extras, values) -> np.ndarray:
         """``-C tau_G`` with pinocchio's gravity torque of the true robot and the rows'
