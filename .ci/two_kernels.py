@@ -107,8 +107,11 @@ def main() -> int:
                 failures.append(f"worked example under {kernel} prints other lines than the "
                                 "README:\n" + "\n".join(diff or [f"  {len(lines)} lines vs "
                                                                  f"{len(expected)}"]))
+        cable_robot = root / "cable.yaml"  # the test's own cable arm, named in its arguments
+        cable_robot.write_text(same.CABLE_ROBOT)
         for kernel in kernels:
             for name, args in same.SIMULATIONS.items():
+                args = [a.replace("{cable_robot}", str(cable_robot)) for a in args]
                 subprocess.run([sys.executable, "-m", "robocal_casadi.cli", "simulate", *args,
                                 "--out", str(root / f"sim-{kernel}" / name), "--quiet"],
                                env=_environment(kernel), check=True)
