@@ -179,7 +179,7 @@ class _Candidate:
     unit: Effect | None = None  # the one-unit effect tested (a joint, a pair, a column)
 
 
-def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
+def joined_extras(problem: Problem) -> dict[str, np.ndarray]:
     """Extra columns present in every dataset, joined; ``payload`` if any dataset has it."""
     datasets = [m.dataset for m in problem.models]
     out: dict[str, np.ndarray] = {}
@@ -596,9 +596,9 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
 
 
 def _offered_extras(problem: Problem, available_columns) -> dict[str, np.ndarray]:
-    """The joined extra columns (``_joined_extras``) without those ``available_columns``
+    """The joined extra columns (``joined_extras``) without those ``available_columns``
     (when given) lacks."""
-    extras = _joined_extras(problem)
+    extras = joined_extras(problem)
     if available_columns is not None:
         for column in data_columns():
             if column in extras and column not in available_columns:
@@ -943,16 +943,23 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
                                            for n in kept}
         effect = next(e for e in problem.effects if e.name == name
                       and set(kept) <= set(e.parameter_names()))
-        text = effect.describe(values, units)
-        scale = units.length_scale
         numbers = evidence[key]
-        held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
-        summary = (f"{text}{held_text}; adding it lowers the cross-validated RMS of the fit "
-                   f"data (folds of the fit readings held out in turn) from "
-                   f"{numbers['cv_rms_before'] / scale:.3g} {units.length} to "
-                   f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")
+        summary = finding_summary(effect, values, held, numbers, units)
         findings.append(EffectFinding(name=name, joints=joints, parameters=values,
                                       unit=effect.unit, evidence=dict(numbers), std=errors,
                                       summary=summary,
                                       units={n: effect.parameter_unit(n) for n in values}))
     return findings
+
+
+def finding_summary(effect: Effect, values: dict[str, float], held: Sequence[str],
+                    numbers: dict, units) -> str:
+    """The sentence of one finding: ``effect`` at ``values`` (SI), the parameters ``held``
+    at zero, and what it lowers the held-out RMS [m] from and to (``numbers``), lengths in
+    the display ``units``."""
+    scale = units.length_scale
+    held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
+    return (f"{effect.describe(values, units)}{held_text}; adding it lowers the "
+            f"cross-validated RMS of the fit data (folds of the fit readings held out in "
+            f"turn) from {numbers['cv_rms_before'] / scale:.3g} {units.length} to "
+            f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")
