@@ -145,19 +145,18 @@ def judge(kept: MapFolds, without: MapFolds, parameters: int, n: int,
     total = sum(p[2] for p in pairs) / sum(p[3] for p in pairs) if pairs else math.nan
     worst, grown, tolerance = max(((p[0], p[2] / p[3], p[1]) for p in pairs),
                                   key=lambda p: p[1] / (1.0 + p[2]), default=("", 0.0, 0.0))
-    numbers = dict(ratio=ratio, bic_drop=bic, fit_drop=1.0 - kept.fit_sse / without.fit_sse,
-                   cv_without=cv_without, cv_with=cv_with, extrapolation=total, worst=worst)
+    reason = ""
     if without.reason:  # no map pays without it: nothing covers what it explains
-        return _Judged("", **numbers)
-    if not bic > bic_threshold:
-        return _Judged(f"BIC drop {bic:.3g} beside the map", **numbers)
-    if not ratio <= 1.0 - MIN_GAIN:
-        return _Judged(f"held-out RMS {ratio - 1:+.2%} beside the map (needs -{MIN_GAIN:.0%})",
-                       **numbers)
-    if np.isfinite(total) and (total >= 1.0 or grown > 1.0 + tolerance):
-        return _Judged(f"does not extrapolate beside the map (held out {worst}: squared error "
-                       f"x{grown:.3g}; all extrapolating folds x{total:.3g})", **numbers)
-    return _Judged("", **numbers)
+        reason = ""
+    elif not bic > bic_threshold:
+        reason = f"BIC drop {bic:.3g} beside the map"
+    elif not ratio <= 1.0 - MIN_GAIN:
+        reason = f"held-out RMS {ratio - 1:+.2%} beside the map (needs -{MIN_GAIN:.0%})"
+    elif np.isfinite(total) and (total >= 1.0 or grown > 1.0 + tolerance):
+        reason = (f"does not extrapolate beside the map (held out {worst}: squared error "
+                  f"x{grown:.3g}; all extrapolating folds x{total:.3g})")
+    return _Judged(reason, ratio, bic, 1.0 - kept.fit_sse / without.fit_sse, cv_without,
+                   cv_with, float(total), worst)
 
 
 def without_stand_ins(problem: Problem, solution: Solution, declared: int,

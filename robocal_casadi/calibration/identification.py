@@ -836,9 +836,10 @@ def _learned(final: DiagnosedFit, structure, prior: Prior | None, declared: int,
         outcome = learned.learn(final.problem, final.solution.x, structure.variables)
     if outcome is None or outcome.effect is None:
         return final
+    effect, diagnosed = outcome.effect, final
     with stage("physical effects beside the learned map"):
         beside = covered.without_stand_ins(
-            final.problem, final.solution, declared, outcome.effect.joints, final.added,
+            final.problem, final.solution, declared, effect.joints, final.added,
             max((t.round for t in final.tested), default=0) + 1, method=method, loss=loss)
     if beside.removed:
         with stage("learned map"):
@@ -846,12 +847,12 @@ def _learned(final: DiagnosedFit, structure, prior: Prior | None, declared: int,
         if again is not None and again.effect is not None:
             final = replace(final, problem=beside.problem, solution=beside.solution,
                             added=beside.added, tested=final.tested + beside.removed)
-            outcome = again
-    problem, solution = learned.with_map(final.problem, final.solution, outcome.effect,
+            outcome, effect = again, again.effect
+    problem, solution = learned.with_map(final.problem, final.solution, effect,
                                          prior=prior, method=method, loss=loss)
     before, after = final.problem.rms(final.solution.x), problem.rms(solution.x)
     if not after < before:
-        return final
+        return diagnosed  # no map: what it would have covered stays
     finding = learned.finding(outcome, (before, after), problem.robot.units)
     return replace(final, problem=problem, solution=solution, added=final.added + (finding,))
 
