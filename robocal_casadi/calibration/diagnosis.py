@@ -71,7 +71,7 @@ from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
 from ..effects.drives import drives_allowing
 from ..results import Decision, EffectFinding, Identifiability
-from .folds import FoldGrams, FoldScheme, fold_schemes
+from .folds import FoldGrams, FoldScheme, entry_units, fold_schemes, separating_scheme
 from .problem import Problem
 from .solver import Loss, Method, Solution, solve
 
@@ -363,6 +363,7 @@ class _Screening:
         self.E = E
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
         total = Z.T @ Z
+        self.Z, self.total = Z, total  # kept for the folds that separate rivals
         self.schemes = list(schemes)
         self.base = list(range(len(self.free_index)))
         # Every fit adds a candidate's few columns to the free ones: factored once per fold.
@@ -385,7 +386,7 @@ class _Screening:
         is judged and refitted after that reads the fold Grams, ``r_perp`` and the
         screens' own columns, and the stack (the size of the Jacobian) is freed before
         the refits form Jacobians of their own."""
-        self.A = self.E = np.zeros((0, 0))
+        self.A = self.E = self.Z = np.zeros((0, 0))
 
     def held_out(self, columns) -> tuple[float, ...]:
         """Held-out SSE [m^2] of every fold scheme after fitting ``columns``."""
@@ -462,6 +463,32 @@ class _Screening:
                     f"all extrapolating folds x{total:.3g})")
         return ""
 
+    def separation(self, s: _Screen, t: _Screen, entry_unit: np.ndarray) -> _Separation | None:
+        """``s`` against its rival ``t`` on the data that tell them apart: the units where
+        the part of each one's columns the other cannot make is largest
+        (``folds.separating_scheme``; the columns alone choose them, not the residual) held
+        out, the geometry and each effect fitted on the rest. None when the data leave too
+        few units to hold any out (or the stacked columns are gone)."""
+        if s.P is None or t.P is None or not self.Z.size:
+            return None
+        score = np.zeros(self.n)
+        for own, other in ((s.P, t.P), (t.P, s.P)):
+            Q, _ = np.linalg.qr(other)
+            rest = own - Q @ (Q.T @ own)
+            energy = np.sum(rest ** 2, axis=1)
+            if energy.sum() > 0:
+                score += energy / energy.sum()
+        scheme = separating_scheme(entry_unit, score)
+        if scheme is None:
+            return None
+        grams = FoldGrams(self.Z, scheme.fold, self.total, base=self.base)
+        before = grams.held_out_sse(self.base)
+        held = [grams.held_out_sse(self.base + [self.column_of[n] for n in x.kept])
+                for x in (s, t)]
+        units = int(len(np.unique(entry_unit[scheme.fold == 0])))
+        return _Separation(before, held[0], held[1], units,
+                           int(len(np.unique(entry_unit[entry_unit >= 0]))))
+
     def overlap(self, first: _Screen, second: _Screen) -> float:
         """Share of ``second``'s explained residual that ``first`` explains as well (0..1)."""
         if first.P is None or second.P is None:
@@ -475,6 +502,36 @@ class _Screening:
                                        rcond=None)[0]
         extra = float(np.sum((rest @ coefficients) ** 2))
         return float(np.clip(1.0 - extra / alone, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class _Separation:
+    """A candidate against a rival on the units where they differ most, held out: their
+    squared error there [m^2] with neither, with the candidate and with the rival, and
+    how many units were held out of how many."""
+
+    before: float
+    own: float
+    rival: float
+    held: int
+    units: int
+
+    def wins(self) -> bool:
+        """By the held-out rule every effect is judged by: the candidate pays there (its
+        held-out RMS lower by ``MIN_GAIN`` than with neither), and lower by ``MIN_GAIN``
+        than with the rival too (or the rival does not pay there at all)."""
+        gain = (1.0 - MIN_GAIN) ** 2  # on squared errors
+        return self.own <= gain * self.before and (self.rival > gain * self.before
+                                                   or self.own <= gain * self.rival)
+
+    def words(self, rival: str) -> str:
+        """The figures, for the record of a candidate still refused."""
+        if not self.before > 0:
+            return f"on the {self.held} of {self.units} units where they differ most, no error"
+        return (f"on the {self.held} of {self.units} units where they differ most, held out "
+                f"(fitted on the rest), the squared error is x{self.own / self.before:.3g} "
+                f"with it and x{self.rival / self.before:.3g} with {rival} (against neither: "
+                f"its held-out RMS there must be {MIN_GAIN:.0%} below both)")
 
 
 def _implausible(effect: Effect, values: dict[str, float], robot=None) -> str:
@@ -660,13 +717,12 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
     _judge_screens(screening, screens, search, verdicts, bic_threshold)
     passing = sorted((s for s in screens if not verdicts.decisions[id(s)]),
                      key=lambda s: -s.bic_drop)
+    confounded = _confounded(screening, screens, passing, search, bic_threshold)
+    screening.release_columns()
     accepted = None
     for s in passing:
-        rivals = _rivals(screening, screens, s, bic_threshold)
-        if rivals:
-            names = ", ".join(_label(t.candidate) for t in rivals)
-            verdicts.decisions[id(s)] = (f"confounded with {names}: these data cannot tell "
-                                         f"them apart")
+        if confounded.get(id(s)):
+            verdicts.decisions[id(s)] = confounded[id(s)]
             verdicts.outcomes[id(s)] = Decision.CONFOUNDED
             continue
         accepted = _refit(search, screening, s, verdicts, method, loss, bic_threshold)
@@ -677,6 +733,30 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
             verdicts.decisions[id(s)] = "supported, weaker than the one added"
     search.tested += _records(screening, screens, verdicts, rounds)
     return accepted
+
+
+def _confounded(screening: _Screening, screens: list[_Screen], passing: list[_Screen],
+                search: _Search, bic_threshold: float) -> dict[int, str]:
+    """Why each of ``passing`` is refused as confounded with a rival (by ``id``; none for
+    those that are not): a rival explains what it explains as well (``_rivals``), and on
+    the data that separate the two (``_Screening.separation``) it does not beat that
+    rival. Rivals it beats there are not rivals."""
+    out: dict[int, str] = {}
+    entry_unit: np.ndarray | None = None
+    for s in passing:
+        reasons = []
+        for t in _rivals(screening, screens, s, bic_threshold):
+            if entry_unit is None:
+                entry_unit = entry_units(search.big)
+            split = screening.separation(s, t, entry_unit)
+            if split is None:
+                reasons.append(f"{_label(t.candidate)} (no data separate them)")
+            elif not split.wins():
+                reasons.append(f"{_label(t.candidate)} ({split.words(_label(t.candidate))})")
+        if reasons:
+            out[id(s)] = (f"confounded with {'; '.join(reasons)}: these data cannot tell them "
+                          f"apart")
+    return out
 
 
 def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list[_Screen]]:
@@ -690,7 +770,6 @@ def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list
         for k, candidate in enumerate(search.remaining):
             note(f"{k + 1}/{len(search.remaining)} {_label(candidate)}")
             screens.append(_unless_supported(screening.screen(candidate), bic_threshold))
-        screening.release_columns()
     return screening, screens
 
 
