@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.folds import separating_scheme
@@ -89,3 +90,33 @@ def test_rivals_the_separating_data_cannot_tell_apart_stay_refused_and_named(tmp
                in t.decision for t in refused), refused[0].decision
     assert not [e for e in result.effects if e.name == "link_deflection"]
     assert all(3 not in e.joints for e in result.effects if e.name == "joint_compliance")
+
+
+@pytest.mark.slow
+def test_a_gear_ratio_error_told_from_its_stand_in_takes_the_direct_path(tmp_path,
+                                                                         monkeypatch):
+    """Compliance of joints 2 and 3 and a gear-ratio error of joint 3 (the case in which,
+    judged over every fold scheme alone, a coupling of joints 2 and 3 stood in for the
+    gear ratio until later rounds took it out): tried against the coupling on the units
+    where they differ, the gear ratio is added at once and nothing stands in."""
+    from robocal_casadi.calibration import diagnosis
+    from robocal_casadi.calibration.folds import fold_schemes
+    from robocal_casadi.effects import EFFECTS
+
+    joint_effects = ("joint_compliance", "joint_cyclic", "joint_scale", "thermal_drift",
+                     "joint_coupling", "backlash")
+    monkeypatch.setattr(diagnosis, "EFFECTS", {k: EFFECTS[k] for k in joint_effects})
+    monkeypatch.setattr(diagnosis, "fold_schemes", lambda *args, **options: [
+        s for s in fold_schemes(*args, **options) if not s.name.endswith("halves")])
+    truth = {"joint_compliance": {2: 1.057e-6, 3: 0.879e-6}, "joint_scale": {3: 5.44e-4}}
+    data = simulate(ROBOTS["industrial_6r"](), "tracker_points", out_dir=tmp_path / "t",
+                    rows=500, noise=NOISE, geometric_errors=(0.243e-3, 1.2036e-3),
+                    effects=truth, seed=7, progress=False).load()
+    result = calibrate([data])
+    assert sorted((e.name, e.joints) for e in result.effects) == \
+        [("joint_compliance", (2, 3)), ("joint_scale", (3,))]
+    assert not [t for t in result.diagnosis if t.outcome is Decision.TAKEN_OUT]
+    first = [t for t in result.diagnosis if t.round == 1 and t.outcome is Decision.ADDED]
+    assert [t.effect for t in first] == ["joint_scale"]
+    scale = next(e for e in result.effects if e.name == "joint_scale")
+    assert abs(scale.parameters["s3"] - 5.44e-4) < 0.05 * 5.44e-4
