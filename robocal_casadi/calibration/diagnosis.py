@@ -33,8 +33,12 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
 6. Separable? A candidate whose columns the geometry nearly imitates (relative remaining
    norm below ``IMITATED``) is not added; nor is one that a rival of another type explains
    just as well (each explains more than ``CONFOUNDED`` of the other's share, with a
-   held-out error within ``RIVAL_MARGIN``): the data cannot tell which is the cause, and
-   the decision names both.
+   held-out error within ``RIVAL_MARGIN``) unless, on the data that separate the two
+   (``_Screening.separation``: the units where each one's columns differ most from what
+   the other can make, held out, the rest fitted), its held-out RMS is ``MIN_GAIN`` below
+   both that with neither and that with the rival (or the rival does not pay there).
+   Otherwise the data cannot tell which is the cause, and the decision names the rival
+   with those figures.
 
 The candidate with the largest BIC drop among those passing 3-6 is added and everything
 is re-identified jointly with the nonlinear solver; it is kept if the refitted model still

@@ -10,7 +10,7 @@
 4. diagnosis of what the residual still holds (``diagnosis``), when asked; where the
    physical effects leave a structured residual (``unexplained``), a learned map of the
    tool position over the joints it follows, kept only when the folds confirm it
-   (``learned``);
+   (``learned``), the physical effects it may cover judged again beside it (``covered``);
 5. validation on held-out datasets: robot, effects and mounted instrument from the
    calibration, placements fitted again.
 """
