@@ -146,8 +146,8 @@ def judge(kept: MapFolds, without: MapFolds, parameters: int, n: int,
     worst, grown, tolerance = max(((p[0], p[2] / p[3], p[1]) for p in pairs),
                                   key=lambda p: p[1] / (1.0 + p[2]), default=("", 0.0, 0.0))
     reason = ""
-    if without.reason:  # no map pays without it: nothing covers what it explains
-        reason = ""
+    if without.reason:
+        pass  # no map pays without it: nothing covers what it explains, it stays
     elif not bic > bic_threshold:
         reason = f"BIC drop {bic:.3g} beside the map"
     elif not ratio <= 1.0 - MIN_GAIN:
