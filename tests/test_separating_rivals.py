@@ -13,6 +13,7 @@ import pytest
 
 from robocal_casadi.calibration import calibrate
 from robocal_casadi.calibration.folds import separating_scheme
+from robocal_casadi.commands.calibrate import summary
 from robocal_casadi.instruments.datasets import dataset_rows
 from robocal_casadi.instruments.simulate import simulate
 from robocal_casadi.model.examples import ROBOTS
@@ -88,6 +89,10 @@ def test_rivals_the_separating_data_cannot_tell_apart_stay_refused_and_named(tmp
                      if t.outcome is not Decision.NOT_PAYING]
     assert all("link_deflection[link 3]" in t.decision and "units where they differ most"
                in t.decision for t in refused), refused[0].decision
+    rival = [r for r in refused[-1].rivals if r[0] == "link_deflection[link 3]"]
+    assert rival and rival[0][1] > 0.98 ** 2 * rival[0][2], refused[-1].rivals  # no 1% lead
+    line = next(line for line in summary(result).splitlines() if "confounded" in line)
+    assert "joint_compliance[3] (link_deflection[link 3]: x" in line, line
     assert not [e for e in result.effects if e.name == "link_deflection"]
     assert all(3 not in e.joints for e in result.effects if e.name == "joint_compliance")
 

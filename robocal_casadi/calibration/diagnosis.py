@@ -127,6 +127,10 @@ class CandidateTest:
     # refused for a size absurd on its joints' drives only: per joint (1-based) the other
     # drives that would make it plausible, nearest first (``effects.drives.drives_allowing``)
     drives: tuple[tuple[int, tuple[str, ...]], ...] = ()
+    # refused as confounded: each rival that stands, with the held-out squared error on the
+    # units where the two differ most with the candidate and with the rival, relative to
+    # neither (nan: no data separate them; ``_Screening.separation``)
+    rivals: tuple[tuple[str, float, float], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
@@ -601,6 +605,7 @@ class _Verdicts:
     outcomes: dict[int, Decision] = field(default_factory=dict)
     numbers: dict[int, tuple] = field(default_factory=dict)
     drives: dict[int, tuple[tuple[int, tuple[str, ...]], ...]] = field(default_factory=dict)
+    rivals: dict[int, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
 
     def implausible(self, s, effect: Effect, values: dict[str, float], robot, reason: str,
                     after_refit: bool = False) -> None:
@@ -721,7 +726,7 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
     _judge_screens(screening, screens, search, verdicts, bic_threshold)
     passing = sorted((s for s in screens if not verdicts.decisions[id(s)]),
                      key=lambda s: -s.bic_drop)
-    confounded = _confounded(screening, screens, passing, search, bic_threshold)
+    confounded = _confounded(screening, screens, passing, search, bic_threshold, verdicts)
     screening.release_columns()
     accepted = None
     for s in passing:
@@ -740,26 +745,32 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
 
 
 def _confounded(screening: _Screening, screens: list[_Screen], passing: list[_Screen],
-                search: _Search, bic_threshold: float) -> dict[int, str]:
+                search: _Search, bic_threshold: float, verdicts: _Verdicts) -> dict[int, str]:
     """Why each of ``passing`` is refused as confounded with a rival (by ``id``; none for
     those that are not): a rival explains what it explains as well (``_rivals``), and on
     the data that separate the two (``_Screening.separation``) it does not beat that
-    rival. Rivals it beats there are not rivals."""
+    rival. Rivals it beats there are not rivals. The rivals that stand, with the squared
+    errors on the separating units relative to neither (nan: no such data), go to
+    ``verdicts.rivals``."""
     out: dict[int, str] = {}
     entry_unit: np.ndarray | None = None
     for s in passing:
-        reasons = []
+        reasons, standing = [], []
         for t in _rivals(screening, screens, s, bic_threshold):
             if entry_unit is None:
                 entry_unit = entry_units(search.big)
             split = screening.separation(s, t, entry_unit)
-            if split is None:
-                reasons.append(f"{_label(t.candidate)} (no data separate them)")
+            name = _label(t.candidate)
+            if split is None or not split.before > 0:
+                reasons.append(f"{name} (no data separate them)")
+                standing.append((name, math.nan, math.nan))
             elif not split.wins():
-                reasons.append(f"{_label(t.candidate)} ({split.words(_label(t.candidate))})")
+                reasons.append(f"{name} ({split.words(name)})")
+                standing.append((name, split.own / split.before, split.rival / split.before))
         if reasons:
             out[id(s)] = (f"confounded with {'; '.join(reasons)}: these data cannot tell them "
                           f"apart")
+            verdicts.rivals[id(s)] = tuple(standing)
     return out
 
 
@@ -854,7 +865,7 @@ def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
             extrapolation=total, worst_region=worst, estimate=s.values,
             label=_label(s.candidate),
             outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING),
-            drives=verdicts.drives.get(id(s), ())))
+            drives=verdicts.drives.get(id(s), ()), rivals=verdicts.rivals.get(id(s), ())))
     return out
 
 
