@@ -16,6 +16,8 @@ import numpy as np
 
 from robocal_casadi import load_dataset
 from robocal_casadi.calibration import calibrate
+from robocal_casadi.calibration.covered import judge
+from robocal_casadi.calibration.learned import MapFolds
 from robocal_casadi.commands.calibrate import summary
 from robocal_casadi.model.examples import ROBOTS
 from robocal_casadi.model.kinematics import Kinematics
@@ -114,3 +116,31 @@ def test_real_play_survives_the_map(tmp_path):
                 if t.outcome is Decision.COVERED and t.effect == "backlash"]
     # its standard error from the fit's noise: within a few of them, and 10% at most
     assert abs(play_found[0].parameters["b2"] - play) < 0.1 * play, play_found[0].parameters
+
+
+def folds(random: float, extrapolating: tuple[float, ...], fit: float,
+          reason: str = "") -> MapFolds:
+    """Held-out squared errors [m^2] with a map: the random scheme's, then one per
+    extrapolating scheme (tolerance 2%); 100 errors."""
+    schemes = (("units", False, 0.02),) + tuple((f"q{k + 1} ranges", True, 0.02)
+                                                 for k in range(len(extrapolating)))
+    with_map = np.array((random,) + extrapolating)
+    return MapFolds(with_map * 2, with_map, fit, schemes, 100, reason)
+
+
+def test_a_unit_beside_the_map_pays_by_the_rules_diagnosis_adds_effects_by():
+    n, k = 300, 2
+    without = folds(1.0, (1.0, 1.0), fit=1.0)
+    # 5% lower held out, every region lower, a BIC drop of n log(1/0.9) - k log n > 10
+    assert judge(folds(0.95 ** 2, (0.9, 0.9), fit=0.9), without, k, n).reason == ""
+    # within 1% of the model without it beside its own map: covered
+    slight = judge(folds(0.995 ** 2, (0.9, 0.9), fit=0.9), without, k, n)
+    assert slight.reason.startswith("held-out RMS") and "needs -1%" in slight.reason
+    # the fit barely falls: the BIC drop n log(1/0.99) - 2 log 300 is below 10
+    assert judge(folds(0.9, (0.9, 0.9), fit=0.99), without, k, n).reason.startswith("BIC")
+    # one region grown by 5% (tolerance 2%): does not extrapolate
+    grown = judge(folds(0.9, (1.05, 0.5), fit=0.9), without, k, n)
+    assert grown.reason.startswith("does not extrapolate") and "q1 ranges" in grown.reason
+    # no map pays without it: nothing covers it, it stays whatever its numbers
+    alone = folds(1.0, (1.0, 1.0), fit=1.0, reason="held-out RMS -0.2% (needs -1%)")
+    assert judge(folds(1.0, (1.0, 1.0), fit=1.0), alone, k, n).reason == ""
