@@ -45,7 +45,9 @@ class Decision(Enum):
     its estimate outside what real robots show (it stands in for something else);
     ``CONFOUNDED``: as good an explanation as a rival of another effect type, the data
     cannot tell them apart; ``TAKEN_OUT``: added in an earlier round and removed, no longer
-    paying its way with the effects found later; ``NOT_PAYING``: it does not lower the
+    paying its way with the effects found later; ``COVERED``: added, then removed once a
+    learned map over the same joints was in (the map covers what it explained, it no
+    longer pays beside it); ``NOT_PAYING``: it does not lower the
     errors enough for its parameters (or not on held-out data, or the geometry absorbs it,
     or another candidate did better this round).
     """
@@ -54,6 +56,7 @@ class Decision(Enum):
     IMPLAUSIBLE = "refused as implausible"
     CONFOUNDED = "confounded"
     TAKEN_OUT = "taken out"
+    COVERED = "covered by the learned map"
     NOT_PAYING = "not paying"
 
 

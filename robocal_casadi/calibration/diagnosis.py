@@ -33,8 +33,12 @@ drift once per ``temperature`` or ``time`` column) is tested against the residua
 6. Separable? A candidate whose columns the geometry nearly imitates (relative remaining
    norm below ``IMITATED``) is not added; nor is one that a rival of another type explains
    just as well (each explains more than ``CONFOUNDED`` of the other's share, with a
-   held-out error within ``RIVAL_MARGIN``): the data cannot tell which is the cause, and
-   the decision names both.
+   held-out error within ``RIVAL_MARGIN``) unless, on the data that separate the two
+   (``_Screening.separation``: the units where each one's columns differ most from what
+   the other can make, held out, the rest fitted), its held-out RMS is ``MIN_GAIN`` below
+   both that with neither and that with the rival (or the rival does not pay there).
+   Otherwise the data cannot tell which is the cause, and the decision names the rival
+   with those figures.
 
 The candidate with the largest BIC drop among those passing 3-6 is added and everything
 is re-identified jointly with the nonlinear solver; it is kept if the refitted model still
@@ -71,7 +75,7 @@ from ..effects import EFFECTS, data_columns
 from ..effects.base import Effect
 from ..effects.drives import drives_allowing
 from ..results import Decision, EffectFinding, Identifiability
-from .folds import FoldGrams, FoldScheme, fold_schemes
+from .folds import FoldGrams, FoldScheme, entry_units, fold_schemes, separating_scheme
 from .problem import Problem
 from .solver import Loss, Method, Solution, solve
 
@@ -123,6 +127,10 @@ class CandidateTest:
     # refused for a size absurd on its joints' drives only: per joint (1-based) the other
     # drives that would make it plausible, nearest first (``effects.drives.drives_allowing``)
     drives: tuple[tuple[int, tuple[str, ...]], ...] = ()
+    # refused as confounded: each rival that stands, with the held-out squared error on the
+    # units where the two differ most with the candidate and with the rival, relative to
+    # neither (nan: no data separate them; ``_Screening.separation``)
+    rivals: tuple[tuple[str, float, float], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """Every recorded number and word by name (the fields but ``outcome``)."""
@@ -179,7 +187,7 @@ class _Candidate:
     unit: Effect | None = None  # the one-unit effect tested (a joint, a pair, a column)
 
 
-def _joined_extras(problem: Problem) -> dict[str, np.ndarray]:
+def joined_extras(problem: Problem) -> dict[str, np.ndarray]:
     """Extra columns present in every dataset, joined; ``payload`` if any dataset has it."""
     datasets = [m.dataset for m in problem.models]
     out: dict[str, np.ndarray] = {}
@@ -363,6 +371,7 @@ class _Screening:
         self.E = E
         self.column_of = {n: len(self.free_index) + k for k, n in enumerate(names)}
         total = Z.T @ Z
+        self.Z, self.total = Z, total  # kept for the folds that separate rivals
         self.schemes = list(schemes)
         self.base = list(range(len(self.free_index)))
         # Every fit adds a candidate's few columns to the free ones: factored once per fold.
@@ -385,7 +394,7 @@ class _Screening:
         is judged and refitted after that reads the fold Grams, ``r_perp`` and the
         screens' own columns, and the stack (the size of the Jacobian) is freed before
         the refits form Jacobians of their own."""
-        self.A = self.E = np.zeros((0, 0))
+        self.A = self.E = self.Z = np.zeros((0, 0))
 
     def held_out(self, columns) -> tuple[float, ...]:
         """Held-out SSE [m^2] of every fold scheme after fitting ``columns``."""
@@ -462,6 +471,32 @@ class _Screening:
                     f"all extrapolating folds x{total:.3g})")
         return ""
 
+    def separation(self, s: _Screen, t: _Screen, entry_unit: np.ndarray) -> _Separation | None:
+        """``s`` against its rival ``t`` on the data that tell them apart: the units where
+        the part of each one's columns the other cannot make is largest
+        (``folds.separating_scheme``; the columns alone choose them, not the residual) held
+        out, the geometry and each effect fitted on the rest. None when the data leave too
+        few units to hold any out (or the stacked columns are gone)."""
+        if s.P is None or t.P is None or not self.Z.size:
+            return None
+        score = np.zeros(self.n)
+        for own, other in ((s.P, t.P), (t.P, s.P)):
+            Q, _ = np.linalg.qr(other)
+            rest = own - Q @ (Q.T @ own)
+            energy = np.sum(rest ** 2, axis=1)
+            if energy.sum() > 0:
+                score += energy / energy.sum()
+        scheme = separating_scheme(entry_unit, score)
+        if scheme is None:
+            return None
+        grams = FoldGrams(self.Z, scheme.fold, self.total, base=self.base)
+        before = grams.held_out_sse(self.base)
+        held = [grams.held_out_sse(self.base + [self.column_of[n] for n in x.kept])
+                for x in (s, t)]
+        units = int(len(np.unique(entry_unit[scheme.fold == 0])))
+        return _Separation(before, held[0], held[1], units,
+                           int(len(np.unique(entry_unit[entry_unit >= 0]))))
+
     def overlap(self, first: _Screen, second: _Screen) -> float:
         """Share of ``second``'s explained residual that ``first`` explains as well (0..1)."""
         if first.P is None or second.P is None:
@@ -475,6 +510,36 @@ class _Screening:
                                        rcond=None)[0]
         extra = float(np.sum((rest @ coefficients) ** 2))
         return float(np.clip(1.0 - extra / alone, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class _Separation:
+    """A candidate against a rival on the units where they differ most, held out: their
+    squared error there [m^2] with neither, with the candidate and with the rival, and
+    how many units were held out of how many."""
+
+    before: float
+    own: float
+    rival: float
+    held: int
+    units: int
+
+    def wins(self) -> bool:
+        """By the held-out rule every effect is judged by: the candidate pays there (its
+        held-out RMS lower by ``MIN_GAIN`` than with neither), and lower by ``MIN_GAIN``
+        than with the rival too (or the rival does not pay there at all)."""
+        gain = (1.0 - MIN_GAIN) ** 2  # on squared errors
+        return self.own <= gain * self.before and (self.rival > gain * self.before
+                                                   or self.own <= gain * self.rival)
+
+    def words(self, rival: str) -> str:
+        """The figures, for the record of a candidate still refused."""
+        if not self.before > 0:
+            return f"on the {self.held} of {self.units} units where they differ most, no error"
+        return (f"on the {self.held} of {self.units} units where they differ most, held out "
+                f"(fitted on the rest), the squared error is x{self.own / self.before:.3g} "
+                f"with it and x{self.rival / self.before:.3g} with {rival} (against neither: "
+                f"its held-out RMS there must be {MIN_GAIN:.0%} below both)")
 
 
 def _implausible(effect: Effect, values: dict[str, float], robot=None) -> str:
@@ -540,6 +605,7 @@ class _Verdicts:
     outcomes: dict[int, Decision] = field(default_factory=dict)
     numbers: dict[int, tuple] = field(default_factory=dict)
     drives: dict[int, tuple[tuple[int, tuple[str, ...]], ...]] = field(default_factory=dict)
+    rivals: dict[int, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
 
     def implausible(self, s, effect: Effect, values: dict[str, float], robot, reason: str,
                     after_refit: bool = False) -> None:
@@ -596,9 +662,9 @@ def run(problem: Problem, geometric: Solution, identifiability: Identifiability 
 
 
 def _offered_extras(problem: Problem, available_columns) -> dict[str, np.ndarray]:
-    """The joined extra columns (``_joined_extras``) without those ``available_columns``
+    """The joined extra columns (``joined_extras``) without those ``available_columns``
     (when given) lacks."""
-    extras = _joined_extras(problem)
+    extras = joined_extras(problem)
     if available_columns is not None:
         for column in data_columns():
             if column in extras and column not in available_columns:
@@ -660,13 +726,12 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
     _judge_screens(screening, screens, search, verdicts, bic_threshold)
     passing = sorted((s for s in screens if not verdicts.decisions[id(s)]),
                      key=lambda s: -s.bic_drop)
+    confounded = _confounded(screening, screens, passing, search, bic_threshold, verdicts)
+    screening.release_columns()
     accepted = None
     for s in passing:
-        rivals = _rivals(screening, screens, s, bic_threshold)
-        if rivals:
-            names = ", ".join(_label(t.candidate) for t in rivals)
-            verdicts.decisions[id(s)] = (f"confounded with {names}: these data cannot tell "
-                                         f"them apart")
+        if confounded.get(id(s)):
+            verdicts.decisions[id(s)] = confounded[id(s)]
             verdicts.outcomes[id(s)] = Decision.CONFOUNDED
             continue
         accepted = _refit(search, screening, s, verdicts, method, loss, bic_threshold)
@@ -677,6 +742,36 @@ def _round(search: _Search, rounds: int, method: Method, loss: Loss,
             verdicts.decisions[id(s)] = "supported, weaker than the one added"
     search.tested += _records(screening, screens, verdicts, rounds)
     return accepted
+
+
+def _confounded(screening: _Screening, screens: list[_Screen], passing: list[_Screen],
+                search: _Search, bic_threshold: float, verdicts: _Verdicts) -> dict[int, str]:
+    """Why each of ``passing`` is refused as confounded with a rival (by ``id``; none for
+    those that are not): a rival explains what it explains as well (``_rivals``), and on
+    the data that separate the two (``_Screening.separation``) it does not beat that
+    rival. Rivals it beats there are not rivals. The rivals that stand, with the squared
+    errors on the separating units relative to neither (nan: no such data), go to
+    ``verdicts.rivals``."""
+    out: dict[int, str] = {}
+    entry_unit: np.ndarray | None = None
+    for s in passing:
+        reasons, standing = [], []
+        for t in _rivals(screening, screens, s, bic_threshold):
+            if entry_unit is None:
+                entry_unit = entry_units(search.big)
+            split = screening.separation(s, t, entry_unit)
+            name = _label(t.candidate)
+            if split is None or not split.before > 0:
+                reasons.append(f"{name} (no data separate them)")
+                standing.append((name, math.nan, math.nan))
+            elif not split.wins():
+                reasons.append(f"{name} ({split.words(name)})")
+                standing.append((name, split.own / split.before, split.rival / split.before))
+        if reasons:
+            out[id(s)] = (f"confounded with {'; '.join(reasons)}: these data cannot tell them "
+                          f"apart")
+            verdicts.rivals[id(s)] = tuple(standing)
+    return out
 
 
 def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list[_Screen]]:
@@ -690,7 +785,6 @@ def _screen_all(search: _Search, bic_threshold: float) -> tuple[_Screening, list
         for k, candidate in enumerate(search.remaining):
             note(f"{k + 1}/{len(search.remaining)} {_label(candidate)}")
             screens.append(_unless_supported(screening.screen(candidate), bic_threshold))
-        screening.release_columns()
     return screening, screens
 
 
@@ -771,7 +865,7 @@ def _records(screening: _Screening, screens: list[_Screen], verdicts: _Verdicts,
             extrapolation=total, worst_region=worst, estimate=s.values,
             label=_label(s.candidate),
             outcome=verdicts.outcomes.get(id(s), Decision.NOT_PAYING),
-            drives=verdicts.drives.get(id(s), ())))
+            drives=verdicts.drives.get(id(s), ()), rivals=verdicts.rivals.get(id(s), ())))
     return out
 
 
@@ -943,16 +1037,23 @@ def _findings(problem: Problem, solution: Solution, groups: dict,
                                            for n in kept}
         effect = next(e for e in problem.effects if e.name == name
                       and set(kept) <= set(e.parameter_names()))
-        text = effect.describe(values, units)
-        scale = units.length_scale
         numbers = evidence[key]
-        held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
-        summary = (f"{text}{held_text}; adding it lowers the cross-validated RMS of the fit "
-                   f"data (folds of the fit readings held out in turn) from "
-                   f"{numbers['cv_rms_before'] / scale:.3g} {units.length} to "
-                   f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")
+        summary = finding_summary(effect, values, held, numbers, units)
         findings.append(EffectFinding(name=name, joints=joints, parameters=values,
                                       unit=effect.unit, evidence=dict(numbers), std=errors,
                                       summary=summary,
                                       units={n: effect.parameter_unit(n) for n in values}))
     return findings
+
+
+def finding_summary(effect: Effect, values: dict[str, float], held: Sequence[str],
+                    numbers: dict, units) -> str:
+    """The sentence of one finding: ``effect`` at ``values`` (SI), the parameters ``held``
+    at zero, and what it lowers the held-out RMS [m] from and to (``numbers``), lengths in
+    the display ``units``."""
+    scale = units.length_scale
+    held_text = f" ({', '.join(held)} held at zero: the geometry absorbs them)" if held else ""
+    return (f"{effect.describe(values, units)}{held_text}; adding it lowers the "
+            f"cross-validated RMS of the fit data (folds of the fit readings held out in "
+            f"turn) from {numbers['cv_rms_before'] / scale:.3g} {units.length} to "
+            f"{numbers['cv_rms_after'] / scale:.3g} {units.length}")

@@ -196,6 +196,39 @@ def fold_schemes(problem, folds: int = 5, seed: int = 0) -> list[FoldScheme]:
     return schemes
 
 
+SEPARATING_SHARE = 0.2  # of the units: those where two rival effects differ most
+
+
+def entry_units(problem) -> np.ndarray:
+    """The unit (index) each residual entry of ``problem`` belongs to; -1 for none."""
+    return _units(problem).entry_unit
+
+
+def separating_scheme(entry_unit: np.ndarray, score: np.ndarray,
+                      share: float = SEPARATING_SHARE) -> FoldScheme | None:
+    """One fold holding out the units whose residual entries' ``score`` (>= 0, one per
+    entry) sums highest, ``share`` of the units (at least ``MIN_UNITS_PER_FOLD``); every
+    other unit is always trained on. None when too few units would be left to train on.
+
+    Sums within 1e-9 of the largest (relative) are ranked by their first unit, so the
+    fold does not turn on the last bits of a sum."""
+    valid = entry_unit >= 0
+    n_units = int(entry_unit[valid].max()) + 1 if valid.any() else 0
+    count = max(MIN_UNITS_PER_FOLD, int(round(share * n_units)))
+    if n_units - count < MIN_UNITS_PER_FOLD:
+        return None
+    per_unit = np.bincount(entry_unit[valid], weights=score[valid], minlength=n_units)
+    top = float(per_unit.max())
+    if not top > 0:
+        return None
+    order = np.lexsort((np.arange(n_units), -np.round(per_unit / top, 9)))
+    unit_fold = np.full(n_units, -1)
+    unit_fold[order[:count]] = 0
+    fold = np.full(len(entry_unit), -1)
+    fold[valid] = unit_fold[entry_unit[valid]]
+    return FoldScheme("separating", fold, True)
+
+
 def _gram(Z: np.ndarray) -> np.ndarray:
     """``Z^T Z`` of one fold's rows (one array on both sides: the symmetric product,
     half the work of a general one)."""

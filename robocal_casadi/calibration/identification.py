@@ -10,7 +10,7 @@
 4. diagnosis of what the residual still holds (``diagnosis``), when asked; where the
    physical effects leave a structured residual (``unexplained``), a learned map of the
    tool position over the joints it follows, kept only when the folds confirm it
-   (``learned``);
+   (``learned``), the physical effects it may cover judged again beside it (``covered``);
 5. validation on held-out datasets: robot, effects and mounted instrument from the
    calibration, placements fitted again.
 """
@@ -45,7 +45,7 @@ from ..results import (
     RmsSummary,
     SphereEstimate,
 )
-from . import diagnosis, learned, outliers, remainder, unexplained
+from . import covered, diagnosis, learned, outliers, remainder, unexplained
 from .degeneracy import check_dataset, check_finite
 from .evaluation import evaluate, models_for, refit_placement  # noqa: F401 (re-exported)
 from .identifiability import EXACT_TOLERANCE, PRACTICAL_TOLERANCE, analyse
@@ -304,8 +304,8 @@ def calibrate(datasets: Sequence, validation: Sequence = (), *, effects: Sequenc
     nominal, rejected, geometric, final = _fits(request, diagnose)
     structure = find_unexplained(final.problem, final.solution.x, final.solution.free)
     if diagnose:
-        final = _learned(final, structure, geometric.prior, method=request.method,
-                         loss=request.fit_loss)
+        final = _learned(final, structure, geometric.prior, len(nominal.problem.effects),
+                         method=request.method, loss=request.fit_loss)
     return _result(request, nominal, geometric, final, structure, rejected)
 
 
@@ -822,10 +822,12 @@ def _diagnose(problem: Problem, geometric: GeometricFit, validation: Sequence[Da
     return DiagnosedFit(outcome.problem, final, outcome.added, outcome.tested)
 
 
-def _learned(final: DiagnosedFit, structure, prior: Prior | None, *, method: Method,
-             loss: Loss) -> DiagnosedFit:
+def _learned(final: DiagnosedFit, structure, prior: Prior | None, declared: int, *,
+             method: Method, loss: Loss) -> DiagnosedFit:
     """Stage 4, last: the learned map over the joints the unexplained ``structure``
     follows, added when the folds confirm it (``learned``); else ``final`` unchanged.
+    The physical effects added on those joints (``final.problem.effects`` after the first
+    ``declared``) are judged again beside the map, and those it covers go (``covered``).
     The geometry is refitted with the map in under the fit's own ``prior`` (None: plain
     least squares)."""
     if structure is None:
@@ -834,11 +836,23 @@ def _learned(final: DiagnosedFit, structure, prior: Prior | None, *, method: Met
         outcome = learned.learn(final.problem, final.solution.x, structure.variables)
     if outcome is None or outcome.effect is None:
         return final
-    problem, solution = learned.with_map(final.problem, final.solution, outcome.effect,
+    effect, diagnosed = outcome.effect, final
+    with stage("physical effects beside the learned map"):
+        beside = covered.without_stand_ins(
+            final.problem, final.solution, declared, effect.joints, final.added,
+            max((t.round for t in final.tested), default=0) + 1, method=method, loss=loss)
+    if beside.removed:
+        with stage("learned map"):
+            again = learned.learn(beside.problem, beside.solution.x, structure.variables)
+        if again is not None and again.effect is not None:
+            final = replace(final, problem=beside.problem, solution=beside.solution,
+                            added=beside.added, tested=final.tested + beside.removed)
+            outcome, effect = again, again.effect
+    problem, solution = learned.with_map(final.problem, final.solution, effect,
                                          prior=prior, method=method, loss=loss)
     before, after = final.problem.rms(final.solution.x), problem.rms(solution.x)
     if not after < before:
-        return final
+        return diagnosed  # no map: what it would have covered stays
     finding = learned.finding(outcome, (before, after), problem.robot.units)
     return replace(final, problem=problem, solution=solution, added=final.added + (finding,))
 

@@ -325,6 +325,51 @@ def learn(problem: Problem, x: np.ndarray, variables: Sequence[str]) -> LearnedM
     return LearnedMap(effect, before, after, ratio, LENGTH_SCALES[a], SMOOTHING[b], reason)
 
 
+@dataclass(frozen=True)
+class MapFolds:
+    """How a model fares with a map over ``joints`` added, fold by fold: held-out squared
+    error [m^2] per fold scheme without a map (``without``) and with the map those folds
+    choose (``with_map``, each fold's map trained on its training rows), the fit's squared
+    error with that map trained on every row (``fit_sse``), the schemes as
+    (name, extrapolating, tolerance), the per-measurement error count, and the map's own
+    verdict (``reason``: '' when it pays, as in ``learn``)."""
+
+    without: np.ndarray
+    with_map: np.ndarray
+    fit_sse: float
+    schemes: tuple[tuple[str, bool, float], ...]
+    n_errors: int
+    reason: str
+
+    def random_rms(self) -> float:
+        """Held-out RMS [m] with the map on the first scheme that deals units at random
+        (nan when none does)."""
+        random = [k for k, s in enumerate(self.schemes) if not s[1]]
+        return math.sqrt(self.with_map[random[0]] / self.n_errors) if random else math.nan
+
+
+def map_folds(problem: Problem, x: np.ndarray, joints: tuple[int, ...]) -> MapFolds | None:
+    """``MapFolds`` of ``problem`` at ``x`` with a map over ``joints`` (every fold scheme
+    summed, none skipped); None when the data allow no map (see ``learn``)."""
+    data = _rows(problem, x, joints)
+    if data is None or not data.folds:
+        return None
+    release_freed()
+    n_errors = sum(len(e) for e in problem.errors(x))
+    without, cv = _cross_validated(data, {})
+    a, b = np.unravel_index(int(np.argmin(cv.sum(axis=0))), cv.shape[1:])
+    sse = np.column_stack([without, cv[:, a, b]])
+    reason = _verdict(data, sse, n_errors)[0]
+    every = np.arange(len(data.X))
+    effect = fit_map(joints, data.X, data.T, LENGTH_SCALES[a], SMOOTHING[b])
+    fit_sse = data.squared(every) if effect is None else data.squared(
+        every, effect.weight(data.X)[:, None] * effect.kernel_part(data.X))
+    return MapFolds(without, sse[:, 1].copy(), fit_sse,
+                    tuple((name, extrapolating, tolerance)
+                          for name, extrapolating, tolerance, _ in data.folds),
+                    n_errors, reason)
+
+
 def with_map(problem: Problem, solution: Solution, effect: ResidualMap, *,
              prior: Prior | None = None, method: Method = "lm",
              loss: Loss = "linear") -> tuple[Problem, Solution]:

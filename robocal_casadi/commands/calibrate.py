@@ -215,10 +215,43 @@ def _refusal_lines(result: CalibrationResult) -> list[str]:
     if removed:
         lines.append("added, then taken out again (with the later effects in, it no longer "
                      f"helps): {', '.join(removed)}")
+    lines += _covered_lines(result)
     confounded = _rejected(result, Decision.CONFOUNDED)
     if confounded:
-        lines.append(f"not added, confounded with a rival on these data: {', '.join(confounded)}")
+        lines.append("not added, confounded with a rival on these data (held-out squared "
+                     "error where the two differ most, with it / with the rival, against "
+                     "neither): " + ", ".join(_with_rivals(result, confounded)))
     return lines
+
+
+def _with_rivals(result: CalibrationResult, labels: list[str]) -> list[str]:
+    """Each confounded candidate of ``labels`` with the rivals it was last refused for and
+    their figures on the units that separate them (``CandidateTest.rivals``)."""
+    last: dict[str, tuple] = {}
+    for test in result.diagnosis:
+        if test.outcome is Decision.CONFOUNDED:
+            last[test.label or test.effect] = tuple(test.as_dict().get("rivals", ()))
+    out = []
+    for label in labels:
+        figures = "; ".join(
+            f"{name}: no data separate them" if not math.isfinite(own)
+            else f"{name}: x{own:.3g} / x{rival:.3g}" for name, own, rival in last.get(label, ()))
+        out.append(f"{label} ({figures})" if figures else label)
+    return out
+
+
+def _covered_lines(result: CalibrationResult) -> list[str]:
+    """The physical effects taken out once the learned map was in, each with the held-out
+    figures that decided it."""
+    s, unit = result.units.length_scale, result.units.length
+    gone = [(t.label or t.effect, t.as_dict()) for t in result.diagnosis
+            if t.outcome is Decision.COVERED]
+    if not gone:
+        return []
+    return ["taken out once the learned map was in (the map covers what they explained): "
+            + "; ".join(f"{label} (held-out RMS {e['cv_rms_after'] / s:.4g} {unit} with it, "
+                        f"{e['cv_rms_before'] / s:.4g} without it, each with its map; "
+                        f"BIC drop {e['bic_drop']:.3g})" for label, e in gone)]
 
 
 def summary_fields(result: CalibrationResult, *, diagnosed: bool = True) -> dict:

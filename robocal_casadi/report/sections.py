@@ -632,6 +632,8 @@ DIAGNOSIS_HEADERS = {
     "extrapolation": "held-out squared error with it / without it, extrapolating folds",
     "worst_region": "extrapolating split it helps least",
     "label": "name in result.json",
+    "rivals": "rivals that stand (held-out squared error where the two differ most, with it "
+              "and with the rival, against neither)",
 }
 NUMERIC_KEYS = {"round", "parameters", "remaining_norm", "rss_drop", "bic_drop",
                 "cv_rms_before", "cv_rms_after"}
