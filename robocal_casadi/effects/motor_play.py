@@ -32,7 +32,6 @@ declares.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -46,21 +45,11 @@ from ..model.robot import Robot
 from ..model.transmission import TransmissionGroup, group_of
 from .base import Effect, Plausible, RowContext, TrueWorld
 from .checks import column
-from .drives import per_drive
+from .hysteresis import HYSTERESIS
 from .motion import motor_direction_column
 
-DEG = math.pi / 180.0
-MOTOR_PLAY = per_drive(
-    Plausible(0.1 * DEG, sign=+1, basis="lost motion of gear trains: below 0.1 deg"),
-    cycloid=Plausible(0.05 * DEG, sign=+1, basis="cycloidal reducers: a few arc minutes"),
-    harmonic=Plausible(0.05 * DEG, sign=+1, basis="strain-wave gears: a hysteresis loss of "
-                       "an arc minute or two"),
-    belt=Plausible(0.5 * DEG, sign=+1, basis="belt drives: play and stretch, below about "
-                   "0.5 deg"),
-    cable=Plausible(2.0 * DEG, sign=+1, basis="cable drives: friction on the pulleys and "
-                    "cable stretch, up to about 2 deg"),
-    direct=Plausible(0.02 * DEG, sign=+1, basis="a direct drive has only its bearings' "
-                     "friction: below 0.02 deg"))
+# A motor's play and friction lag seen at its joints: the sizes of a joint's own, per drive.
+MOTOR_PLAY = HYSTERESIS
 
 
 def _inverse(group: TransmissionGroup) -> np.ndarray:
