@@ -256,3 +256,16 @@ def test_tracking_compensation_and_fleet_agree_under_two_kernels(kernels, tmp_pa
     results = [json.loads((tmp_path / f"fleet_{k}" / "r1" / "result.json").read_text())
                for k in kernels]
     assert _numbers_agree(*results) == []
+
+
+def test_independent_columns_keep_a_basis_of_what_is_not_spanned_already():
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(12, 1)), rng.normal(size=(12, 1))
+    constant = np.ones((12, 1)) / np.sqrt(12)
+    columns = np.hstack([a, 2 * a - b, b, 3 * constant, a + b + constant])
+    kept, span = exact.independent_columns(columns, constant, 1e-12, 1e-8)
+    # two new directions (a, b): the rest are combinations of them and the constant
+    assert len(kept) == 2 and np.linalg.matrix_rank(columns[:, kept]) == 2
+    assert 3 not in kept  # the constant is spanned from the start
+    assert np.allclose(span.T @ span, np.eye(3), atol=1e-12)
+    assert np.linalg.matrix_rank(np.hstack([span, columns])) == 3

@@ -206,3 +206,31 @@ def project_out(G, A, rtol: float) -> np.ndarray:
     if U.shape[1] == 0:
         return G.copy()
     return G - matmul(U, matmul(U.T, G))
+
+
+def independent_columns(columns, span, floor: float, rtol: float
+                        ) -> tuple[list[int], np.ndarray]:
+    """Columns of ``columns`` (n x m) picked greedily, each time the one with the largest
+    share of its norm outside what is spanned already, while that share exceeds ``rtol``;
+    ``span`` (n x k, orthonormal, k may be 0) what counts as spanned from the start;
+    columns of norm ``floor`` or less are never picked. Returns the indices in the order
+    found and the span grown by them (pivoted Gram-Schmidt, fixed-order sums)."""
+    columns = np.asarray(columns, dtype=float)
+    span = np.asarray(span, dtype=float).reshape(columns.shape[0], -1)
+    norms = norm(columns, axis=0)
+    remaining = columns - matmul(span, matmul(span.T, columns)) if span.shape[1] \
+        else columns.copy()
+    candidates = [k for k in range(columns.shape[1]) if norms[k] > floor]
+    kept: list[int] = []
+    while candidates:
+        left = norm(remaining[:, candidates], axis=0)
+        relative = left / norms[candidates]
+        best = int(np.argmax(relative))
+        if relative[best] <= rtol:
+            break
+        k = candidates.pop(best)
+        u = remaining[:, k] / left[best]
+        remaining -= np.outer(u, matmul(u, remaining))
+        span = np.column_stack([span, u])
+        kept.append(k)
+    return kept, span

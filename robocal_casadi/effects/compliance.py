@@ -122,24 +122,11 @@ def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
     Q = rng.uniform(lower, upper, size=(samples, robot.dof))
     p = robot.parameter_vector()
     rows = np.array([np.asarray(basis(q, p))[joint - 1] for q in Q])  # samples x 4 dof
-    kept: list[int] = []
-    span = [np.ones(samples) / np.sqrt(samples)]
-    remaining = rows.copy()
-    norms = np.linalg.norm(rows, axis=0)
+    norms = exact.norm(rows, axis=0)
     # a unit first moment (1 kg m) gives torques of order |g|: below that, roundoff
     scale = max(float(norms.max()), exact.norm(robot.gravity) * np.sqrt(samples))
-    remaining -= np.outer(span[0], exact.matmul(span[0], remaining))
-    candidates = [k for k in range(rows.shape[1]) if norms[k] > INDEPENDENCE * scale]
-    while candidates:
-        left = np.linalg.norm(remaining[:, candidates], axis=0)
-        relative = left / norms[candidates]
-        best = int(np.argmax(relative))
-        if relative[best] <= INDEPENDENCE:
-            break
-        k = candidates.pop(best)
-        u = remaining[:, k] / left[best]
-        remaining -= np.outer(u, exact.matmul(u, remaining))
-        kept.append(k)
+    constant = np.ones((samples, 1)) / np.sqrt(samples)
+    kept, _ = exact.independent_columns(rows, constant, INDEPENDENCE * scale, INDEPENDENCE)
     return tuple(kept)
 
 
@@ -155,6 +142,7 @@ def require_inertia(robot: Robot, effect: str) -> None:
     if not robot.has_inertia:
         raise InputError(f"{effect} needs 'mass' and 'com' on every joint of the robot file "
                          f"to simulate gravity torques", where=f"effects.{effect}")
+
 
 class JointCompliance(Effect):
     """``dq_j = -c_j tau_j(q)`` for each joint j in ``joints``; see the module docstring.

@@ -136,21 +136,10 @@ def independent_products(robot: Robot, group: tuple[int, ...], *, samples: int =
         columns = np.array([_deflection(group, term, rows).ravel() for term in terms]).T
         # sums in a fixed order (``exact``): which products are kept must not turn on the
         # BLAS kernel
-        norms = exact.norm(columns, axis=0)
-        scale = max(scale, float(norms.max()))
-        remaining = columns - exact.matmul(span, exact.matmul(span.T, columns))
-        candidates = [k for k in range(len(terms)) if norms[k] > INDEPENDENCE * scale]
-        while candidates:
-            left = exact.norm(remaining[:, candidates], axis=0)
-            relative = left / norms[candidates]
-            best = int(np.argmax(relative))
-            if relative[best] <= INDEPENDENCE:
-                break
-            k = candidates.pop(best)
-            u = remaining[:, k] / left[best]
-            remaining -= np.outer(u, exact.matmul(u, remaining))
-            span = np.column_stack([span, u])
-            kept.append(terms[k])
+        scale = max(scale, float(exact.norm(columns, axis=0).max()))
+        found, span = exact.independent_columns(columns, span, INDEPENDENCE * scale,
+                                                INDEPENDENCE)
+        kept += [terms[k] for k in found]
     return tuple(kept)
 
 
