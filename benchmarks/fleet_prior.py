@@ -6,7 +6,9 @@ once per fleet) plus each robot's own (``OWN`` of the tolerance). ``--robots`` r
 calibrated with all their data (30 tracker readings or 15 bar placements) under the
 tolerance prior; their population prior is learned from them (``population_prior.learn``).
 Then ``--next`` new robots of the model are measured with fewer and fewer poses and
-calibrated twice on the same data, with the tolerance prior and with the fleet prior; each
+calibrated three times on the same data, with the tolerance prior, with the fleet prior and
+with the population itself (its true mean and spread: what the best learned prior could
+know, so that what the learning loses and what no prior can give are told apart); each
 calibration's TRUE work-cell RMS is the distance between the calibrated and the true
 position of the instrument's point (tracker target, probe tip) over ``CELL_POSES`` random
 configurations in the joint limits, after the best rigid motion (which registering the
@@ -19,6 +21,10 @@ the tolerance prior; then, for each robot with more than one placement, leave th
 out: the prior from the others, the robot fitted on 16 touches of its first placement (the
 first 8 touches in each socket), held-out RMS on its other placements, with the tolerance
 prior and with the fleet prior.
+
+``--own`` may list several sizes of each robot's own part (e.g. ``0.333,0.0333``): the
+simulated parts run once for each, the first under ``tracker``/``bar``, the others under
+``tracker own=<size>`` and ``bar own=<size>``.
 
 Every fit runs without diagnosis and with the linear loss (the robust screening needs more
 readings than the fewest counts here give); both priors see the same data.
@@ -41,11 +47,13 @@ import math
 import os
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from robocal_casadi.calibration.population_prior import (
+    PopulationPrior,
     calibration_from,
     learn,
     posterior_content,
@@ -86,6 +94,20 @@ def fleet_errors(robot, rng, shared, own_scale, off=False):
     tolerance = np.array([tolerance_of(n, registry.quantity(n), robot) for n in names])
     own = rng.choice([-1.0, 1.0], size=len(names)) if off else rng.normal(size=len(names))
     return {n: float(v) for n, v in zip(names, (shared + own_scale * own) * tolerance)}
+
+
+def true_population(prior: PopulationPrior, robot, names, shared, own) -> PopulationPrior:
+    """``prior`` with the population the fleet was drawn from in place of what was learned:
+    mean ``shared`` tolerances and spread ``own`` tolerances on the perturbed ``names``, and
+    on the rest (never off the drawing) a spread of a thousandth of the learned one."""
+    registry = robot.parameters()
+    mean = np.zeros(len(prior.names))
+    variance = (1e-3 * prior.spread) ** 2
+    for name, value in zip(names, shared):
+        k = prior.names.index(name)
+        tolerance = tolerance_of(name, registry.quantity(name), robot)
+        mean[k], variance[k] = value * tolerance, (own * tolerance) ** 2
+    return replace(prior, mean=mean, covariance=np.diag(variance))
 
 
 def true_cell_rms(result, truth, kinematics: Kinematics, Q: np.ndarray) -> float:
@@ -145,6 +167,7 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
             continue
         calibrations.append(calibration_from(posterior_content(result), Path(f"robot-{k}")))
     prior = learn(calibrations)
+    population = true_population(prior, robot, names, shared, own)
     learned_s = time.perf_counter() - started
     rows = []
     for k in range(next_robots + 1):
@@ -158,7 +181,8 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
         for count in counts:
             part_data = subset(dataset, kind, count)
             entry = {"robot": k, "off_model": off, "count": count}
-            for label, used in (("tolerance", None), ("fleet", prior)):
+            for label, used in (("tolerance", None), ("fleet", prior),
+                                ("population", population)):
                 try:
                     result = calibrate_job([part_data], (), options(used))
                 except RobocalError as error:
@@ -167,7 +191,7 @@ def simulated(part: str, robots: int, next_robots: int, seed: int, folder: Path,
                     continue
                 use = result.prior.use
                 entry[label] = true_cell_rms(result, data.truth, kinematics, Q) * 1e3
-                if used is not None:
+                if used is prior:
                     entry["belongs"] = use.belongs
                     entry["conflict"] = None if use.member is None else use.member.distance
                     entry["threshold"] = None if use.member is None else use.member.threshold
@@ -189,8 +213,10 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
         at = [r for r in members if r["count"] == count]
         tolerance = [r["tolerance"] for r in at if r["tolerance"] is not None]
         fleet = [r["fleet"] for r in at if r["fleet"] is not None]
+        population = [r["population"] for r in at if r.get("population") is not None]
         out[str(count)] = {"tolerance_median_mm": _median(tolerance),
                            "fleet_median_mm": _median(fleet),
+                           "population_median_mm": _median(population),
                            "tolerance_calibrated": len(tolerance),
                            "fleet_calibrated": len(fleet),
                            "belongs": sum(bool(r.get("belongs")) for r in at),
@@ -201,6 +227,10 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
     tolerance_all = {r["robot"]: r["tolerance"] for r in members if r["count"] == full
                      and r["tolerance"] is not None}
     no_worse = [fleet_third[k] <= tolerance_all[k] for k in fleet_third if k in tolerance_all]
+    population_third = {r["robot"]: r["population"] for r in members if r["count"] == third
+                        and r.get("population") is not None}
+    population_no_worse = [population_third[k] <= tolerance_all[k] for k in population_third
+                           if k in tolerance_all]
     off = [r for r in rows if r["off_model"]]
     only_fleet = [r for r in members if r["tolerance"] is None and r["fleet"] is not None]
     return {"per_count": out, "third": third,
@@ -209,6 +239,9 @@ def summarise(rows: list[dict], counts, full: int) -> dict:
                                                      for r in only_fleet],
             "fleet_at_third_no_worse_than_tolerance_at_all": f"{sum(no_worse)}/{len(no_worse)}",
             "fleet_third_median_mm": _median(list(fleet_third.values())),
+            "population_at_third_no_worse_than_tolerance_at_all":
+                f"{sum(population_no_worse)}/{len(population_no_worse)}",
+            "population_third_median_mm": _median(list(population_third.values())),
             "tolerance_all_median_mm": _median(list(tolerance_all.values())),
             "off_model_refused": f"{sum(_told(r) for r in off)}/{len(off)}",
             "off_model_same_as_tolerance": all(
@@ -291,8 +324,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--noise", type=float, default=NOISE * 1e3,
                         help="simulated noise per coordinate [mm] (default %(default)s)")
-    parser.add_argument("--own", type=float, default=OWN,
-                        help="each robot's own errors, in tolerances (default %(default).3g)")
+    parser.add_argument("--own", default=f"{OWN:.4g}",
+                        help="each robot's own errors, in tolerances; a list runs each "
+                        "(default %(default)s)")
     parser.add_argument("--shared", type=Path,
                         default=Path(os.environ[PANDA_DATA]) if os.environ.get(PANDA_DATA)
                         else None,
@@ -310,10 +344,14 @@ def main() -> None:
             started = time.perf_counter()
             if part == "panda":
                 report[part] = pandas(args.shared)
-            else:
-                report[part] = simulated(part, args.robots, args.next, args.seed,
-                                         Path(folder), args.noise * 1e-3, args.own)
-            report[part]["seconds"] = time.perf_counter() - started
+                report[part]["seconds"] = time.perf_counter() - started
+                continue
+            for k, own in enumerate(float(v) for v in args.own.split(",")):
+                key = part if k == 0 else f"{part} own={own:g}"
+                report[key] = simulated(part, args.robots, args.next, args.seed,
+                                        Path(folder) / f"own{k}", args.noise * 1e-3, own)
+                report[key]["seconds"] = time.perf_counter() - started
+                started = time.perf_counter()
     text = json.dumps(report, indent=1)
     print(text)
     if args.out is None:

@@ -67,7 +67,7 @@ RUNS = {"setup": ("setup.py", "--tests", "--tests-timeout", "3900"),
         "third_harmonic": ("third_harmonic.py",),
         # the Pandas' data: the folder ROBOCAL_PANDA_DATA names (fleet_prior.py --help)
         "fleet_prior": ("fleet_prior.py", "--part", "tracker,bar,panda", "--robots", "40",
-                        "--next", "5"),
+                        "--next", "5", "--own", "0.3333,0.03333"),
         "cable": ("cable.py",)}
 INTRO = ("Figures from this repository's benchmark scripts on a 2-core machine (each prints "
          "JSON with the comparison run in the same process), written into this section by "
@@ -851,34 +851,41 @@ def render_fleet_prior(record: dict) -> str:
             f"robot's geometric errors a part the model shares, {first['shared']:.2f} of the "
             f"tolerance, plus its own, {first['own']:.2f} of it; the prior learned from "
             f"{first['fleet_robots']} calibrated robots; the next robots measured with fewer "
-            f"and fewer poses and calibrated on the same data with the tolerance prior and "
-            f"with the fleet prior; true work-cell RMS: calibrated against simulated tool "
-            f"point over 400 configurations in the joint limits, after the best rigid "
-            f"motion, median over the robots of the model, in mm; then the real Pandas, "
-            f"each left out of its own prior). {_run_line(record)}")
+            f"and fewer poses and calibrated on the same data with the tolerance prior, with "
+            f"the fleet prior, and with the population itself as the prior (its true mean "
+            f"and spread: the most any learned prior could know); true work-cell RMS: "
+            f"calibrated against simulated tool point over 400 configurations in the joint "
+            f"limits, after the best rigid motion, median over the robots of the model, in "
+            f"mm; then the real Pandas, each left out of its own prior). {_run_line(record)}")
     parts.append(lead)
     for kind in simulated:
         part = out[kind]
         summary = part["summary"]
-        unit = "readings" if kind == "tracker" else "placements"
+        unit = _fleet_unit(kind)
         rows = [f"| {kind} ({part['noise_mm']:g} mm noise): {unit} | tolerance prior | "
-                f"fleet prior | robots that belong |", "| --- | --- | --- | --- |"]
+                f"fleet prior | the population itself | robots that belong |",
+                "| --- | --- | --- | --- | --- |"]
         for count in part["counts"]:
             c = summary["per_count"][str(count)]
             tolerance = (_mm(c["tolerance_median_mm"]) if c["tolerance_calibrated"]
                          else "refused (too few)")
             rows.append(f"| {count} | {tolerance} | {_mm(c['fleet_median_mm'])} | "
+                        f"{_mm(c.get('population_median_mm'))} | "
                         f"{c['belongs']} of {c['robots']} |")
         parts.append("\n".join(rows))
-        parts.append(
-            f"A third of the {unit} ({summary['third']}) with the fleet prior against all "
-            f"{part['full']} with the tolerance prior: no worse on "
-            f"{summary['fleet_at_third_no_worse_than_tolerance_at_all']} robots (medians "
-            f"{_mm(summary['fleet_third_median_mm'])} against "
-            f"{_mm(summary['tolerance_all_median_mm'])} mm). The robot off the model (own "
+        parts.append(_fleet_third(part, kind) + (
+            f" The robot off the model (own "
             f"errors {part['off']:g} times the fleet's spread) told it does not belong: "
             f"{summary['off_model_refused']}, and then calibrated as with the tolerance "
-            f"prior: {'yes' if summary['off_model_same_as_tolerance'] else 'no'}.")
+            f"prior: {'yes' if summary['off_model_same_as_tolerance'] else 'no'}."))
+    smaller = [k for k in out if " own=" in k]
+    if smaller:
+        parts.append("Robots of a model that differ far less from each other (the same "
+                     "fleets with each robot's own part smaller; shared part and counts as "
+                     "above): " + " ".join(
+                         f"{k.split(' ')[0]}, own part {out[k]['own']:.3g} of the "
+                         f"tolerance: " + _fleet_third(out[k], k.split(' ')[0])
+                         for k in smaller))
     if "panda" in out:
         panda = out["panda"]
         rows = ["| Panda left out | held-out RMS, tolerance prior / fleet prior [mm] | ratio | "
@@ -896,6 +903,26 @@ def render_fleet_prior(record: dict) -> str:
         parts.append(f"At most 0.85 of the tolerance prior's held-out RMS: "
                      f"{panda['at_most_0.85']} of {panda['count']} Pandas.")
     return "\n\n".join(parts) + _notes(record)
+
+
+def _fleet_unit(kind: str) -> str:
+    return "readings" if kind == "tracker" else "placements"
+
+
+def _fleet_third(part: dict, kind: str) -> str:
+    """The fleet-prior benchmark's target in words: a third of the poses with the fleet
+    prior (and with the population itself) against all of them with the tolerance prior."""
+    summary = part["summary"]
+    unit = _fleet_unit(kind)
+    population = summary.get("population_at_third_no_worse_than_tolerance_at_all")
+    return (f"A third of the {unit} ({summary['third']}) with the fleet prior against all "
+            f"{part['full']} with the tolerance prior: no worse on "
+            f"{summary['fleet_at_third_no_worse_than_tolerance_at_all']} robots (medians "
+            f"{_mm(summary['fleet_third_median_mm'])} against "
+            f"{_mm(summary['tolerance_all_median_mm'])} mm)"
+            + ("." if population is None else
+               f"; with the population itself as the prior: {population} "
+               f"({_mm(summary['population_third_median_mm'])} mm)."))
 
 
 def _cable_run(name: str, run: dict, targets: dict) -> str:

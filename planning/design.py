@@ -87,6 +87,9 @@ class Plan:
     travel: Travel | None = None
     tool_error_bound: float = float("nan")
     random_conditions_all: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    least_squares_count: int | None = None
+    """Set on a plan of fewer placements or readings than least squares needs (this
+    count), chosen for a fleet prior that determines the rest (``target``)."""
 
     @property
     def random_tool_median(self) -> float:
@@ -97,7 +100,7 @@ class Plan:
 
     @property
     def random_median(self) -> float:
-        return float(np.median(self.random_values))
+        return _median(self.random_values)
 
     @property
     def joints(self) -> np.ndarray:
@@ -121,6 +124,14 @@ class Plan:
 
     def summary(self) -> str:
         what = self.setup.model.unit_name
+        if self.least_squares_count is not None:
+            return (f"planned {len(self.candidates)} {what} ({len(self.joints)} rows), fewer "
+                    f"than the {self.least_squares_count} least squares needs for "
+                    f"{len(self.identifiable)} identifiable parameters: the fleet prior "
+                    f"determines the rest (calibrate with --prior); chosen from a plan of "
+                    f"{self.least_squares_count} by the predicted work-cell RMS under that "
+                    f"prior; without it these data cannot be calibrated"
+                    + (f"\n{self.travel.summary()}" if self.travel is not None else ""))
         ratio = self.value / self.random_median if self.random_median else math.nan
         return (f"planned {len(self.candidates)} {what} ({len(self.joints)} rows) for "
                 f"{len(self.identifiable)} identifiable parameters, chosen from "

@@ -22,13 +22,22 @@ plan do at least that well.
 The search doubles the count from the least the planner accepts until a plan reaches
 the target, then bisects between the last count that did not and the first that did;
 every count tried is designed afresh (the curve printed is those counts' figures).
+
+With a fleet prior the least count least squares needs is not a floor: the calibration
+weighs the readings against the population and fits data fewer than its unknowns. When
+the least plan the planner designs already reaches the target, smaller ones are made from
+it by backward elimination (Bayesian design, Chaloner and Verdinelli 1995, "Bayesian
+experimental design: a review", Statistical Science 10(3), section 2): one placement or
+reading at a time, the one whose removal raises the predicted figure under the fleet prior
+least, as long as the rest still reach the target. Those counts' tolerance-prior figure is
+left out: the tolerance prior does not let such data be calibrated.
 """
 
 from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TextIO
 
 import numpy as np
@@ -42,6 +51,7 @@ from robocal_casadi.results import BAND_SEED as SEED
 from .accuracy import tool_weights
 from .design import DEFAULT_INDEX, Plan, TooFew, design_plan
 from .information import _project_shared
+from .order import order_candidates
 from .rows import RowModel
 from .runnable import runnable_setup
 from .setup import setup_from_dataset
@@ -55,7 +65,8 @@ class Trial:
     """One count tried: ``rms`` [m] the ``QUANTILE`` quantile of one robot's predicted RMS
     over the workspace, ``mean_rms`` [m] the root of its mean square (inf: the planner
     could not fill the count); with a fleet prior, ``tolerance_rms`` [m] the quantile the
-    tolerance prior would give on the same plan (None otherwise)."""
+    tolerance prior would give on the same plan (inf: too few for it to calibrate; None
+    without a fleet prior)."""
 
     count: int
     rms: float
@@ -90,6 +101,8 @@ class TargetSearch:
             figure = ("too few for the planner" if not math.isfinite(t.rms) else
                       f"{t.rms / scale:.4g} ({t.mean_rms / scale:.4g})"
                       + ("" if t.tolerance_rms is None else
+                         "; tolerance prior: too few to calibrate"
+                         if not math.isfinite(t.tolerance_rms) else
                          f"; tolerance prior {t.tolerance_rms / scale:.4g}"))
             lines.append(f"  {t.count:5d}  {figure}{mark}")
         return "\n".join(lines)
@@ -101,6 +114,7 @@ class Predictor:
     def __init__(self, dataset: Dataset, fleet=None, seed: int = 0):
         setup, kinematics, workspace = runnable_setup(setup_from_dataset(dataset))
         self.setup = setup
+        self.workspace = workspace
         self.rows = RowModel(setup, kinematics)
         names = self.rows.parameters
         self.weights = tool_weights(setup, workspace, names, np.random.default_rng(seed))
@@ -118,11 +132,18 @@ class Predictor:
             ) -> tuple[float, float]:
         """``(quantile, root mean square)`` [m] of one robot's RMS calibrated on ``plan``
         with a prior of ``precision`` over the ``covered`` parameters."""
+        return self.rms_of([b.X for b in self.rows.blocks(list(plan.candidates))],
+                           plan.identifiable, covered, precision)
+
+    def rms_of(self, blocks: list[np.ndarray], identifiable: tuple[str, ...],
+               covered: np.ndarray, precision: np.ndarray) -> tuple[float, float]:
+        """``rms`` of the design whose candidates' Jacobian rows are ``blocks`` (robot and
+        mounted columns, then the placement unknowns), fitting ``identifiable``."""
         names = self.rows.parameters
         n = len(names)
-        X = np.vstack([b.X for b in self.rows.blocks(list(plan.candidates))])
+        X = np.vstack(blocks)
         J = _project_shared(X[:, :n], X[:, n:])
-        keep = covered | np.isin(np.array(names), np.array(plan.identifiable))
+        keep = covered | np.isin(np.array(names), np.array(identifiable))
         A = J.T @ J / self.setup.noise**2 + precision
         A = A[np.ix_(keep, keep)]
         d = 1.0 / np.sqrt(np.diag(A))  # scaled: lengths and angles side by side
@@ -213,7 +234,42 @@ def search(dataset: Dataset, target: float, *, fleet=None, limit: int | None = N
                     high = middle
                 else:
                     low = middle
+        if fleet is not None and high is not None and not any(
+                c < high and math.isfinite(t.rms) for c, t in trials.items()):
+            # the least plan the planner designs reaches the target: with the fleet prior
+            # fewer may do (the planner's "too few" below it no longer the last word)
+            for count in [c for c in trials if c < high]:
+                del trials[count]
+            for plan in _fewer(plans[high], predictor, target):
+                count = len(plan.candidates)
+                trials[count] = replace(predictor.trial(plan), tolerance_rms=math.inf)
+                if trials[count].rms <= target:
+                    plans[count], high = plan, count
     ordered = tuple(trials[c] for c in sorted(trials))
     prior = "tolerance" if fleet is None else f"fleet ({fleet.path})"
     return TargetSearch(target, limit, ordered, high, plans.get(high) if high else None, prior)
 
+
+def _fewer(plan: Plan, predictor: Predictor, target: float) -> list[Plan]:
+    """Plans of fewer placements or readings than ``plan`` (the least the planner designs),
+    one fewer each, by backward elimination under the predictor's fleet prior (module
+    docstring): every one that reaches ``target`` [m] and the first that does not."""
+    blocks = [b.X for b in predictor.rows.blocks(list(plan.candidates))]
+    chosen = list(range(len(blocks)))
+    out = []
+    while len(chosen) > 1:
+        figures = [predictor.rms_of([blocks[i] for i in chosen if i != drop],
+                                    plan.identifiable, *predictor.prior)[0]
+                   for drop in chosen]
+        best = int(np.argmin(figures))  # ties: the first in plan order goes
+        chosen.pop(best)
+        candidates, travel = order_candidates([plan.candidates[i] for i in chosen],
+                                              predictor.workspace)
+        out.append(replace(
+            plan, candidates=candidates, value=math.nan, random_values=np.zeros(0),
+            singular_values=np.zeros(0), tool_error=math.nan, random_tool_errors=np.zeros(0),
+            condition_all=math.nan, travel=travel, tool_error_bound=math.nan,
+            random_conditions_all=np.zeros(0), least_squares_count=len(plan.candidates)))
+        if not figures[best] <= target:
+            break
+    return out

@@ -946,7 +946,7 @@ def _map_solve(problem: Problem, x: np.ndarray, free: np.ndarray, prior: Prior, 
                                rows=distinct, certified=problem.certified_entries(),
                                noise_known=noise_known)
         settled = abs(statistics.sigma / prior.sigma - 1.0) < SIGMA_SETTLED
-        if not np.isfinite(statistics.sigma) or settled:
+        if noise_known or not np.isfinite(statistics.sigma) or settled:
             break
         prior = prior.with_sigma(statistics.sigma)
     covariance = np.nan_to_num(statistics.covariance, nan=0.0)

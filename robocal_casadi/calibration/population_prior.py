@@ -219,7 +219,10 @@ class PopulationPrior(population.PopulationFigures):
     fitted_by: tuple[int, ...] = ()  # robots whose calibration fitted it (empty: not known)
 
     def fitted(self) -> tuple[str, ...]:
-        """The parameters some robot's calibration fitted (its data could see them)."""
+        """The parameters some robot's calibration fitted (its data could see them); every
+        parameter of the prior when that is not known (a file written by hand)."""
+        if not self.fitted_by:
+            return self.names
         return tuple(n for n, k in zip(self.names, self.fitted_by) if k > 0)
 
 

@@ -172,7 +172,9 @@ def _summarise(args: argparse.Namespace, plan, programs, searched=None) -> None:
                  {"target_m": searched.target,
                   "curve": [{"count": t.count, "rms_m": t.rms if math.isfinite(t.rms) else None,
                              "mean_rms_m": t.mean_rms if math.isfinite(t.mean_rms) else None,
-                             "tolerance_rms_m": t.tolerance_rms}
+                             "tolerance_rms_m": t.tolerance_rms
+                             if t.tolerance_rms is None or math.isfinite(t.tolerance_rms)
+                             else None}
                             for t in searched.trials]}),
               **{name: getattr(plan, key) for key, name in figures.items()
                  if hasattr(plan, key)})
