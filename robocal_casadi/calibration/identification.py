@@ -20,7 +20,7 @@ from __future__ import annotations
 import difflib
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -250,6 +250,10 @@ class Validation:
     spheres: tuple[SphereEstimate, ...] = ()
     all: RmsSummary | None = None  # over every reading, those set aside included
     rejected: tuple[RejectedReading, ...] = ()
+    # the held-out problems under the geometric and the final model with their solutions
+    # (placements fitted again), for what is measured on them afterwards
+    fits: tuple[tuple[Problem, np.ndarray], ...] = field(default=(), repr=False,
+                                                         compare=False)
 
 
 @reports_stages(default=False)
@@ -490,25 +494,24 @@ def _remainder(request: _Request, final: DiagnosedFit, held_out: Validation,
                 (final.problem, final.solution)
             rms = held_out.summary.rms_geometric if geometric is not None else \
                 held_out.summary.rms_final
+            held = held_out.fits[0 if geometric is not None else 1]
             return remainder.measure(problem, solution.x, solution.free,
                                      validation_models=models_for(request.validation,
                                                                   "validation:"),
                                      validation_rms=rms,
-                                     estimation=_estimation(request, problem, solution))
+                                     estimation=_estimation(solution, problem, *held))
         return remainder.measure(final.problem, final.solution.x, final.solution.free,
                                  cv_rms=cv)
 
 
-def _estimation(request: _Request, problem: Problem, solution: Solution) -> float | None:
-    """What the uncertainty of ``solution``'s estimates gives on the validation data [m]
-    (``remainder.estimation_rms``), the validation placements fitted again for it."""
+def _estimation(solution: Solution, problem: Problem, held_out: Problem,
+                x_held: np.ndarray) -> float | None:
+    """What the uncertainty of ``solution``'s estimates (in ``problem``) gives on the
+    validation data [m] (``remainder.estimation_rms``), on the held-out problem validation
+    built, its placements fitted again (``x_held``)."""
     covariance = solution.covariance
     if covariance is None or covariance.shape != (int(solution.free.sum()),) * 2:
         return None
-    held_out, x_held = evaluate(request.robot, request.validation, problem.effects,
-                                _values(problem, solution.x), label_prefix="validation:",
-                                kinematics=problem.kinematics,
-                                frames=StationFrames.of(problem, solution.x))
     return remainder.estimation_rms(problem, solution.x, solution.free, covariance,
                                     held_out, x_held)
 
@@ -1174,7 +1177,7 @@ def _validate(robot: Robot, validation: Sequence[DatasetBase], problem: Problem,
     validation_problem, x_validation = stages[-1]
     return Validation(summary, tuple(residuals),
                       _spheres(validation_problem, x_validation, None, "validation"),
-                      all=every, rejected=rejected)
+                      all=every, rejected=rejected, fits=tuple(stages[1:]))
 
 
 def _screened_unknowns(problem: Problem, identifiable: Sequence[str]) -> np.ndarray:
