@@ -204,9 +204,12 @@ def nearest_turns(Q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.nda
     return Q
 
 
-def order_candidates(candidates, workspace) -> tuple[tuple[Candidate, ...], Travel]:
+def order_candidates(candidates, workspace, keep_given: bool = False
+                     ) -> tuple[tuple[Candidate, ...], Travel]:
     """``candidates`` in run order (rows inside a placement reordered too), joints on
-    their nearest turns, and the travel before and after."""
+    their nearest turns, and the travel before and after. ``keep_given``: the order given
+    is already a run order (a plan with some poses taken out); it is kept where the search
+    finds no shorter one in all."""
     candidates = list(candidates)
     lower, upper = workspace.lower, workspace.upper
     before = largest_moves(np.vstack([c.joints for c in candidates]))
@@ -218,6 +221,10 @@ def order_candidates(candidates, workspace) -> tuple[tuple[Candidate, ...], Trav
         distance = None if c.distance is None else c.distance[rows]
         ordered.append(Candidate(c.joints[rows], points, c.sockets, distance))
     Q = nearest_turns(np.vstack([c.joints for c in ordered]), lower, upper)
+    if keep_given:
+        given = nearest_turns(np.vstack([c.joints for c in candidates]), lower, upper)
+        if np.sum(largest_moves(given)) <= np.sum(largest_moves(Q)):
+            ordered, Q = candidates, given
     out, start = [], 0
     for c in ordered:
         out.append(Candidate(Q[start:start + len(c.joints)], c.points, c.sockets, c.distance))

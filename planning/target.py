@@ -264,7 +264,7 @@ def _fewer(plan: Plan, predictor: Predictor, target: float) -> list[Plan]:
         best = int(np.argmin(figures))  # ties: the first in plan order goes
         chosen.pop(best)
         candidates, travel = order_candidates([plan.candidates[i] for i in chosen],
-                                              predictor.workspace)
+                                              predictor.workspace, keep_given=True)
         out.append(replace(
             plan, candidates=candidates, value=math.nan, random_values=np.zeros(0),
             singular_values=np.zeros(0), tool_error=math.nan, random_tool_errors=np.zeros(0),
