@@ -234,20 +234,29 @@ def search(dataset: Dataset, target: float, *, fleet=None, limit: int | None = N
                     high = middle
                 else:
                     low = middle
-        if fleet is not None and high is not None and not any(
-                c < high and math.isfinite(t.rms) for c, t in trials.items()):
-            # the least plan the planner designs reaches the target: with the fleet prior
-            # fewer may do (the planner's "too few" below it no longer the last word)
-            for count in [c for c in trials if c < high]:
-                del trials[count]
-            for plan in _fewer(plans[high], predictor, target):
-                count = len(plan.candidates)
-                trials[count] = replace(predictor.trial(plan), tolerance_rms=math.inf)
-                if trials[count].rms <= target:
-                    plans[count], high = plan, count
+        if fleet is not None and high is not None:
+            high = _below_least_squares(trials, plans, high, predictor, target)
     ordered = tuple(trials[c] for c in sorted(trials))
     prior = "tolerance" if fleet is None else f"fleet ({fleet.path})"
     return TargetSearch(target, limit, ordered, high, plans.get(high) if high else None, prior)
+
+
+def _below_least_squares(trials: dict[int, Trial], plans: dict[int, Plan], high: int,
+                         predictor: Predictor, target: float) -> int:
+    """Where the least plan the planner designs (``high``) reaches ``target`` [m] under a
+    fleet prior, the smaller plans ``_fewer`` makes, entered in ``trials`` and ``plans``
+    (the planner's "too few" below ``high`` no longer the last word); the fewest count
+    reaching the target."""
+    if any(c < high and math.isfinite(t.rms) for c, t in trials.items()):
+        return high  # a smaller plan was designed and did not reach it
+    for count in [c for c in trials if c < high]:
+        del trials[count]
+    for plan in _fewer(plans[high], predictor, target):
+        count = len(plan.candidates)
+        trials[count] = replace(predictor.trial(plan), tolerance_rms=math.inf)
+        if trials[count].rms <= target:
+            plans[count], high = plan, count
+    return high
 
 
 def _fewer(plan: Plan, predictor: Predictor, target: float) -> list[Plan]:

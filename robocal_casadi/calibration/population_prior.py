@@ -239,9 +239,16 @@ class PopulationPrior(population.PopulationFigures):
         scale = np.maximum(np.abs(self.nominal), 1e-3)
         off = np.flatnonzero(np.abs(nominal - self.nominal) > NOMINAL_RTOL * scale)
         if len(off):
-            raise InputError(f"a prior of another nominal robot: {self.names[int(off[0])]} "
-                             f"is {self.nominal[int(off[0])]:.9g} SI in the prior, "
-                             f"{nominal[int(off[0])]:.9g} in robot {robot.name!r}", file=file)
+            k = int(off[0])
+            quantity = self.quantities[k]
+            unit = self.units.unit_name(quantity)
+            scale_k = self.units.scale(quantity)
+            whose = (f"robot {self.model!r}, not {robot.name!r}" if self.model != robot.name
+                     else "another nominal robot")
+            raise InputError(f"a prior of {whose}: {self.names[k]} is "
+                             f"{self.nominal[k] / scale_k:.9g}{' ' + unit if unit else ''} in "
+                             f"the prior, {nominal[k] / scale_k:.9g}"
+                             f"{' ' + unit if unit else ''} in robot {robot.name!r}", file=file)
 
 
 def _first_difference(prior: Sequence[str], robot: Sequence[str]) -> str:
