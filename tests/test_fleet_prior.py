@@ -304,7 +304,33 @@ def test_calibrate_refuses_a_prior_of_another_model(fleet, tmp_path, capsys):
     capsys.readouterr()
     assert main(["calibrate", str(data.dataset_path), "--no-report", "--prior", str(prior_file),
                  "--out", str(tmp_path / "out")]) == 2
-    assert str(prior_file) in capsys.readouterr().err
+    err = capsys.readouterr().err.strip().splitlines()
+    # one line: the file, both robots, the first differing value in the file's units
+    assert len(err) == 1 and str(prior_file) in err[0]
+    assert "does not fit robot 'ur-type'" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_prior_of_another_drawing_names_the_value_in_the_files_units():
+    """A robot with the prior's parameters but another nominal value is refused naming the
+    parameter and both values in the file's units (mm), not SI."""
+    from robocal_casadi.calibration.population_prior import PopulationPrior
+    from robocal_casadi.errors import InputError
+    robot = examples.industrial_6r()
+    registry = robot.parameters()
+    names = tuple(registry.names)
+    prior = PopulationPrior(robot.name, robot.convention, robot.units, "2026-01-01", ("a",),
+                            names, tuple(registry.quantity(n) for n in names),
+                            robot.parameter_vector(), np.zeros(len(names)),
+                            np.eye(len(names)) * 1e-6, tuple(1 for _ in names))
+    values = robot.parameter_vector().copy()
+    values[names.index("d1")] += 0.5e-3  # [m]
+    other = robot.with_parameters(values)
+    with pytest.raises(InputError) as refused:
+        prior.check_robot(other, "prior.yaml")
+    nominal_mm = 1e3 * robot.parameter_vector()[names.index("d1")]
+    assert (f"d1 is {nominal_mm:.9g} mm in the prior, {nominal_mm + 0.5:.9g} mm in robot"
+            in str(refused.value))
 
 
 @pytest.mark.slow
