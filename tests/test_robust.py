@@ -211,12 +211,26 @@ def test_false_alarm_rate_on_pure_noise(tmp_path):
     assert len(result.rejected) <= 1
 
 
+def _counts(**aside: int) -> dict[str, dict]:
+    """Robots' rejection records as the fleet summary holds them, 250 readings each."""
+    return {name: {"readings": k, "of": 250, "share": k / 250} for name, k in aside.items()}
+
+
 def test_fleet_flags_a_robot_with_many_rejections():
-    values = {"r1": (0.0, None), "r2": (0.0, None), "r3": (0.004, None), "r4": (0.0, None),
-              "r5": (0.06, None)}
-    quantity = _rejections(values)
+    quantity = _rejections(_counts(r1=0, r2=0, r3=1, r4=0, r5=15))
     assert [f.robot for f in quantity.findings] == ["r5"]
     assert all(f.value > REJECTED_SHARE for f in quantity.findings)
+
+
+def test_fleet_does_not_flag_what_the_common_rate_gives():
+    """Most robots lose no reading, one loses three of 250 (1.2%, above REJECTED_SHARE):
+    at the fleet's pooled rate (3 of 1,250) a robot's count has a binomial spread, and
+    three is within it (the median's spread alone, zero here, would flag any loss); a
+    record without the readings' count keeps the old rule."""
+    assert not _rejections(_counts(r1=0, r2=0, r3=3, r4=0, r5=0)).findings
+    old = {name: {"readings": r["readings"], "share": r["share"]}
+           for name, r in _counts(r1=0, r2=0, r3=3, r4=0, r5=0).items()}
+    assert [f.robot for f in _rejections(old).findings] == ["r3"]
 
 
 SWEEP = [(case, seed, share) for case in FAST for seed, share in ((1, 0.01), (2, 0.03), (3, 0.05))]

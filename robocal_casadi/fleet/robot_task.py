@@ -254,7 +254,7 @@ def robot_summary(result) -> dict:
     kept = sum(len(r.joints) if r.joints is not None else len(r.errors_final)
                for r in result.residuals)
     rejected = {"units": sum(e.role == "fit" for e in result.rejected), "readings": aside,
-                "share": aside / max(kept + aside, 1)}
+                "of": kept + aside, "share": aside / max(kept + aside, 1)}
     return {"units": result.units.as_dict(), "fit": rms(result.fit), "rejected": rejected,
             "validation": rms(result.validation), "fit_std": _rms_noise(result.residuals),
             "validation_std": _rms_noise(result.validation_residuals), "effects": effects,

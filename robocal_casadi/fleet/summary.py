@@ -302,10 +302,10 @@ def summarise(fleet: Fleet, outcomes: Sequence[RobotOutcome], *,
                   for name, summary in summaries.items() if summary.get(block) is not None}
         if values:
             quantities.append(_judged(f"{block}.{key}", label, "length", values, judged))
-    shares = {name: (summary["rejected"]["share"], None) for name, summary in summaries.items()
-              if summary.get("rejected") is not None}
-    if shares:
-        quantities.append(_rejections(shares))
+    rejected = {name: summary["rejected"] for name, summary in summaries.items()
+                if summary.get("rejected") is not None}
+    if rejected:
+        quantities.append(_rejections(rejected))
     joints = sorted({int(j) for summary in summaries.values()
                      for j in summary.get("compliance", {})})
     for joint in joints:
@@ -335,9 +335,20 @@ REJECTED_SHARE = 0.01  # a robot with more of its readings set aside as gross er
 # standing out from the fleet, is flagged
 
 
-def _rejections(values: dict) -> Quantity:
+def _rejections(rejected: dict[str, dict]) -> Quantity:
     """The share of each robot's readings set aside as gross errors; a robot stands out
-    above the fleet's spread (``high_outliers``) and above ``REJECTED_SHARE``."""
+    above the fleet's spread (``high_outliers``) and above ``REJECTED_SHARE``.
+
+    Each share's standard error is the binomial one of its count at the fleet's pooled
+    rate, ``sqrt(p (1 - p) / n)`` (``n`` the robot's readings, ``p`` all robots' readings
+    set aside over all their readings): in a fleet where most robots lose none, one
+    reading of a hundred is what the common rate gives, not a robot standing out."""
+    counted = {name: r for name, r in rejected.items() if r.get("of")}
+    total = sum(r["of"] for r in counted.values())
+    rate = sum(r["readings"] for r in counted.values()) / total if total else None
+    values = {name: (r["share"], None if rate is None or name not in counted else
+                     math.sqrt(rate * (1.0 - rate) / counted[name]["of"]))
+              for name, r in rejected.items()}
     spread, findings = high_outliers("rejected.share", values)
     return Quantity(key="rejected.share", label="share of the readings set aside as gross errors",
                     kind="share", values=values, judged=True, spread=spread,
