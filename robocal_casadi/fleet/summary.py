@@ -117,11 +117,11 @@ class FleetSummary:
                 "robot": finding.robot, "quantity": finding.quantity, "label": quantity.label,
                 "value": finding.value / s, "median": finding.median / s,
                 "robust_sd": finding.robust_sd / s, "score": finding.score, "unit": unit,
-                "reason": (f"{quantity.label} {_number(finding.value / s)} {unit} is "
+                "reason": (f"{quantity.label} {_number(finding.value / s)}{_unit(unit)} is "
                            f"{_score(finding.score)} standard deviations above the fleet "
-                           f"median {_number(finding.median / s)} {unit} (the fleet's robust "
-                           f"spread {_number(finding.robust_sd / s)} {unit} combined with "
-                           "the noise of the robots' own values)")})
+                           f"median {_number(finding.median / s)}{_unit(unit)} (the fleet's "
+                           f"robust spread {_number(finding.robust_sd / s)}{_unit(unit)} "
+                           "combined with the noise of the robots' own values)")})
         for move in self.moved:
             s, unit = self.scale(move.quantity), self.unit(move.quantity)
             out.append({
@@ -228,6 +228,11 @@ def _scaled(value, length: float):
 
 def _number(value: float) -> str:
     return f"{value:.4g}"
+
+
+def _unit(unit: str) -> str:
+    """`` unit`` after a number; nothing for a dimensionless quantity (a share)."""
+    return f" {unit}" if unit else ""
 
 
 def _score(score: float) -> str:
