@@ -398,3 +398,17 @@ def test_the_fleet_prior_calibrates_a_robot_measured_too_briefly_for_least_squar
     # what remains is the few readings' estimation error, not a model that lacks something
     left = result["unexplained"]
     assert not left["is_noise"] and left["estimation"]["explains_the_rest"]
+
+
+def test_what_the_fleet_prior_moved_is_none_when_nothing_moved():
+    """A robot calibrated with the tolerance prior in both passes moved no estimate: none
+    is named (not the first parameter at zero standard errors); otherwise the estimate
+    that moved most, in the first pass's standard errors."""
+    from robocal_casadi.fleet.learning import _largest_move
+    before = {"parameters": [{"name": "a1", "estimate": 1.0, "std": 0.1},
+                             {"name": "d2", "estimate": 2.0, "std": 0.5}]}
+    assert _largest_move(before, before) == {"moved": None, "moved_by_std": None}
+    after = {"parameters": [{"name": "a1", "estimate": 1.05, "std": 0.1},
+                            {"name": "d2", "estimate": 3.0, "std": 0.5}]}
+    moved = _largest_move(before, after)
+    assert moved["moved"] == "d2" and math.isclose(moved["moved_by_std"], 2.0)

@@ -88,7 +88,8 @@ def _validation(result: dict) -> float | None:
 
 
 def _largest_move(before: dict, after: dict) -> dict:
-    """The estimate that moved most, in the first pass's standard errors."""
+    """The estimate that moved most, in the first pass's standard errors (none where no
+    estimate moved: a robot calibrated with the tolerance prior again)."""
     first = {p["name"]: p for p in before["parameters"]}
     best = {"moved": None, "moved_by_std": None}
     for entry in after["parameters"]:
@@ -96,7 +97,7 @@ def _largest_move(before: dict, after: dict) -> dict:
         if old is None or not old.get("std"):
             continue
         score = abs(entry["estimate"] - old["estimate"]) / old["std"]
-        if best["moved_by_std"] is None or score > best["moved_by_std"]:
+        if score > (best["moved_by_std"] or 0.0):
             best = {"moved": entry["name"], "moved_by_std": score}
     return best
 
@@ -117,7 +118,7 @@ def table_html(rows: list[dict]) -> str:
              "<th>largest change of an estimate</th></tr>"]
     for row in rows:
         unit = html.escape(str(row["unit"]))
-        moved = "" if row["moved"] is None else \
+        moved = "none" if row["moved"] is None else \
             f"{html.escape(row['moved'])}: {row['moved_by_std']:.3g} standard errors"
         if row["predicted_rms"][0] is None and row["validation_rms"][0] is None:
             moved = "refused with the tolerance prior alone: calibrated only with the fleet's"
