@@ -318,3 +318,17 @@ def test_without_masses_the_lumped_form_reaches_the_noise_floor(tmp_path, arm_fi
         assert play.parameters[parameter] == pytest.approx(value, rel=0.1), parameter
     floor = NOISE * math.sqrt(3)
     assert result.validation.rms_final <= 1.15 * floor < result.validation.rms_geometric
+
+
+def test_what_remains_names_the_motor_whose_play_it_follows(tmp_path, arm_file):
+    """Play behind motor 2 of the differential, left out of the model (no diagnosis): the
+    search for unexplained structure names that motor's direction alone and explains most
+    of the residual (with only the joints' directions it named direction_q3, direction_q2,
+    q2, ... for 37% of it)."""
+    fit = simulate(arm_file, "tracker_points", out_dir=tmp_path / "fit", rows=150,
+                   noise=NOISE, seed=3, geometric_errors=ERRORS,
+                   effects={"motor_play": {2: 0.3 * DEG}}, progress=False)
+    left = calibrate([fit.load()], diagnose=False).unexplained
+    assert left is not None
+    assert left.variables[0] == motor_direction_column(2)
+    assert left.share > 0.8

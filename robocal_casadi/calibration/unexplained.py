@@ -4,7 +4,8 @@ After the effect search, the residual is tested for structure that no effect of 
 library describes. The hypothesis class is broad on purpose: *some geometric parameter
 of some joint takes a value that varies smoothly with some variable*. The variables are
 each joint reading ``q<j>``, each joint's direction of motion ``direction_q<j>`` (the
-sign of its change from the previous row; rows are in measurement order), each numeric
+sign of its change from the previous row; rows are in measurement order), where the robot
+file declares a ``transmission``, each motor's direction ``direction_m<k>``, each numeric
 extra column (``temperature``, ``time``, ``payload`` ...), and each pair of joint
 readings. A length that sags with its angle, a joint offset that follows another joint,
 backlash, a warm-up: each is such a variation, named or not.
@@ -41,7 +42,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from ..effects.motion import directions_of_motion
+from ..effects.motion import directions_of_motion, motor_directions_of_motion
 from ..results import StructureTest, Unexplained
 from .folds import FoldGrams, fold_schemes
 
@@ -84,7 +85,7 @@ def _hats(values: np.ndarray, knots: int) -> np.ndarray | None:
 
 def _variables(problem) -> list[_Variable]:
     robot = problem.robot
-    joints_parts, directions_parts, extras_parts = [], [], []
+    joints_parts, directions_parts, extras_parts, motor_parts = [], [], [], []
     columns: set[str] | None = None
     for model in problem.models:
         dataset = model.dataset
@@ -92,6 +93,7 @@ def _variables(problem) -> list[_Variable]:
             else np.full((dataset.rows, robot.dof), np.nan)
         joints_parts.append(readings)
         directions_parts.append(directions_of_motion(readings))
+        motor_parts.append(motor_directions_of_motion(readings, robot))
         numeric = {k for k, v in dataset.extras.items()
                    if np.asarray(v).dtype.kind in "fiu"}
         columns = numeric if columns is None else columns & numeric
@@ -117,6 +119,12 @@ def _variables(problem) -> list[_Variable]:
         if np.any(sign > 0) and np.any(sign < 0):
             out.append(_Variable(f"direction_q{j + 1}",
                                  np.column_stack([sign > 0, sign < 0]).astype(float)))
+    # a motor of a differential turns several joints: its reversals are a variable of
+    # their own (play in its drive shows where it reverses, not where a joint does)
+    for name in motor_parts[0] if motor_parts else ():
+        sign = np.concatenate([part[name] for part in motor_parts])
+        if np.any(sign > 0) and np.any(sign < 0):
+            out.append(_Variable(name, np.column_stack([sign > 0, sign < 0]).astype(float)))
     for name in sorted(columns or ()):
         values = np.concatenate([np.asarray(e[name], float) for e in extras_parts])
         if np.all(np.isfinite(values)) and np.ptp(values) > 0:
@@ -427,6 +435,8 @@ def _values_of(problem, name: str) -> np.ndarray:
         if name.startswith("direction_q"):
             j = int(name[len("direction_q"):]) - 1
             parts.append(directions_of_motion(dataset.joints)[:, j])
+        elif name.startswith("direction_m"):
+            parts.append(motor_directions_of_motion(dataset.joints, problem.robot)[name])
         elif name.startswith("q") and name[1:].isdigit():
             parts.append(dataset.joints[:, int(name[1:]) - 1])
         else:
