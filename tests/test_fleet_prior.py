@@ -412,3 +412,54 @@ def test_what_the_fleet_prior_moved_is_none_when_nothing_moved():
                             {"name": "d2", "estimate": 3.0, "std": 0.5}]}
     moved = _largest_move(before, after)
     assert moved["moved"] == "d2" and math.isclose(moved["moved_by_std"], 2.0)
+
+
+@pytest.mark.parametrize("change,key,words", [
+    (lambda c: c["parameters"][3].update(unit="furlong"), "parameters[3].unit",
+     "expected the file's units (mm or deg), got 'furlong'"),
+    (lambda c: c["parameters"][3].update(mean=float("nan")), "parameters[3].mean",
+     "expected a finite number"),
+    (lambda c: c["parameters"][3].update(spread=float("inf")), "parameters[3].spread",
+     "expected a finite number"),
+    (lambda c: c["parameters"][3].update(seen_by=-1), "parameters[3].seen_by",
+     "count of robots"),
+    (lambda c: c["parameters"][3].update(fitted_by=-2), "parameters[3].fitted_by",
+     "count of robots"),
+    (lambda c: c["parameters"][2].update(name=c["parameters"][3]["name"]), "parameters",
+     "listed twice"),
+])
+def test_a_broken_prior_file_is_refused_naming_the_key(tmp_path, change, key, words):
+    """Every row of PRIOR.yaml is checked on reading: a unit not the file's, a number that
+    is not finite, a negative count, a name given twice: InputError naming file and key
+    (the calibration would otherwise diverge on a NaN or mistake degrees for radians)."""
+    from robocal_casadi.calibration.population_prior import (
+        PopulationPrior,
+        load_prior,
+        save_prior,
+    )
+    from robocal_casadi.errors import InputError
+    robot = examples.industrial_6r()
+    registry = robot.parameters()
+    names = tuple(registry.names)
+    path = tmp_path / "prior.yaml"
+    save_prior(PopulationPrior(robot.name, robot.convention, robot.units, "2026-01-01",
+                               ("a", "b"), names, tuple(registry.quantity(n) for n in names),
+                               robot.parameter_vector(), np.zeros(len(names)),
+                               np.eye(len(names)) * 1e-8, tuple(2 for _ in names),
+                               fitted_by=tuple(2 for _ in names)), path)
+    load_prior(path)  # as written: read back
+    content = yaml.safe_load(path.read_text())
+    change(content)
+    path.write_text(yaml.safe_dump(content, sort_keys=False))
+    with pytest.raises(InputError) as refused:
+        load_prior(path)
+    assert f"{path}: {key}: " in str(refused.value) and words in str(refused.value)
+
+
+def test_a_robot_whose_data_see_nothing_of_the_population_is_not_said_to_belong():
+    from robocal_casadi.calibration.population import Membership
+    from robocal_casadi.calibration.population_prior import PriorUse
+    unseen = PriorUse("p.yaml", "p.yaml", True, Membership("r", 0.0, 0, math.inf, 1.0))
+    assert "cannot be judged" in unseen.sentence and "belongs (" not in unseen.sentence
+    seen = PriorUse("p.yaml", "p.yaml", True, Membership("r", 3.0, 5, 20.5, 1.0))
+    assert "this robot belongs (prior-data conflict 3 over 5 directions" in seen.sentence

@@ -344,12 +344,17 @@ def load_prior(path: Path) -> PopulationPrior:
         try:
             fitted_by.append(int(row.get("fitted_by", -1)))
             names.append(str(row["name"]))
-            quantities.append(_quantity(units, str(row["unit"])))
+            unit = str(row["unit"])
             values.append([float(row[key]) for key in ("nominal", "mean", "spread")]
                           + [int(row["seen_by"])])
-        except (KeyError, TypeError, ValueError) as error:
+        except (KeyError, TypeError, ValueError, AttributeError) as error:
             raise InputError(f"expected name, unit, nominal, mean, spread, seen_by: {error}",
                              file=path, where=f"parameters[{k}]") from None
+        _check_row(path, k, units, unit, values[-1], fitted_by[-1], "fitted_by" in row)
+        quantities.append(_quantity(units, unit))
+    if len(set(names)) != len(names):
+        twice = next(n for n in names if names.count(n) > 1)
+        raise InputError(f"{twice!r} is listed twice", file=path, where="parameters")
     table = np.array(values, float)
     scale = np.array([units.scale(q) for q in quantities])
     spread = table[:, 2] * scale
@@ -374,6 +379,26 @@ def load_prior(path: Path) -> PopulationPrior:
                            () if min(fitted_by) < 0 else tuple(fitted_by))
 
 
+def _check_row(path: Path, k: int, units: Units, unit: str, values: list,
+               fitted_by: int, has_fitted_by: bool) -> None:
+    """One parameter row of ``PRIOR.yaml``: a unit of the file's, finite numbers, counts
+    of robots that are not negative (``InputError`` naming the key)."""
+    where = f"parameters[{k}]"
+    if unit not in (units.length, units.angle, ""):
+        raise InputError(f"expected the file's units ({units.length} or {units.angle}), got "
+                         f"{unit!r}", file=path, where=f"{where}.unit")
+    for key, value in zip(("nominal", "mean", "spread"), values):
+        if not math.isfinite(value):
+            raise InputError(f"expected a finite number, got {value}", file=path,
+                             where=f"{where}.{key}")
+    if values[3] < 0:
+        raise InputError(f"expected a count of robots (0 or more), got {values[3]}",
+                         file=path, where=f"{where}.seen_by")
+    if has_fitted_by and fitted_by < 0:
+        raise InputError(f"expected a count of robots (0 or more), got {fitted_by}",
+                         file=path, where=f"{where}.fitted_by")
+
+
 @dataclass(frozen=True)
 class PriorUse:
     """Which prior a calibration used: ``source`` ``"tolerance"`` or the population
@@ -396,6 +421,9 @@ class PriorUse:
         if self.offered is None or self.member is None:
             return ""
         m = self.member
+        if m.seen == 0:
+            return (f"fleet prior {self.offered}: used; whether this robot belongs cannot be "
+                    f"judged: its data see none of the directions the population covers")
         figure = (f"prior-data conflict {m.distance:.3g} over {m.seen} directions seen, "
                   f"limit {m.threshold:.3g}")
         if self.belongs:
