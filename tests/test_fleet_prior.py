@@ -463,3 +463,44 @@ def test_a_robot_whose_data_see_nothing_of_the_population_is_not_said_to_belong(
     assert "cannot be judged" in unseen.sentence and "belongs (" not in unseen.sentence
     seen = PriorUse("p.yaml", "p.yaml", True, Membership("r", 3.0, 5, 20.5, 1.0))
     assert "this robot belongs (prior-data conflict 3 over 5 directions" in seen.sentence
+
+
+@pytest.fixture(scope="module")
+def posterior_file_content(tmp_path_factory):
+    """A geometry_posterior.json's content from one quick tracker calibration."""
+    from robocal_casadi.calibration import calibrate
+    from robocal_casadi.calibration.population_prior import posterior_content
+    data = simulate(examples.industrial_6r(), "tracker_points",
+                    out_dir=tmp_path_factory.mktemp("posterior") / "sim", rows=30,
+                    noise=0.02e-3, seed=5, progress=False)
+    return json.loads(json.dumps(posterior_content(calibrate([data.load()], diagnose=False))))
+
+
+@pytest.mark.parametrize("change,key,words", [
+    (lambda c: c["estimate"].__setitem__(0, float("nan")), "estimate", "finite"),
+    (lambda c: c.update(estimate=c["estimate"][:-1]), "estimate", "numbers, got"),
+    (lambda c: c.update(covariance=c["covariance"][:-1]), "covariance", "numbers, got"),
+    (lambda c: c["covariance"][0].__setitem__(0, -1.0), "covariance", "semi-definite"),
+    (lambda c: c["fitted"].__setitem__(0, "zz9"), "fitted", "'zz9' is not among"),
+    (lambda c: c["parameters"][0].update(unit="furlong"), "parameters[0].unit", "furlong"),
+    (lambda c: c["prior"].update(centre=c["prior"]["centre"][:-1]), "prior.centre",
+     "numbers, got"),
+    (lambda c: c["prior"]["covariance"][0].__setitem__(0, 0.0), "prior.covariance",
+     "positive definite"),
+])
+def test_a_broken_posterior_file_is_refused_naming_the_key(posterior_file_content, change,
+                                                           key, words):
+    """`robocal prior` reads every robot's geometry_posterior.json strictly: a NaN, a list
+    of the wrong size, a matrix that is no covariance, an unknown name, a unit not the
+    file's end in InputError naming file and key (not a traceback, not a prior with NaN)."""
+    import copy
+
+    from robocal_casadi.calibration.population_prior import calibration_from
+    from robocal_casadi.errors import InputError
+    calibration_from(posterior_file_content, Path("robot"))  # as written: read
+    content = copy.deepcopy(posterior_file_content)
+    change(content)
+    with pytest.raises(InputError) as refused:
+        calibration_from(content, Path("robot"))
+    assert f"{Path('robot') / 'geometry_posterior.json'}: {key}: " in str(refused.value)
+    assert words in str(refused.value)

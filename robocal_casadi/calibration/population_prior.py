@@ -153,38 +153,77 @@ def read_calibration(folder: Path) -> Calibration:
 
 def calibration_from(content: dict, folder: Path, path: Path | None = None) -> Calibration:
     """The ``Calibration`` a ``geometry_posterior.json`` ``content`` describes (``folder``
-    names the robot; ``path`` the file, for errors)."""
+    names the robot; ``path`` the file, for errors: ``InputError`` naming the key of
+    anything missing, of the wrong size, not finite or not a covariance)."""
     path = path if path is not None else Path(folder) / POSTERIOR_FILE
     try:
         units = units_of(content, file=path)
         rows = content["parameters"]
         names = tuple(str(r["name"]) for r in rows)
+        for k, r in enumerate(rows):
+            if str(r["unit"]) not in (units.length, units.angle, ""):
+                raise InputError(f"expected the file's units ({units.length} or "
+                                 f"{units.angle}), got {r['unit']!r}", file=path,
+                                 where=f"parameters[{k}].unit")
         quantities = tuple(_quantity(units, str(r["unit"])) for r in rows)
         scale = np.array([units.scale(q) for q in quantities])
-        nominal = np.array([float(r["nominal"]) for r in rows]) * scale
+        nominal = _finite(path, "parameters[].nominal",
+                          [float(r["nominal"]) for r in rows]) * scale
         tolerance = np.array([np.nan if r["tolerance"] is None else float(r["tolerance"])
                               for r in rows]) * scale
         fitted = tuple(str(n) for n in content["fitted"])
+        unknown = [n for n in fitted if n not in names]
+        if unknown or len(set(fitted)) != len(fitted):
+            raise InputError(f"{unknown[0]!r} is not among the parameters" if unknown else
+                             "a parameter is listed twice", file=path, where="fitted")
         position = [names.index(n) for n in fitted]
         s = scale[position]
         nominal_fitted = nominal[position]
-        estimate = np.array(content["estimate"], float) * s - nominal_fitted
-        covariance = np.array(content["covariance"], float).reshape(len(fitted), len(fitted))
-        covariance = covariance * np.outer(s, s)
+        n = len(fitted)
+        estimate = _finite(path, "estimate", content["estimate"], (n,)) * s - nominal_fitted
+        covariance = _covariance(path, "covariance", content["covariance"], n) * np.outer(s, s)
         prior = content["prior"]
+        if prior is not None:
+            centre = _finite(path, "prior.centre", prior["centre"], (n,)) * s - nominal_fitted
+            prior_covariance = _covariance(path, "prior.covariance", prior["covariance"], n,
+                                           definite=True) * np.outer(s, s)
         model, convention = str(content["model"]), str(content["convention"])
-    except (KeyError, TypeError, ValueError) as error:
+    except (KeyError, TypeError, ValueError, AttributeError) as error:
         raise InputError(f"unreadable: {error}", file=path) from None
     if prior is None:
         information = np.linalg.pinv(covariance, hermitian=True)
         evidence = Evidence(str(folder), information, information @ estimate)
     else:
-        centre = np.array(prior["centre"], float) * s - nominal_fitted
-        prior_covariance = np.array(prior["covariance"], float).reshape(covariance.shape)
         evidence = Evidence.from_posterior(str(folder), estimate, covariance, centre,
-                                           prior_covariance * np.outer(s, s))
+                                           prior_covariance)
     return Calibration(folder, model, convention, units, names, quantities, nominal, tolerance,
                        fitted, evidence)
+
+
+def _finite(path: Path, key: str, values, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """``values`` as a finite array of ``shape`` (``InputError`` naming ``key`` if not)."""
+    array = np.array(values, float)
+    if shape is not None and array.shape != shape:
+        raise InputError(f"expected {' x '.join(map(str, shape))} numbers, got "
+                         f"{' x '.join(map(str, array.shape)) or 'one'}", file=path, where=key)
+    if not np.all(np.isfinite(array)):
+        raise InputError("expected finite numbers", file=path, where=key)
+    return array
+
+
+def _covariance(path: Path, key: str, values, n: int, definite: bool = False) -> np.ndarray:
+    """``values`` as an ``n x n`` symmetric positive semi-definite (``definite``: positive
+    definite) matrix, to rounding (``InputError`` naming ``key`` if not)."""
+    matrix = _finite(path, key, values, (n, n))
+    symmetric = 0.5 * (matrix + matrix.T)
+    scale = float(np.max(np.abs(np.diag(symmetric)), initial=0.0))
+    lowest = float(np.min(np.linalg.eigvalsh(symmetric))) if n else math.inf
+    if not np.allclose(matrix, matrix.T, rtol=1e-6, atol=1e-12 * scale) or \
+            lowest < -1e-9 * scale or (definite and not lowest > 0):
+        kind = "definite" if definite else "semi-definite"
+        raise InputError(f"expected a symmetric positive {kind} matrix (a covariance)",
+                         file=path, where=key)
+    return symmetric
 
 
 def _quantity(units: Units, unit: str) -> str:
