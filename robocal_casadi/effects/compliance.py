@@ -108,6 +108,19 @@ def _lumped_functions(robot: Robot) -> tuple[ca.Function, ca.Function]:
     return basis, per_kg
 
 
+def sampled_basis(robot: Robot, samples: int, seed: int) -> np.ndarray:
+    """``first_moment_basis`` (samples x dof x 4 dof) at ``samples`` configurations drawn
+    uniformly within the joint limits (a full turn where there are none) from ``seed``:
+    where the lumped terms are judged independent."""
+    basis, _ = _lumped_functions(robot)
+    rng = np.random.default_rng(seed)
+    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
+    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
+    Q = rng.uniform(lower, upper, size=(samples, robot.dof))
+    p = robot.parameter_vector()
+    return np.array([np.asarray(basis(q, p)) for q in Q])
+
+
 def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
                       seed: int = 0) -> tuple[int, ...]:
     """Columns of ``first_moment_basis`` row ``joint`` (1-based) kept as lumped unknowns.
@@ -115,13 +128,7 @@ def independent_terms(robot: Robot, joint: int, *, samples: int = SAMPLES,
     A maximal set independent of each other and of a constant (see the module
     docstring), in the order found.
     """
-    basis, _ = _lumped_functions(robot)
-    rng = np.random.default_rng(seed)
-    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
-    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
-    Q = rng.uniform(lower, upper, size=(samples, robot.dof))
-    p = robot.parameter_vector()
-    rows = np.array([np.asarray(basis(q, p))[joint - 1] for q in Q])  # samples x 4 dof
+    rows = sampled_basis(robot, samples, seed)[:, joint - 1]  # samples x 4 dof
     norms = exact.norm(rows, axis=0)
     # a unit first moment (1 kg m) gives torques of order |g|: below that, roundoff
     scale = max(float(norms.max()), exact.norm(robot.gravity) * np.sqrt(samples))

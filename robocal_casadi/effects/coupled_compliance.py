@@ -67,6 +67,7 @@ from .compliance import (
     _lumped_functions,
     _torque_function,
     require_inertia,
+    sampled_basis,
 )
 from .gravity import FIRST_MOMENT_COMPONENTS
 
@@ -117,13 +118,7 @@ def independent_products(robot: Robot, group: tuple[int, ...], *, samples: int =
     """The lumped products of ``group`` kept as unknowns (see the module docstring): a
     maximal set independent of each other and of a constant per joint, diagonal products
     first, in the order found."""
-    basis, _ = _lumped_functions(robot)
-    rng = np.random.default_rng(seed)
-    lower = np.where(np.isfinite(robot.lower_limits), robot.lower_limits, -np.pi)
-    upper = np.where(np.isfinite(robot.upper_limits), robot.upper_limits, np.pi)
-    Q = rng.uniform(lower, upper, size=(samples, robot.dof))
-    p = robot.parameter_vector()
-    rows = np.array([np.asarray(basis(q, p)) for q in Q])  # samples x dof x 4 dof
+    rows = sampled_basis(robot, samples, seed)  # samples x dof x 4 dof
     n, count = len(group), rows.shape[2]
     constants = [np.kron(np.ones(samples), np.eye(n)[i]) / np.sqrt(samples) for i in range(n)]
     span = np.array(constants).T  # (samples n) x n, orthonormal
